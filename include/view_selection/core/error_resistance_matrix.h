@@ -1,0 +1,93 @@
+// The error-resistance matrix E of METHOD.md, kept incrementally: adding keyframe n computes its
+// row and its column only; changing a keyframe's point set recomputes its row only (E[a][i]
+// depends on X_a, camera i and i's depth map, never on X_i).
+#pragma once
+
+#include "view_selection/core/error_resistance_table.h"
+#include "view_selection/core/types.h"
+
+#include <Eigen/Core>
+
+#include <vector>
+
+namespace view_selection {
+
+/// Parameters of E. Defaults are METHOD.md's; every field is documented in config/*.yaml.
+struct ErrorResistanceConfig {
+  /// E[i][j] is +inf when fewer than max(min_covisible_points, min_covisible_ratio * |X_i|)
+  /// points of X_i are visible in j.
+  int min_covisible_points = 10;
+  double min_covisible_ratio = 0.1;
+  /// Optional gate: +inf when the optical axes differ by more than this [deg]; <= 0 disables
+  /// it (the paper's mode).
+  double max_view_angle_deg = 0.0;
+  /// Occlusion test against j's depth map: visible when |z_j - D_j(p)| <= max(abs, rel * z_j).
+  double occlusion_abs_tolerance = 0.05;  ///< [m, scene units]
+  double occlusion_rel_tolerance = 0.03;  ///< [fraction of z_j]
+
+  /// Throws InvalidArgument naming the first field out of range.
+  void validate() const;
+};
+
+/// E[i][j] computed from scratch for one ordered pair: the median of r(X; i -> j) over the
+/// points of X_i visible in j, or +inf (gates). The incremental matrix stores exactly this.
+double computeErrorResistance(const Keyframe& view_i, const Keyframe& view_j,
+                              const ErrorResistanceConfig& config);
+
+class ErrorResistanceMatrix {
+ public:
+  explicit ErrorResistanceMatrix(ErrorResistanceConfig config = {});
+
+  /// Validates the keyframe (intrinsics, pose, finite points; throws InvalidInput), appends it
+  /// with the next id and computes row n and column n. Returns its id.
+  ViewId addKeyframe(Keyframe keyframe);
+  /// Replaces X_id (finite points; throws InvalidInput) and recomputes row id only.
+  void setPoints(ViewId id, Eigen::Matrix3Xd points);
+  /// Forgets every keyframe.
+  void clear();
+
+  size_t size() const { return views_.size(); }
+  const Keyframe& keyframe(ViewId id) const { return views_.at(static_cast<size_t>(id)).keyframe; }
+  double at(ViewId i, ViewId j) const { return table_.at(i, j); }
+  const ErrorResistanceTable& table() const { return table_; }
+  const ErrorResistanceConfig& config() const { return config_; }
+  /// Pairs whose points were projected (not culled by a pair-level test) so far; for benchmarks.
+  size_t pairsEvaluated() const { return pairs_evaluated_; }
+
+  /// Per-keyframe data computed once (rotation, frustum, bounding sphere of the points).
+  struct View {
+    Keyframe keyframe;
+    Eigen::Matrix3d world_to_camera;   // R^T
+    Eigen::Vector3d sphere_centre;     // of X_i, world
+    double sphere_radius = -1.0;       // < 0: no points
+    Eigen::Matrix<double, 3, 5> frustum_normals;  // camera frame, inward unit normals
+  };
+  static View makeView(Keyframe keyframe);
+
+  /// Reused storage for one pair's visible points and their r values.
+  struct Scratch {
+    std::vector<Eigen::Vector3d> points_cam;
+    std::vector<double> values;
+  };
+
+ private:
+  double entry(const View& view_i, const View& view_j);
+
+  ErrorResistanceConfig config_;
+  std::vector<View> views_;
+  ErrorResistanceTable table_;
+  Scratch scratch_;
+  size_t pairs_evaluated_ = 0;
+};
+
+/// The pair computation behind both computeErrorResistance and the matrix. `evaluated` is set
+/// when the points had to be projected (the pair was not culled by a pair-level test).
+double computeErrorResistance(const ErrorResistanceMatrix::View& view_i,
+                              const ErrorResistanceMatrix::View& view_j,
+                              const ErrorResistanceConfig& config,
+                              ErrorResistanceMatrix::Scratch& scratch, bool* evaluated = nullptr);
+
+/// Throws InvalidInput when a keyframe cannot enter the matrix (bad intrinsics, pose or points).
+void validateKeyframe(const Keyframe& keyframe);
+
+}  // namespace view_selection

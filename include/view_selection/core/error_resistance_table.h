@@ -1,0 +1,60 @@
+// Sparse storage of the error-resistance matrix E: only finite entries are kept, by row and by
+// column. A missing entry is +inf (no co-visibility, a gate, or the diagonal). Views that see
+// nothing in common are the norm on long sequences, so selection runs in O(finite entries).
+#pragma once
+
+#include "view_selection/core/types.h"
+
+#include <cstddef>
+#include <vector>
+
+namespace view_selection {
+
+/// One finite entry of a row (view = column index) or of a column (view = row index).
+struct TableEntry {
+  ViewId view;
+  double value;
+  bool operator==(const TableEntry& o) const { return view == o.view && value == o.value; }
+};
+
+class ErrorResistanceTable {
+ public:
+  explicit ErrorResistanceTable(size_t size = 0) { resize(size); }
+
+  /// From a dense square matrix; non-finite entries and the diagonal are left out.
+  static ErrorResistanceTable fromDense(const std::vector<std::vector<double>>& dense);
+
+  size_t size() const { return rows_.size(); }
+  /// Grows to `size` views (never shrinks; use clear()).
+  void resize(size_t size);
+  void clear();
+
+  /// E[i][j]; +inf when absent.
+  double at(ViewId i, ViewId j) const;
+  /// Sets E[i][j]; a non-finite value removes the entry. i == j is ignored (the diagonal is +inf).
+  void set(ViewId i, ViewId j, double value);
+  /// Replaces row i with `entries` (any order, finite values, no diagonal).
+  void replaceRow(ViewId i, std::vector<TableEntry> entries);
+
+  /// Finite entries of row i, ascending by column.
+  const std::vector<TableEntry>& row(ViewId i) const { return rows_[static_cast<size_t>(i)]; }
+  /// Finite entries of column j, ascending by row.
+  const std::vector<TableEntry>& column(ViewId j) const { return cols_[static_cast<size_t>(j)]; }
+
+  size_t finiteCount() const { return finite_count_; }
+  /// Dense copy, +inf for absent entries.
+  std::vector<std::vector<double>> dense() const;
+
+  bool operator==(const ErrorResistanceTable& o) const { return rows_ == o.rows_; }
+  bool operator!=(const ErrorResistanceTable& o) const { return !(*this == o); }
+
+ private:
+  static void upsert(std::vector<TableEntry>& list, ViewId view, double value);
+  static bool erase(std::vector<TableEntry>& list, ViewId view);
+
+  std::vector<std::vector<TableEntry>> rows_;
+  std::vector<std::vector<TableEntry>> cols_;
+  size_t finite_count_ = 0;
+};
+
+}  // namespace view_selection

@@ -1,0 +1,134 @@
+#include "view_selection/core/error_resistance.h"
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core.hpp>
+
+#include <algorithm>
+#include <cmath>
+
+namespace view_selection {
+
+std::optional<Eigen::Vector2d> epipolarDirection(const Eigen::Vector3d& epipole_h,
+                                                 const Eigen::Vector2d& p_j) {
+  // The line through p_j and the epipole is l = e_h x (p_j, 1); its direction (l_b, -l_a)
+  // simplifies to e_z * p_j - e_xy. With e_z = 0 (epipole at infinity) this is -e_xy, the
+  // direction of the projected baseline, so one formula covers both cases of METHOD.md.
+  const Eigen::Vector2d dir = epipole_h.z() * p_j - epipole_h.head<2>();
+  const double norm = dir.norm();
+  const double scale = std::abs(epipole_h.z()) * p_j.norm() + epipole_h.head<2>().norm();
+  if (!(norm > 1e-12 * scale) || !std::isfinite(norm)) return std::nullopt;
+  return Eigen::Vector2d(dir / norm);
+}
+
+PairErrorResistance::PairErrorResistance(const Eigen::Vector3d& origin_i,
+                                         const PinholeIntrinsics& intrinsics_j,
+                                         const CameraPose& pose_j)
+    : k_(intrinsics_j), o_i_cam_(pose_j.worldToCamera(origin_i)) {
+  epipole_h_ = k_.matrix() * o_i_cam_;
+}
+
+double PairErrorResistance::operator()(const Eigen::Vector3d& p_cam) const {
+  if (!(p_cam.z() > 0.0)) return kInfinity;  // behind camera j (also catches NaN)
+  const Eigen::Vector2d p_j = k_.project(p_cam);
+  const std::optional<Eigen::Vector2d> u = epipolarDirection(epipole_h_, p_j);
+  if (!u) return kInfinity;  // P on the baseline: no parallax
+
+  // Triangle O_i, P, O_j, everything in camera-j coordinates (O_j at the origin).
+  const Eigen::Vector3d& d = p_cam;  // O_j -> P
+  const Eigen::Vector3d& b = o_i_cam_;  // O_j -> O_i
+  const double d_norm = d.norm();
+  const double b_norm = b.norm();
+  const Eigen::Vector3d to_oi = b - d;  // P -> O_i
+  const double to_oi_norm = to_oi.norm();
+  if (!(b_norm > 0.0) || !(to_oi_norm > 0.0)) return kInfinity;
+  // Parallax angle gamma at P between P->O_i and P->O_j = -d.
+  const double cos_gamma = -to_oi.dot(d) / (to_oi_norm * d_norm);
+  const double sin_gamma = to_oi.cross(d).norm() / (to_oi_norm * d_norm);
+  // Angle beta at O_j between O_j->P and O_j->O_i.
+  const double cos_beta = d.dot(b) / (d_norm * b_norm);
+  const double sin_beta = d.cross(b).norm() / (d_norm * b_norm);
+  const double d_dot_b = d.dot(b);
+
+  double worst = 0.0;
+  for (const double s : {1.0, -1.0}) {
+    const Eigen::Vector3d d_moved = k_.backProject(p_j + s * *u);  // ray through p'_j, z = 1
+    const double moved_norm = d_moved.norm();
+    const double cos_delta = d.dot(d_moved) / (d_norm * moved_norm);
+    const double sin_delta = d.cross(d_moved).norm() / (d_norm * moved_norm);
+    // The moved ray turns towards O_i when its component along b's part orthogonal to d is
+    // positive (d_moved . (b - (b.d) d / |d|^2) > 0, scaled by |d|^2).
+    const bool towards = d_moved.dot(b) * d_norm * d_norm - d_dot_b * d_moved.dot(d) > 0.0;
+    double denominator;
+    if (towards) {
+      // Meets the ray from O_i between O_i and P only while delta < beta; beyond, behind O_i.
+      if (!(sin_beta * cos_delta - cos_beta * sin_delta > 0.0)) return kInfinity;
+      denominator = sin_gamma * cos_delta + cos_gamma * sin_delta;  // sin(gamma + delta)
+    } else {
+      denominator = sin_gamma * cos_delta - cos_gamma * sin_delta;  // sin(gamma - delta)
+    }
+    if (!(denominator > 0.0)) return kInfinity;  // rays parallel or diverging
+    worst = std::max(worst, d_norm * sin_delta / denominator);
+  }
+  return std::isfinite(worst) ? worst : kInfinity;
+}
+
+double pointErrorResistance(const Eigen::Vector3d& point, const Eigen::Vector3d& origin_i,
+                            const PinholeIntrinsics& intrinsics_j, const CameraPose& pose_j) {
+  const PairErrorResistance pair(origin_i, intrinsics_j, pose_j);
+  return pair(pose_j.worldToCamera(point));
+}
+
+namespace {
+
+cv::Matx34d projectionMatrix(const PinholeIntrinsics& k, const CameraPose& pose) {
+  const Eigen::Matrix3d r_cw = pose.rotation().transpose();
+  const Eigen::Vector3d t_cw = -r_cw * pose.position;
+  Eigen::Matrix<double, 3, 4> rt;
+  rt << r_cw, t_cw;
+  const Eigen::Matrix<double, 3, 4> p = k.matrix() * rt;
+  cv::Matx34d out;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 4; ++c) out(r, c) = p(r, c);
+  return out;
+}
+
+}  // namespace
+
+double pointErrorResistanceByTriangulation(const Eigen::Vector3d& point,
+                                           const PinholeIntrinsics& intrinsics_i,
+                                           const CameraPose& pose_i,
+                                           const PinholeIntrinsics& intrinsics_j,
+                                           const CameraPose& pose_j) {
+  const Eigen::Vector3d p_cam_i = pose_i.worldToCamera(point);
+  const Eigen::Vector3d p_cam_j = pose_j.worldToCamera(point);
+  if (!(p_cam_i.z() > 0.0) || !(p_cam_j.z() > 0.0)) return kInfinity;
+  const Eigen::Vector2d p_i = intrinsics_i.project(p_cam_i);
+  const Eigen::Vector2d p_j = intrinsics_j.project(p_cam_j);
+  const Eigen::Vector3d epipole_h = intrinsics_j.matrix() * pose_j.worldToCamera(pose_i.position);
+  const std::optional<Eigen::Vector2d> u = epipolarDirection(epipole_h, p_j);
+  if (!u) return kInfinity;
+
+  const cv::Matx34d proj_i = projectionMatrix(intrinsics_i, pose_i);
+  const cv::Matx34d proj_j = projectionMatrix(intrinsics_j, pose_j);
+  double worst = 0.0;
+  for (const double s : {1.0, -1.0}) {
+    const Eigen::Vector2d moved = p_j + s * *u;
+    cv::Mat pts_i = (cv::Mat_<double>(2, 1) << p_i.x(), p_i.y());
+    cv::Mat pts_j = (cv::Mat_<double>(2, 1) << moved.x(), moved.y());
+    cv::Mat homogeneous;
+    cv::triangulatePoints(proj_i, proj_j, pts_i, pts_j, homogeneous);
+    homogeneous.convertTo(homogeneous, CV_64F);
+    const double w = homogeneous.at<double>(3, 0);
+    if (!(std::abs(w) > 1e-15)) return kInfinity;
+    const Eigen::Vector3d moved_point(homogeneous.at<double>(0, 0) / w,
+                                      homogeneous.at<double>(1, 0) / w,
+                                      homogeneous.at<double>(2, 0) / w);
+    // The intersection must lie on the ray from O_i (t > 0) and in front of camera j.
+    if (!((moved_point - pose_i.position).dot(point - pose_i.position) > 0.0)) return kInfinity;
+    if (!(pose_j.worldToCamera(moved_point).z() > 0.0)) return kInfinity;
+    worst = std::max(worst, (moved_point - point).norm());
+  }
+  return worst;
+}
+
+}  // namespace view_selection

@@ -1,0 +1,189 @@
+#include "view_selection/core/error_resistance_matrix.h"
+
+#include "view_selection/core/error_resistance.h"
+#include "view_selection/core/exceptions.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+namespace view_selection {
+
+void ErrorResistanceConfig::validate() const {
+  if (min_covisible_points < 1)
+    throw InvalidArgument("min_covisible_points must be >= 1, got " +
+                          std::to_string(min_covisible_points));
+  if (!(min_covisible_ratio >= 0.0 && min_covisible_ratio <= 1.0))
+    throw InvalidArgument("min_covisible_ratio must be in [0, 1], got " +
+                          std::to_string(min_covisible_ratio));
+  if (!std::isfinite(max_view_angle_deg) || max_view_angle_deg > 180.0)
+    throw InvalidArgument("max_view_angle_deg must be <= 180 (<= 0 disables the gate), got " +
+                          std::to_string(max_view_angle_deg));
+  if (!(occlusion_abs_tolerance >= 0.0) || !std::isfinite(occlusion_abs_tolerance))
+    throw InvalidArgument("occlusion_abs_tolerance must be >= 0");
+  if (!(occlusion_rel_tolerance >= 0.0) || !std::isfinite(occlusion_rel_tolerance))
+    throw InvalidArgument("occlusion_rel_tolerance must be >= 0");
+}
+
+void validateKeyframe(const Keyframe& keyframe) {
+  const PinholeIntrinsics& k = keyframe.intrinsics;
+  if (!k.isValid())
+    throw InvalidInput("keyframe intrinsics are invalid (fx=" + std::to_string(k.fx) +
+                       ", fy=" + std::to_string(k.fy) + ", size " + std::to_string(k.width) +
+                       "x" + std::to_string(k.height) + ")");
+  if (!keyframe.pose.isValid())
+    throw InvalidInput("keyframe pose is not finite or its quaternion is not of unit length");
+  if (!keyframe.points.allFinite()) throw InvalidInput("keyframe has non-finite sample points");
+  if (keyframe.depth) {
+    const DepthMap& d = *keyframe.depth;
+    if (d.depth.size() != static_cast<size_t>(d.cols) * static_cast<size_t>(d.rows) ||
+        !(d.cell_width > 0.0) || !(d.cell_height > 0.0))
+      throw InvalidInput("keyframe depth map is inconsistent (size does not match cols x rows)");
+  }
+}
+
+ErrorResistanceMatrix::View ErrorResistanceMatrix::makeView(Keyframe keyframe) {
+  View v;
+  keyframe.pose.orientation.normalize();
+  v.world_to_camera = keyframe.pose.rotation().transpose();
+  const PinholeIntrinsics& k = keyframe.intrinsics;
+  // Inward normals of the planes bounding the visible region [0, w) x [0, h), z > 0.
+  v.frustum_normals.col(0) = Eigen::Vector3d(0.0, 0.0, 1.0);
+  v.frustum_normals.col(1) = Eigen::Vector3d(k.fx, 0.0, k.cx).normalized();
+  v.frustum_normals.col(2) = Eigen::Vector3d(-k.fx, 0.0, k.width - k.cx).normalized();
+  v.frustum_normals.col(3) = Eigen::Vector3d(0.0, k.fy, k.cy).normalized();
+  v.frustum_normals.col(4) = Eigen::Vector3d(0.0, -k.fy, k.height - k.cy).normalized();
+  if (keyframe.points.cols() > 0) {
+    const Eigen::Vector3d lo = keyframe.points.rowwise().minCoeff();
+    const Eigen::Vector3d hi = keyframe.points.rowwise().maxCoeff();
+    v.sphere_centre = 0.5 * (lo + hi);
+    v.sphere_radius = (keyframe.points.colwise() - v.sphere_centre).colwise().norm().maxCoeff();
+  } else {
+    v.sphere_centre.setZero();
+    v.sphere_radius = -1.0;
+  }
+  v.keyframe = std::move(keyframe);
+  return v;
+}
+
+double computeErrorResistance(const ErrorResistanceMatrix::View& view_i,
+                              const ErrorResistanceMatrix::View& view_j,
+                              const ErrorResistanceConfig& config,
+                              ErrorResistanceMatrix::Scratch& scratch, bool* evaluated) {
+  if (evaluated) *evaluated = false;
+  const Keyframe& kf_i = view_i.keyframe;
+  const Keyframe& kf_j = view_j.keyframe;
+  const Eigen::Index n_points = kf_i.points.cols();
+  const double needed = std::max(static_cast<double>(config.min_covisible_points),
+                                 config.min_covisible_ratio * static_cast<double>(n_points));
+  if (static_cast<double>(n_points) < needed) return kInfinity;
+
+  if (config.max_view_angle_deg > 0.0) {
+    const double c = std::clamp(
+        view_i.world_to_camera.row(2).dot(view_j.world_to_camera.row(2)), -1.0, 1.0);
+    if (std::acos(c) * 180.0 / M_PI > config.max_view_angle_deg) return kInfinity;
+  }
+
+  const Eigen::Matrix3d& r_cw = view_j.world_to_camera;
+  const Eigen::Vector3d& o_j = kf_j.pose.position;
+  // Pair-level cull: a bounding sphere of X_i wholly outside one plane of j's frustum means no
+  // point can be visible. The margin keeps the test conservative under rounding.
+  {
+    const Eigen::Vector3d c = r_cw * (view_i.sphere_centre - o_j);
+    const double margin = view_i.sphere_radius + 1e-9 * (c.norm() + view_i.sphere_radius);
+    if ((view_j.frustum_normals.transpose() * c).minCoeff() < -margin) return kInfinity;
+  }
+  if (evaluated) *evaluated = true;
+
+  const PinholeIntrinsics& k = kf_j.intrinsics;
+  const DepthMap* depth = kf_j.depth ? kf_j.depth.get() : nullptr;
+  scratch.points_cam.clear();
+  for (Eigen::Index c = 0; c < n_points; ++c) {
+    const Eigen::Vector3d p = r_cw * (kf_i.points.col(c) - o_j);
+    if (!(p.z() > 0.0)) continue;
+    const double u = k.fx * p.x() / p.z() + k.cx;
+    const double v = k.fy * p.y() / p.z() + k.cy;
+    if (!(u >= 0.0 && v >= 0.0 && u < k.width && v < k.height)) continue;
+    if (depth) {
+      const double d = depth->at(u, v);
+      if (d > 0.0 && std::abs(p.z() - d) > std::max(config.occlusion_abs_tolerance,
+                                                     config.occlusion_rel_tolerance * p.z()))
+        continue;  // occluded (or in front of the surface j saw): not visible
+    }
+    scratch.points_cam.push_back(p);
+  }
+  if (static_cast<double>(scratch.points_cam.size()) < needed) return kInfinity;
+
+  const PairErrorResistance resistance(kf_i.pose.position, k, kf_j.pose);
+  scratch.values.resize(scratch.points_cam.size());
+  for (size_t q = 0; q < scratch.points_cam.size(); ++q)
+    scratch.values[q] = resistance(scratch.points_cam[q]);
+
+  // Median; for an even count the mean of the two middle values (+inf if either is +inf).
+  auto& vals = scratch.values;
+  const size_t mid = vals.size() / 2;
+  std::nth_element(vals.begin(), vals.begin() + static_cast<std::ptrdiff_t>(mid), vals.end());
+  double median = vals[mid];
+  if (vals.size() % 2 == 0) {
+    const double lower = *std::max_element(vals.begin(), vals.begin() + static_cast<std::ptrdiff_t>(mid));
+    median = std::isfinite(median) ? 0.5 * (lower + median) : kInfinity;
+  }
+  return std::isfinite(median) ? median : kInfinity;
+}
+
+double computeErrorResistance(const Keyframe& view_i, const Keyframe& view_j,
+                              const ErrorResistanceConfig& config) {
+  ErrorResistanceMatrix::Scratch scratch;
+  return computeErrorResistance(ErrorResistanceMatrix::makeView(view_i),
+                                ErrorResistanceMatrix::makeView(view_j), config, scratch);
+}
+
+ErrorResistanceMatrix::ErrorResistanceMatrix(ErrorResistanceConfig config)
+    : config_(std::move(config)) {
+  config_.validate();
+}
+
+double ErrorResistanceMatrix::entry(const View& view_i, const View& view_j) {
+  bool evaluated = false;
+  const double value = computeErrorResistance(view_i, view_j, config_, scratch_, &evaluated);
+  pairs_evaluated_ += evaluated ? 1 : 0;
+  return value;
+}
+
+ViewId ErrorResistanceMatrix::addKeyframe(Keyframe keyframe) {
+  validateKeyframe(keyframe);
+  views_.push_back(makeView(std::move(keyframe)));
+  const size_t n = views_.size() - 1;
+  table_.resize(views_.size());
+  const View& added = views_[n];
+  for (size_t j = 0; j < n; ++j)
+    table_.set(static_cast<ViewId>(n), static_cast<ViewId>(j), entry(added, views_[j]));
+  for (size_t i = 0; i < n; ++i)
+    table_.set(static_cast<ViewId>(i), static_cast<ViewId>(n), entry(views_[i], added));
+  return static_cast<ViewId>(n);
+}
+
+void ErrorResistanceMatrix::setPoints(ViewId id, Eigen::Matrix3Xd points) {
+  if (id < 0 || static_cast<size_t>(id) >= views_.size())
+    throw InvalidArgument("setPoints: unknown view id " + std::to_string(id));
+  if (!points.allFinite()) throw InvalidInput("setPoints: non-finite sample points");
+  Keyframe keyframe = std::move(views_[static_cast<size_t>(id)].keyframe);
+  keyframe.points = std::move(points);
+  views_[static_cast<size_t>(id)] = makeView(std::move(keyframe));
+  const View& changed = views_[static_cast<size_t>(id)];
+  std::vector<TableEntry> row;
+  for (size_t j = 0; j < views_.size(); ++j) {
+    if (static_cast<ViewId>(j) == id) continue;
+    const double value = entry(changed, views_[j]);
+    if (std::isfinite(value)) row.push_back({static_cast<ViewId>(j), value});
+  }
+  table_.replaceRow(id, std::move(row));
+}
+
+void ErrorResistanceMatrix::clear() {
+  views_.clear();
+  table_.clear();
+  pairs_evaluated_ = 0;
+}
+
+}  // namespace view_selection

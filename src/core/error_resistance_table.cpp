@@ -1,0 +1,106 @@
+#include "view_selection/core/error_resistance_table.h"
+
+#include "view_selection/core/error_resistance.h"
+#include "view_selection/core/exceptions.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+namespace view_selection {
+
+namespace {
+bool byView(const TableEntry& e, ViewId v) { return e.view < v; }
+}  // namespace
+
+ErrorResistanceTable ErrorResistanceTable::fromDense(const std::vector<std::vector<double>>& dense) {
+  ErrorResistanceTable table(dense.size());
+  for (size_t i = 0; i < dense.size(); ++i) {
+    if (dense[i].size() != dense.size())
+      throw InvalidArgument("error-resistance matrix is not square: row " + std::to_string(i) +
+                            " has " + std::to_string(dense[i].size()) + " entries, expected " +
+                            std::to_string(dense.size()));
+    for (size_t j = 0; j < dense.size(); ++j)
+      table.set(static_cast<ViewId>(i), static_cast<ViewId>(j), dense[i][j]);
+  }
+  return table;
+}
+
+void ErrorResistanceTable::resize(size_t size) {
+  if (size < rows_.size()) throw InvalidArgument("ErrorResistanceTable::resize cannot shrink");
+  rows_.resize(size);
+  cols_.resize(size);
+}
+
+void ErrorResistanceTable::clear() {
+  rows_.clear();
+  cols_.clear();
+  finite_count_ = 0;
+}
+
+double ErrorResistanceTable::at(ViewId i, ViewId j) const {
+  const auto& row = rows_.at(static_cast<size_t>(i));
+  const auto it = std::lower_bound(row.begin(), row.end(), j, byView);
+  return (it != row.end() && it->view == j) ? it->value : kInfinity;
+}
+
+void ErrorResistanceTable::upsert(std::vector<TableEntry>& list, ViewId view, double value) {
+  // Entries usually arrive with the largest id so far (a new keyframe): append fast path.
+  if (list.empty() || list.back().view < view) {
+    list.push_back({view, value});
+    return;
+  }
+  const auto it = std::lower_bound(list.begin(), list.end(), view, byView);
+  if (it != list.end() && it->view == view)
+    it->value = value;
+  else
+    list.insert(it, {view, value});
+}
+
+bool ErrorResistanceTable::erase(std::vector<TableEntry>& list, ViewId view) {
+  const auto it = std::lower_bound(list.begin(), list.end(), view, byView);
+  if (it == list.end() || it->view != view) return false;
+  list.erase(it);
+  return true;
+}
+
+void ErrorResistanceTable::set(ViewId i, ViewId j, double value) {
+  if (i < 0 || j < 0 || static_cast<size_t>(i) >= size() || static_cast<size_t>(j) >= size())
+    throw InvalidArgument("ErrorResistanceTable::set: index out of range");
+  if (i == j) return;
+  auto& row = rows_[static_cast<size_t>(i)];
+  auto& col = cols_[static_cast<size_t>(j)];
+  if (std::isfinite(value)) {
+    const size_t before = row.size();
+    upsert(row, j, value);
+    upsert(col, i, value);
+    finite_count_ += row.size() - before;
+  } else if (erase(row, j)) {
+    erase(col, i);
+    --finite_count_;
+  }
+}
+
+void ErrorResistanceTable::replaceRow(ViewId i, std::vector<TableEntry> entries) {
+  auto& row = rows_.at(static_cast<size_t>(i));
+  for (const TableEntry& e : row) erase(cols_[static_cast<size_t>(e.view)], i);
+  finite_count_ -= row.size();
+  row.clear();
+  std::sort(entries.begin(), entries.end(),
+            [](const TableEntry& a, const TableEntry& b) { return a.view < b.view; });
+  for (const TableEntry& e : entries) {
+    if (e.view == i || !std::isfinite(e.value)) continue;
+    row.push_back(e);
+    upsert(cols_.at(static_cast<size_t>(e.view)), i, e.value);
+  }
+  finite_count_ += row.size();
+}
+
+std::vector<std::vector<double>> ErrorResistanceTable::dense() const {
+  std::vector<std::vector<double>> out(size(), std::vector<double>(size(), kInfinity));
+  for (size_t i = 0; i < size(); ++i)
+    for (const TableEntry& e : rows_[i]) out[i][static_cast<size_t>(e.view)] = e.value;
+  return out;
+}
+
+}  // namespace view_selection

@@ -1,0 +1,183 @@
+#include "view_selection/core/selection.h"
+
+#include "view_selection/core/exceptions.h"
+
+#include <algorithm>
+#include <set>
+
+namespace view_selection {
+
+namespace {
+
+/// Strict order of METHOD.md: by value, then by id.
+bool better(double value_a, ViewId id_a, double value_b, ViewId id_b) {
+  return value_a < value_b || (value_a == value_b && id_a < id_b);
+}
+
+}  // namespace
+
+std::string toString(CompletionMode mode) {
+  return mode == CompletionMode::kPaper ? "paper" : "reachable";
+}
+
+CompletionMode completionModeFromString(const std::string& text) {
+  if (text == "paper") return CompletionMode::kPaper;
+  if (text == "reachable") return CompletionMode::kReachable;
+  throw InvalidArgument("completion must be 'paper' or 'reachable', got '" + text + "'");
+}
+
+void SelectionConfig::validate() const {
+  if (k < 1) throw InvalidArgument("k must be >= 1, got " + std::to_string(k));
+}
+
+std::pair<ViewId, ViewId> Selection::initialPair() const {
+  if (start_view < 0 || static_cast<size_t>(start_view) >= next_views.size() ||
+      next_views[static_cast<size_t>(start_view)].empty())
+    return {-1, -1};
+  return {start_view, next_views[static_cast<size_t>(start_view)].front()};
+}
+
+std::vector<NextViewSet> computeNextViewSets(const ErrorResistanceTable& e, int k) {
+  std::vector<NextViewSet> sets(e.size());
+  std::vector<TableEntry> buffer;
+  for (size_t i = 0; i < e.size(); ++i) {
+    const auto& row = e.row(static_cast<ViewId>(i));
+    buffer.assign(row.begin(), row.end());
+    const size_t take = std::min(buffer.size(), static_cast<size_t>(std::max(k, 0)));
+    std::partial_sort(buffer.begin(), buffer.begin() + static_cast<std::ptrdiff_t>(take),
+                      buffer.end(), [](const TableEntry& a, const TableEntry& b) {
+                        return better(a.value, a.view, b.value, b.view);
+                      });
+    sets[i].reserve(take);
+    for (size_t q = 0; q < take; ++q) sets[i].push_back(buffer[q].view);
+  }
+  return sets;
+}
+
+ViewId findStartView(const ErrorResistanceTable& e) {
+  ViewId best_row = -1;
+  ViewId best_col = -1;
+  double best_value = 0.0;
+  for (size_t i = 0; i < e.size(); ++i) {
+    for (const TableEntry& entry : e.row(static_cast<ViewId>(i))) {
+      const auto row = static_cast<ViewId>(i);
+      if (best_row < 0 || entry.value < best_value ||
+          (entry.value == best_value &&
+           (row < best_row || (row == best_row && entry.view < best_col)))) {
+        best_row = row;
+        best_col = entry.view;
+        best_value = entry.value;
+      }
+    }
+  }
+  return best_row;
+}
+
+void traverse(const std::vector<NextViewSet>& sets, ViewId start, std::vector<char>& visited,
+              std::vector<ViewId>& order) {
+  if (!visited[static_cast<size_t>(start)]) {
+    visited[static_cast<size_t>(start)] = 1;
+    order.push_back(start);
+  }
+  // Each stack frame keeps how far into its set it has looked: marks only accumulate, so a
+  // candidate found marked once stays marked and is never looked at again.
+  std::vector<std::pair<ViewId, size_t>> stack{{start, 0}};
+  while (!stack.empty()) {
+    auto& [current, cursor] = stack.back();
+    const NextViewSet& candidates = sets[static_cast<size_t>(current)];
+    while (cursor < candidates.size() && visited[static_cast<size_t>(candidates[cursor])]) ++cursor;
+    if (cursor == candidates.size()) {
+      stack.pop_back();  // all next views marked: return to the previous view
+      continue;
+    }
+    const ViewId next = candidates[cursor];
+    visited[static_cast<size_t>(next)] = 1;
+    order.push_back(next);
+    stack.emplace_back(next, 0);
+  }
+}
+
+std::vector<std::pair<ViewId, ViewId>> pairsFromSets(const std::vector<NextViewSet>& sets) {
+  std::vector<std::pair<ViewId, ViewId>> pairs;
+  for (size_t i = 0; i < sets.size(); ++i)
+    for (const ViewId j : sets[i])
+      pairs.emplace_back(std::min(static_cast<ViewId>(i), j), std::max(static_cast<ViewId>(i), j));
+  std::sort(pairs.begin(), pairs.end());
+  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+  return pairs;
+}
+
+namespace {
+
+/// Best a (by (E[a][x], a)) over column x, optionally among visited views only; -1 if none.
+ViewId bestPredecessor(const ErrorResistanceTable& e, ViewId x, const std::vector<char>* visited) {
+  ViewId best = -1;
+  double best_value = 0.0;
+  for (const TableEntry& entry : e.column(x)) {
+    if (visited && !(*visited)[static_cast<size_t>(entry.view)]) continue;
+    if (best < 0 || better(entry.value, entry.view, best_value, best)) {
+      best = entry.view;
+      best_value = entry.value;
+    }
+  }
+  return best;
+}
+
+void completePaper(const ErrorResistanceTable& e, const std::vector<char>& visited,
+                   Selection& out) {
+  for (size_t x = 0; x < e.size(); ++x) {
+    if (visited[x]) continue;
+    const ViewId a = bestPredecessor(e, static_cast<ViewId>(x), nullptr);
+    if (a < 0) {
+      out.isolated.push_back(static_cast<ViewId>(x));
+      continue;
+    }
+    out.final_next_views[static_cast<size_t>(a)].push_back(static_cast<ViewId>(x));
+    out.completed.push_back({static_cast<ViewId>(x), a});
+  }
+}
+
+void completeReachable(const ErrorResistanceTable& e, std::vector<char>& visited,
+                       Selection& out) {
+  // Unvisited views with a finite entry from some visited view, smallest id first.
+  std::set<ViewId> candidates;
+  size_t scanned = 0;  // views of `order` whose rows were already offered as candidates
+  auto offerNewlyVisited = [&]() {
+    for (; scanned < out.order.size(); ++scanned)
+      for (const TableEntry& entry : e.row(out.order[scanned]))
+        if (!visited[static_cast<size_t>(entry.view)]) candidates.insert(entry.view);
+  };
+  offerNewlyVisited();
+  while (!candidates.empty()) {
+    const ViewId x = *candidates.begin();
+    candidates.erase(candidates.begin());
+    if (visited[static_cast<size_t>(x)]) continue;
+    const ViewId a = bestPredecessor(e, x, &visited);
+    out.final_next_views[static_cast<size_t>(a)].push_back(x);
+    out.completed.push_back({x, a});
+    traverse(out.final_next_views, x, visited, out.order);  // marks x, then continues from it
+    offerNewlyVisited();
+  }
+  for (size_t x = 0; x < e.size(); ++x)
+    if (!visited[x]) out.isolated.push_back(static_cast<ViewId>(x));
+}
+
+}  // namespace
+
+Selection selectViews(const ErrorResistanceTable& e, const SelectionConfig& config) {
+  config.validate();
+  Selection out;
+  out.next_views = computeNextViewSets(e, config.k);
+  out.final_next_views = out.next_views;
+  out.start_view = findStartView(e);
+  std::vector<char> visited(e.size(), 0);
+  if (out.start_view >= 0) traverse(out.next_views, out.start_view, visited, out.order);
+  if (config.completion == CompletionMode::kPaper)
+    completePaper(e, visited, out);
+  else
+    completeReachable(e, visited, out);
+  out.pairs = pairsFromSets(out.final_next_views);
+  return out;
+}
+
+}  // namespace view_selection
