@@ -1,0 +1,49 @@
+// Which frames become keyframes: every frame, every Nth frame, or after enough motion.
+#pragma once
+
+#include "view_selection/core/types.h"
+
+#include <optional>
+#include <string>
+
+namespace view_selection {
+
+enum class KeyframeMode {
+  kEveryFrame,  ///< every frame offered
+  kEveryNth,    ///< frames 0, N, 2N, ... of those offered
+  kMotion,      ///< the first frame, then one after min_translation OR min_rotation_deg of motion
+};
+
+std::string toString(KeyframeMode mode);
+/// "every_frame", "every_nth" or "motion"; throws InvalidArgument otherwise.
+KeyframeMode keyframeModeFromString(const std::string& text);
+
+struct KeyframePolicyConfig {
+  KeyframeMode mode = KeyframeMode::kMotion;
+  int every_n = 10;                 ///< kEveryNth: keep one frame in every_n
+  double min_translation = 0.10;    ///< kMotion: [m, scene units] since the last keyframe
+  double min_rotation_deg = 10.0;   ///< kMotion: [deg] since the last keyframe
+
+  void validate() const;
+};
+
+class KeyframePolicy {
+ public:
+  explicit KeyframePolicy(KeyframePolicyConfig config = {});
+
+  /// Offers the next frame; true when it should become a keyframe. Counts the frame either way.
+  /// The policy remembers the pose only once the caller confirms with keyframeAccepted(), so a
+  /// frame that is dropped later (no points, bad depth) does not move the reference.
+  bool offer(const CameraPose& pose);
+  /// The frame offered last did become a keyframe at `pose`.
+  void keyframeAccepted(const CameraPose& pose);
+  void reset();
+  const KeyframePolicyConfig& config() const { return config_; }
+
+ private:
+  KeyframePolicyConfig config_;
+  long frames_offered_ = 0;
+  std::optional<CameraPose> last_keyframe_;
+};
+
+}  // namespace view_selection
