@@ -27,15 +27,18 @@ struct TumPoseEntry {
 std::vector<TumImageEntry> readTumImageList(const std::string& path);
 /// Reads groundtruth.txt (same rules; a non-finite value or a zero quaternion is malformed).
 std::vector<TumPoseEntry> readTumTrajectory(const std::string& path);
-/// Writes groundtruth.txt format (8 columns, full double precision).
+/// Writes groundtruth.txt format (8 columns, full double precision). Throws IoError.
 void writeTumTrajectory(const std::string& path, const std::vector<TumPoseEntry>& poses,
                         const std::string& comment = "");
+/// Writes rgb.txt / depth.txt format ("stamp path", stamps with 6 decimals). Throws IoError.
+void writeTumImageList(const std::string& path, const std::vector<TumImageEntry>& entries,
+                       const std::string& comment = "");
 
 /// Intrinsics from a YAML file: flat keys fx, fy, cx, cy, width, height (this package's
 /// camera.yaml), or a ROS camera_info calibration file (image_width, image_height,
 /// camera_matrix/data). Throws IoError naming the file and what is missing.
 PinholeIntrinsics loadCameraYaml(const std::string& path);
-/// Writes the flat camera.yaml format.
+/// Writes the flat camera.yaml format. Throws IoError.
 void writeCameraYaml(const std::string& path, const PinholeIntrinsics& intrinsics);
 /// TUM's published colour intrinsics for freiburg1/2/3, chosen by a folder name containing
 /// "freiburg1" / "fr1" etc.; empty when the name says none.
