@@ -132,7 +132,11 @@ void completePaper(const ErrorResistanceTable& e, const std::vector<char>& visit
       out.isolated.push_back(static_cast<ViewId>(x));
       continue;
     }
-    out.final_next_views[static_cast<size_t>(a)].push_back(static_cast<ViewId>(x));
+    // x may already be in C_a (a itself unvisited): the set stays free of duplicates, and the
+    // completion is still reported.
+    auto& set = out.final_next_views[static_cast<size_t>(a)];
+    if (std::find(set.begin(), set.end(), static_cast<ViewId>(x)) == set.end())
+      set.push_back(static_cast<ViewId>(x));
     out.completed.push_back({static_cast<ViewId>(x), a});
   }
 }

@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -46,8 +47,9 @@ class ViewSelector {
   /// Takes ownership of the point source; a DepthPointSource when null.
   explicit ViewSelector(ViewSelectorConfig config, std::unique_ptr<PointSource> points = nullptr);
 
-  /// Validates the frame (throws InvalidInput with a reason; nothing changes then), applies the
-  /// keyframe policy, gets the points and inserts the keyframe.
+  /// Validates the frame (throws InvalidInput with a reason; nothing changes then), rejects a
+  /// stamp not after the previous frame's (duplicate or out of order), applies the keyframe
+  /// policy, gets the points and inserts the keyframe.
   FrameResult addFrame(const Frame& frame);
   /// The selection for the keyframes so far.
   Selection select() const;
@@ -64,6 +66,7 @@ class ViewSelector {
   std::unique_ptr<PointSource> points_;
   KeyframePolicy policy_;
   ErrorResistanceMatrix matrix_;
+  std::optional<double> last_stamp_;  // of the last valid frame offered
 };
 
 /// Throws InvalidInput when a frame cannot be used (intrinsics, pose, depth type or size).

@@ -1,0 +1,227 @@
+// Selection on hand-built matrices whose answers are worked out here by hand (METHOD.md "Next
+// view sets", "View check", "Completion", "Outputs"), plus randomized invariants.
+#include "view_selection/core/selection.h"
+
+#include "view_selection/core/error_resistance.h"
+#include "view_selection/core/exceptions.h"
+
+#include <gtest/gtest.h>
+
+#include <queue>
+#include <random>
+#include <set>
+
+namespace view_selection {
+namespace {
+
+constexpr double X = kInfinity;
+using Pairs = std::vector<std::pair<ViewId, ViewId>>;
+
+TEST(Selection, TraversalTakesSecondBestWhenMarkedAndReturnsWhenAllMarked) {
+  // k = 2.
+  //   C0 = [2 (0.1), 1 (0.3)]   C1 = [0 (0.2), 3 (0.5)]   C2 = [1 (0.05), 0 (0.4)]   C3 = []
+  // s = 2 (E[2][1] = 0.05 is the smallest entry). From 2: best unmarked is 1. From 1: 0.
+  // At 0 both next views are marked (special case 2): return to 1, whose best (0) is marked, so
+  // its second best 3 is taken (special case 1). 3 has no next views: back to 1, then 2, done.
+  const auto e = ErrorResistanceTable::fromDense({
+      {X, 0.3, 0.1, X},
+      {0.2, X, X, 0.5},
+      {0.4, 0.05, X, X},
+      {X, X, X, X},
+  });
+  const Selection s = selectViews(e, {2, CompletionMode::kPaper});
+  EXPECT_EQ(s.next_views, (std::vector<NextViewSet>{{2, 1}, {0, 3}, {1, 0}, {}}));
+  EXPECT_EQ(s.start_view, 2);
+  EXPECT_EQ(s.initialPair(), std::make_pair(2, 1));
+  EXPECT_EQ(s.order, (std::vector<ViewId>{2, 1, 0, 3}));
+  EXPECT_TRUE(s.completed.empty());
+  EXPECT_TRUE(s.isolated.empty());
+  EXPECT_EQ(s.final_next_views, s.next_views);
+  EXPECT_EQ(s.pairs, (Pairs{{0, 1}, {0, 2}, {1, 2}, {1, 3}}));
+}
+
+// Seven views, k = 1.
+//   row 0: E01 = 0.1, E06 = 0.8      C0 = [1]
+//   row 1: E10 = 0.2, E12 = 0.9      C1 = [0]
+//   row 2: E23 = 0.25                C2 = [3]
+//   row 3: E34 = 0.4                 C3 = [4]
+//   row 4: E42 = 0.35                C4 = [2]
+//   rows 5, 6: nothing               C5 = C6 = []
+// s = 0; traversal 0 -> 1, and 1's only next view (0) is marked: order [0, 1].
+ErrorResistanceTable sevenViews() {
+  return ErrorResistanceTable::fromDense({
+      {X, 0.1, X, X, X, X, 0.8},
+      {0.2, X, 0.9, X, X, X, X},
+      {X, X, X, 0.25, X, X, X},
+      {X, X, X, X, 0.4, X, X},
+      {X, X, 0.35, X, X, X, X},
+      {X, X, X, X, X, X, X},
+      {X, X, X, X, X, X, X},
+  });
+}
+
+TEST(Selection, PaperCompletionAddsEachMissedViewToItsBestPredecessor) {
+  // Unvisited 2..6 in increasing id; the best predecessor is over all views:
+  //   2: column {E12 = 0.9, E42 = 0.35} -> 4 (already in C4: set unchanged, completion recorded)
+  //   3: column {E23} -> 2 (already there)   4: {E34} -> 3 (already there)
+  //   5: empty column -> isolated            6: {E06} -> 0, C0 becomes [1, 6]
+  // Paper mode does not extend the order, and 2, 3, 4 stay unreachable from s = 0.
+  const Selection s = selectViews(sevenViews(), {1, CompletionMode::kPaper});
+  EXPECT_EQ(s.next_views, (std::vector<NextViewSet>{{1}, {0}, {3}, {4}, {2}, {}, {}}));
+  EXPECT_EQ(s.start_view, 0);
+  EXPECT_EQ(s.order, (std::vector<ViewId>{0, 1}));
+  EXPECT_EQ(s.completed, (std::vector<CompletedView>{{2, 4}, {3, 2}, {4, 3}, {6, 0}}));
+  EXPECT_EQ(s.isolated, (std::vector<ViewId>{5}));
+  EXPECT_EQ(s.final_next_views, (std::vector<NextViewSet>{{1, 6}, {0}, {3}, {4}, {2}, {}, {}}));
+  EXPECT_EQ(s.pairs, (Pairs{{0, 1}, {0, 6}, {2, 3}, {2, 4}, {3, 4}}));
+}
+
+TEST(Selection, ReachableCompletionJoinsFromVisitedViewsAndContinuesTraversal) {
+  // Visited {0, 1}; candidates (unvisited with a finite entry from a visited view): {2, 6}.
+  //   2: visited predecessors {E12 = 0.9} (4 is not visited) -> C1 = [0, 2]; traversal continues
+  //      from 2: 2 -> 3 -> 4 (4's next view 2 is marked). order [0, 1, 2, 3, 4]
+  //   6: {E06} -> C0 = [1, 6]; 6 has no next views. order [..., 6]
+  //   5 is unreachable: isolated.
+  const Selection s = selectViews(sevenViews(), {1, CompletionMode::kReachable});
+  EXPECT_EQ(s.order, (std::vector<ViewId>{0, 1, 2, 3, 4, 6}));
+  EXPECT_EQ(s.completed, (std::vector<CompletedView>{{2, 1}, {6, 0}}));
+  EXPECT_EQ(s.isolated, (std::vector<ViewId>{5}));
+  EXPECT_EQ(s.final_next_views, (std::vector<NextViewSet>{{1, 6}, {0, 2}, {3}, {4}, {2}, {}, {}}));
+  EXPECT_EQ(s.pairs, (Pairs{{0, 1}, {0, 6}, {1, 2}, {2, 3}, {2, 4}, {3, 4}}));
+  // Next view sets before completion do not depend on the mode.
+  EXPECT_EQ(s.next_views, selectViews(sevenViews(), {1, CompletionMode::kPaper}).next_views);
+}
+
+TEST(Selection, TiesBreakOnLowerId) {
+  // Row 0 ties 1 and 2 at 0.5; the start ties E03 = E10 = 0.2, so the lower row (0) wins.
+  const auto e = ErrorResistanceTable::fromDense({
+      {X, 0.5, 0.5, 0.2},
+      {0.2, X, 0.7, 0.7},
+      {X, X, X, X},
+      {X, X, X, X},
+  });
+  const Selection s = selectViews(e, {2, CompletionMode::kPaper});
+  EXPECT_EQ(s.next_views[0], (NextViewSet{3, 1}));
+  EXPECT_EQ(s.next_views[1], (NextViewSet{0, 2}));
+  EXPECT_EQ(s.start_view, 0);
+  EXPECT_EQ(findStartView(e), 0);
+  // Order: 0 -> 3 (nothing) -> back, 0 -> 1 -> 2 (0 marked), back. Ties again on ids.
+  EXPECT_EQ(s.order, (std::vector<ViewId>{0, 3, 1, 2}));
+}
+
+TEST(Selection, DegenerateMatrices) {
+  const Selection empty = selectViews(ErrorResistanceTable(0), {});
+  EXPECT_EQ(empty.start_view, -1);
+  EXPECT_TRUE(empty.order.empty() && empty.pairs.empty() && empty.isolated.empty());
+  EXPECT_EQ(empty.initialPair(), std::make_pair(-1, -1));
+
+  for (const CompletionMode mode : {CompletionMode::kPaper, CompletionMode::kReachable}) {
+    const Selection none = selectViews(ErrorResistanceTable(3), {5, mode});
+    EXPECT_EQ(none.start_view, -1);
+    EXPECT_TRUE(none.order.empty());
+    EXPECT_EQ(none.isolated, (std::vector<ViewId>{0, 1, 2}));
+    EXPECT_TRUE(none.pairs.empty());
+  }
+  EXPECT_THROW(selectViews(ErrorResistanceTable(2), {0, CompletionMode::kPaper}), InvalidArgument);
+  EXPECT_EQ(completionModeFromString("reachable"), CompletionMode::kReachable);
+  EXPECT_THROW(completionModeFromString("Paper"), InvalidArgument);
+}
+
+TEST(Selection, TableKeepsRowsAndColumnsConsistent) {
+  ErrorResistanceTable t(4);
+  t.set(0, 2, 1.0);
+  t.set(3, 2, 0.5);
+  t.set(0, 0, 7.0);  // the diagonal is never stored
+  EXPECT_EQ(t.at(0, 0), kInfinity);
+  EXPECT_EQ(t.finiteCount(), 2u);
+  ASSERT_EQ(t.column(2).size(), 2u);
+  EXPECT_EQ(t.column(2)[0].view, 0);
+  EXPECT_EQ(t.column(2)[1].view, 3);
+  t.set(0, 2, kInfinity);
+  EXPECT_EQ(t.finiteCount(), 1u);
+  EXPECT_EQ(t.column(2).size(), 1u);
+  t.replaceRow(3, {{1, 0.25}, {0, 0.75}});
+  EXPECT_EQ(t.column(2).size(), 0u);
+  EXPECT_EQ(t.at(3, 0), 0.75);
+  EXPECT_EQ(t.finiteCount(), 2u);
+  EXPECT_EQ(t.dense()[3], (std::vector<double>{0.75, 0.25, X, X}));
+}
+
+/// Views reachable from `from` through `sets`.
+std::set<ViewId> reachable(const std::vector<NextViewSet>& sets, ViewId from) {
+  std::set<ViewId> seen{from};
+  std::queue<ViewId> queue;
+  queue.push(from);
+  while (!queue.empty()) {
+    const ViewId v = queue.front();
+    queue.pop();
+    for (const ViewId w : sets[static_cast<size_t>(v)])
+      if (seen.insert(w).second) queue.push(w);
+  }
+  return seen;
+}
+
+TEST(Selection, RandomMatricesKeepTheInvariants) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  for (int trial = 0; trial < 300; ++trial) {
+    const size_t n = 1 + static_cast<size_t>(uni(rng) * 40);
+    const double density = uni(rng) * 0.3;
+    std::vector<std::vector<double>> dense(n, std::vector<double>(n, X));
+    for (size_t i = 0; i < n; ++i)
+      for (size_t j = 0; j < n; ++j)
+        if (i != j && uni(rng) < density) dense[i][j] = std::round(uni(rng) * 20) / 20;  // ties
+    const auto e = ErrorResistanceTable::fromDense(dense);
+    const int k = 1 + static_cast<int>(uni(rng) * 5);
+    for (const CompletionMode mode : {CompletionMode::kPaper, CompletionMode::kReachable}) {
+      const Selection s = selectViews(e, {k, mode});
+      // Sets: at most k, finite entries, sorted by (value, id).
+      for (size_t i = 0; i < n; ++i) {
+        const auto& c = s.next_views[i];
+        ASSERT_LE(c.size(), static_cast<size_t>(k));
+        ASSERT_EQ(c.size(), std::min(static_cast<size_t>(k), e.row(static_cast<ViewId>(i)).size()));
+        for (size_t q = 1; q < c.size(); ++q) {
+          const double a = e.at(static_cast<ViewId>(i), c[q - 1]), b = e.at(static_cast<ViewId>(i), c[q]);
+          ASSERT_TRUE(a < b || (a == b && c[q - 1] < c[q]));
+        }
+      }
+      // Order is a list of distinct views; every view is visited or isolated or completed.
+      const std::set<ViewId> ordered(s.order.begin(), s.order.end());
+      ASSERT_EQ(ordered.size(), s.order.size());
+      std::set<ViewId> covered = ordered;
+      for (const auto& c : s.completed) covered.insert(c.view);
+      for (const ViewId v : s.isolated) {
+        ASSERT_EQ(covered.count(v), 0u);
+        covered.insert(v);
+      }
+      ASSERT_EQ(covered.size(), n);
+      if (s.start_view < 0) continue;
+      ASSERT_EQ(s.order.front(), s.start_view);
+      if (mode == CompletionMode::kReachable) {
+        // Every non-isolated view is reachable from s through the final sets.
+        const std::set<ViewId> r = reachable(s.final_next_views, s.start_view);
+        ASSERT_EQ(r.size() + s.isolated.size(), n) << "trial " << trial;
+        ASSERT_EQ(r, ordered);
+      } else {
+        // Paper mode: a completed view is in its predecessor's final set, and no view with a
+        // finite column entry is left out.
+        for (const auto& c : s.completed) {
+          const auto& f = s.final_next_views[static_cast<size_t>(c.added_to)];
+          ASSERT_NE(std::find(f.begin(), f.end(), c.view), f.end());
+          for (const TableEntry& entry : e.column(c.view))
+            ASSERT_GE(entry.value, e.at(c.added_to, c.view));
+        }
+        for (const ViewId v : s.isolated) ASSERT_TRUE(e.column(v).empty());
+      }
+      // Pairs: the undirected union of the final sets.
+      std::set<std::pair<ViewId, ViewId>> expected;
+      for (size_t i = 0; i < n; ++i)
+        for (const ViewId j : s.final_next_views[i])
+          expected.insert({std::min<ViewId>(static_cast<ViewId>(i), j), std::max<ViewId>(static_cast<ViewId>(i), j)});
+      ASSERT_EQ(s.pairs, Pairs(expected.begin(), expected.end()));
+    }
+  }
+}
+
+}  // namespace
+}  // namespace view_selection
