@@ -1,0 +1,298 @@
+// The error-resistance matrix: incremental insertion equals a from-scratch computation in any
+// insertion order, row-only recomputation, gates, occlusion, median, against a naive reference.
+#include "view_selection/core/error_resistance_matrix.h"
+
+#include "view_selection/core/error_resistance.h"
+#include "view_selection/core/exceptions.h"
+
+#include "test_support.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <numeric>
+#include <random>
+
+namespace view_selection {
+namespace {
+
+using test::lookAt;
+using test::vgaIntrinsics;
+
+/// The definition of METHOD.md written out plainly, independent of the optimised code path.
+double naiveEntry(const Keyframe& i, const Keyframe& j, const ErrorResistanceConfig& config) {
+  const double needed = std::max<double>(config.min_covisible_points,
+                                         config.min_covisible_ratio * i.points.cols());
+  if (config.max_view_angle_deg > 0.0) {
+    const double angle = std::acos(std::clamp(i.pose.opticalAxis().dot(j.pose.opticalAxis()), -1.0, 1.0));
+    if (angle * 180.0 / M_PI > config.max_view_angle_deg) return kInfinity;
+  }
+  std::vector<double> values;
+  for (Eigen::Index c = 0; c < i.points.cols(); ++c) {
+    const Eigen::Vector3d p = i.points.col(c);
+    const Eigen::Vector3d pc = j.pose.worldToCamera(p);
+    if (pc.z() <= 0.0) continue;
+    const Eigen::Vector2d px = j.intrinsics.project(pc);
+    if (!j.intrinsics.inImage(px)) continue;
+    if (j.depth) {
+      const double d = j.depth->at(px.x(), px.y());
+      if (d > 0.0 && std::abs(pc.z() - d) > std::max(config.occlusion_abs_tolerance,
+                                                     config.occlusion_rel_tolerance * pc.z()))
+        continue;
+    }
+    values.push_back(pointErrorResistance(p, i.pose.position, j.intrinsics, j.pose));
+  }
+  if (values.size() < needed) return kInfinity;
+  std::sort(values.begin(), values.end());
+  const size_t m = values.size() / 2;
+  return values.size() % 2 ? values[m] : 0.5 * (values[m - 1] + values[m]);
+}
+
+/// A room of points on its walls with cameras inside looking at random walls; each keyframe
+/// keeps the points it sees (z-buffered) and, for some, a coarse depth map.
+struct Scene {
+  std::vector<Keyframe> keyframes;
+};
+
+Scene makeScene(unsigned seed, int views, bool with_depth) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  // Walls of a 6 x 3 x 5 box plus a free-standing panel that occludes part of the room.
+  std::vector<Eigen::Vector3d> world;
+  for (int q = 0; q < 4000; ++q) {
+    const int wall = static_cast<int>(uni(rng) * 5);
+    const double a = uni(rng), b = uni(rng);
+    switch (wall) {
+      case 0: world.emplace_back(-3.0, 3.0 * a - 1.5, 5.0 * b - 2.5); break;
+      case 1: world.emplace_back(3.0, 3.0 * a - 1.5, 5.0 * b - 2.5); break;
+      case 2: world.emplace_back(6.0 * a - 3.0, 3.0 * b - 1.5, -2.5); break;
+      case 3: world.emplace_back(6.0 * a - 3.0, 3.0 * b - 1.5, 2.5); break;
+      default: world.emplace_back(1.5 * a - 0.75, 1.5 * b - 0.75, 0.0); break;  // panel
+    }
+  }
+  Scene scene;
+  for (int v = 0; v < views; ++v) {
+    const Eigen::Vector3d eye(4.0 * uni(rng) - 2.0, 0.6 * uni(rng) - 0.3, 3.0 * uni(rng) - 1.5);
+    const Eigen::Vector3d target(6.0 * uni(rng) - 3.0, 0.5 * uni(rng) - 0.25, 5.0 * uni(rng) - 2.5);
+    if ((target - eye).norm() < 0.5) {
+      --v;
+      continue;
+    }
+    Keyframe kf;
+    kf.stamp = v;
+    kf.image_name = std::to_string(v) + ".png";
+    kf.intrinsics = vgaIntrinsics(400.0 + 200.0 * uni(rng));
+    kf.pose = lookAt(eye, target, 0.2 * uni(rng) - 0.1);
+    // z-buffer on 8 x 8 cells: the nearest point per cell is what this camera sees there.
+    auto map = std::make_shared<DepthMap>();
+    map->cols = 80;
+    map->rows = 60;
+    map->cell_width = map->cell_height = 8.0;
+    map->depth.assign(80 * 60, 0.0f);
+    std::vector<std::pair<int, Eigen::Vector3d>> seen;
+    for (const auto& p : world) {
+      const Eigen::Vector3d pc = kf.pose.worldToCamera(p);
+      if (pc.z() <= 0.1) continue;
+      const Eigen::Vector2d px = kf.intrinsics.project(pc);
+      if (!kf.intrinsics.inImage(px)) continue;
+      const int cell = static_cast<int>(px.y() / 8) * 80 + static_cast<int>(px.x() / 8);
+      float& d = map->depth[static_cast<size_t>(cell)];
+      if (d == 0.0f || pc.z() < d) d = static_cast<float>(pc.z());
+      seen.emplace_back(cell, p);
+    }
+    std::vector<Eigen::Vector3d> kept;
+    for (const auto& [cell, p] : seen)
+      if (std::abs(kf.pose.worldToCamera(p).z() - map->depth[static_cast<size_t>(cell)]) < 0.05 &&
+          kept.size() < 120)
+        kept.push_back(p);
+    kf.points.resize(3, static_cast<Eigen::Index>(kept.size()));
+    for (size_t q = 0; q < kept.size(); ++q) kf.points.col(static_cast<Eigen::Index>(q)) = kept[q];
+    if (with_depth && v % 3 != 2) kf.depth = map;  // some views without depth maps
+    scene.keyframes.push_back(std::move(kf));
+  }
+  return scene;
+}
+
+TEST(ErrorResistanceMatrix, OptimisedEntryMatchesNaiveDefinition) {
+  const Scene scene = makeScene(11, 24, true);
+  ErrorResistanceConfig config;
+  int finite = 0, infinite = 0;
+  for (const auto& a : scene.keyframes) {
+    for (const auto& b : scene.keyframes) {
+      if (&a == &b) continue;
+      const double fast = computeErrorResistance(a, b, config);
+      const double slow = naiveEntry(a, b, config);
+      if (std::isfinite(slow)) {
+        ++finite;
+        ASSERT_NEAR(fast, slow, 1e-12 * slow);
+      } else {
+        ++infinite;
+        ASSERT_EQ(fast, kInfinity);
+      }
+    }
+  }
+  // The scene must exercise both outcomes, or this test would prove little.
+  EXPECT_GT(finite, 40);
+  EXPECT_GT(infinite, 40);
+}
+
+TEST(ErrorResistanceMatrix, IncrementalEqualsFromScratchInAnyInsertionOrder) {
+  const Scene scene = makeScene(5, 20, true);
+  const size_t n = scene.keyframes.size();
+  ErrorResistanceConfig config;
+  config.max_view_angle_deg = 100.0;  // exercise the optional gate too
+  std::mt19937 rng(99);
+  for (int trial = 0; trial < 4; ++trial) {
+    std::vector<size_t> perm(n);
+    std::iota(perm.begin(), perm.end(), 0);
+    if (trial > 0) std::shuffle(perm.begin(), perm.end(), rng);
+    ErrorResistanceMatrix matrix(config);
+    for (size_t q = 0; q < n; ++q) {
+      EXPECT_EQ(matrix.addKeyframe(scene.keyframes[perm[q]]), static_cast<ViewId>(q));
+      // After every insertion the matrix so far equals the from-scratch values.
+      for (size_t a = 0; a <= q; ++a)
+        for (size_t b = 0; b <= q; ++b) {
+          const double expected = a == b ? kInfinity
+                                         : computeErrorResistance(scene.keyframes[perm[a]],
+                                                                  scene.keyframes[perm[b]], config);
+          ASSERT_EQ(matrix.at(static_cast<ViewId>(a), static_cast<ViewId>(b)), expected)
+              << "trial " << trial << " after " << q << " at " << a << "," << b;
+        }
+    }
+    EXPECT_GT(matrix.table().finiteCount(), n);
+  }
+}
+
+TEST(ErrorResistanceMatrix, ChangingPointsRecomputesOnlyThatRow) {
+  Scene scene = makeScene(3, 16, true);
+  const size_t n = scene.keyframes.size();
+  ErrorResistanceMatrix matrix;
+  for (const auto& kf : scene.keyframes) matrix.addKeyframe(kf);
+  const auto before = matrix.table().dense();
+  const size_t evaluated_before = matrix.pairsEvaluated();
+
+  // Give view 4 the points of view 5 plus its own: its row changes, nothing else may.
+  const ViewId changed = 4;
+  Eigen::Matrix3Xd merged(3, scene.keyframes[4].points.cols() + scene.keyframes[5].points.cols());
+  merged << scene.keyframes[4].points, scene.keyframes[5].points;
+  matrix.setPoints(changed, merged);
+  EXPECT_LE(matrix.pairsEvaluated() - evaluated_before, n - 1);  // one row at most
+
+  scene.keyframes[4].points = merged;
+  const auto after = matrix.table().dense();
+  bool row_changed = false;
+  for (size_t a = 0; a < n; ++a)
+    for (size_t b = 0; b < n; ++b) {
+      const double expected =
+          a == b ? kInfinity : computeErrorResistance(scene.keyframes[a], scene.keyframes[b], {});
+      ASSERT_EQ(after[a][b], expected);
+      if (static_cast<ViewId>(a) != changed) {
+        ASSERT_EQ(after[a][b], before[a][b]);
+      }
+      row_changed |= after[a][b] != before[a][b];
+    }
+  EXPECT_TRUE(row_changed);
+  EXPECT_THROW(matrix.setPoints(static_cast<ViewId>(n), merged), InvalidArgument);
+}
+
+/// Two cameras 1 m apart looking at a grid of `count` points 3 m ahead.
+std::pair<Keyframe, Keyframe> twoViews(int count) {
+  Keyframe a, b;
+  a.intrinsics = b.intrinsics = vgaIntrinsics();
+  a.pose = lookAt({0, 0, 0}, {0.5, 0, 3});
+  b.pose = lookAt({1, 0, 0}, {0.5, 0, 3});
+  a.points.resize(3, count);
+  for (int q = 0; q < count; ++q) a.points.col(q) = Eigen::Vector3d(0.5 + 0.05 * (q % 10), 0.05 * (q / 10), 3.0);
+  return {a, b};
+}
+
+TEST(ErrorResistanceMatrix, CovisibilityGate) {
+  ErrorResistanceConfig config;  // max(10, 0.1 |X_i|)
+  {
+    auto [a, b] = twoViews(10);
+    EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, config)));
+    auto [c, d] = twoViews(9);
+    EXPECT_EQ(computeErrorResistance(c, d, config), kInfinity);
+  }
+  {
+    // 200 points of which 20 visible passes (0.1 * 200 = 20); 19 visible does not.
+    auto [a, b] = twoViews(20);
+    Eigen::Matrix3Xd points(3, 200);
+    points.leftCols(20) = a.points;
+    for (int q = 20; q < 200; ++q) points.col(q) = Eigen::Vector3d(0.5, 0.0, -3.0);  // behind b
+    a.points = points;
+    EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, config)));
+    a.points.col(0) = Eigen::Vector3d(0.5, 0.0, -3.0);
+    EXPECT_EQ(computeErrorResistance(a, b, config), kInfinity);
+  }
+}
+
+TEST(ErrorResistanceMatrix, OcclusionAgainstTheOtherViewsDepthMap) {
+  auto [a, b] = twoViews(30);
+  auto wall = std::make_shared<DepthMap>();
+  wall->cols = 80;
+  wall->rows = 60;
+  wall->cell_width = wall->cell_height = 8.0;
+  wall->depth.assign(80 * 60, 1.0f);  // b sees a surface 1 m away everywhere: points hidden
+  b.depth = wall;
+  EXPECT_EQ(computeErrorResistance(a, b, {}), kInfinity);
+  // A surface at the points' depth in b (within 3 %) keeps them visible.
+  auto same = std::make_shared<DepthMap>(*wall);
+  const double z = b.pose.worldToCamera(a.points.col(0)).z();
+  same->depth.assign(80 * 60, static_cast<float>(z * 1.02));
+  b.depth = same;
+  EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, {})));
+  // Unknown depth (0) cannot occlude.
+  auto unknown = std::make_shared<DepthMap>(*wall);
+  unknown->depth.assign(80 * 60, 0.0f);
+  b.depth = unknown;
+  EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, {})));
+}
+
+TEST(ErrorResistanceMatrix, ViewAngleGateAndDiagonal) {
+  auto [a, b] = twoViews(30);
+  const double angle = std::acos(a.pose.opticalAxis().dot(b.pose.opticalAxis())) * 180.0 / M_PI;
+  ErrorResistanceConfig config;
+  config.max_view_angle_deg = angle + 0.5;
+  EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, config)));
+  config.max_view_angle_deg = angle - 0.5;
+  EXPECT_EQ(computeErrorResistance(a, b, config), kInfinity);
+
+  ErrorResistanceMatrix matrix;
+  matrix.addKeyframe(a);
+  matrix.addKeyframe(b);
+  EXPECT_EQ(matrix.at(0, 0), kInfinity);
+  EXPECT_EQ(matrix.at(1, 1), kInfinity);
+  EXPECT_TRUE(std::isfinite(matrix.at(0, 1)));
+  EXPECT_EQ(matrix.at(1, 0), kInfinity);  // b has no points
+}
+
+TEST(ErrorResistanceMatrix, MedianOfEvenCountIsMeanOfMiddleValues) {
+  auto [a, b] = twoViews(12);
+  std::vector<double> r;
+  for (int q = 0; q < 12; ++q) r.push_back(pointErrorResistance(a.points.col(q), a.pose.position, b.intrinsics, b.pose));
+  std::sort(r.begin(), r.end());
+  ASSERT_LT(r[5], r[6]);  // distinct middle values, so the rule matters
+  EXPECT_DOUBLE_EQ(computeErrorResistance(a, b, {}), 0.5 * (r[5] + r[6]));
+}
+
+TEST(ErrorResistanceMatrix, RejectsUnusableKeyframesAndKeepsState) {
+  auto [a, b] = twoViews(20);
+  ErrorResistanceMatrix matrix;
+  matrix.addKeyframe(a);
+  Keyframe bad = b;
+  bad.pose.position.x() = std::nan("");
+  EXPECT_THROW(matrix.addKeyframe(bad), InvalidInput);
+  bad = b;
+  bad.intrinsics.fx = 0.0;
+  EXPECT_THROW(matrix.addKeyframe(bad), InvalidInput);
+  bad = b;
+  bad.pose.orientation = Eigen::Quaterniond(0, 0, 0, 0);
+  EXPECT_THROW(matrix.addKeyframe(bad), InvalidInput);
+  EXPECT_EQ(matrix.size(), 1u);
+  EXPECT_EQ(matrix.addKeyframe(b), 1);
+  EXPECT_THROW(ErrorResistanceMatrix({0, 0.1}), InvalidArgument);
+}
+
+}  // namespace
+}  // namespace view_selection
