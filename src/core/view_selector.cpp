@@ -71,13 +71,24 @@ FrameResult ViewSelector::addFrame(const Frame& frame) {
       << (frame.stamp == *last_stamp_ ? " (duplicate)" : " (out of order)");
     throw InvalidInput(s.str());
   }
-  FrameResult result;
   CameraPose pose = frame.pose;
   pose.orientation.normalize();
-  // Any throw below leaves the matrix untouched: the points are computed before insertion.
-  const bool wanted = policy_.offer(pose);
-  last_stamp_ = frame.stamp;
-  if (!wanted) return result;
+  // Transactional: a frame that fails anywhere (e.g. the point source finds no depth) leaves
+  // the policy, the last stamp and the matrix exactly as they were.
+  const KeyframePolicy policy_before = policy_;
+  try {
+    FrameResult result = insert(frame, pose);
+    last_stamp_ = frame.stamp;
+    return result;
+  } catch (...) {
+    policy_ = policy_before;
+    throw;
+  }
+}
+
+FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
+  FrameResult result;
+  if (!policy_.offer(pose)) return result;
 
   const auto t_points = std::chrono::steady_clock::now();
   const ViewId id = static_cast<ViewId>(matrix_.size());
@@ -100,6 +111,7 @@ FrameResult ViewSelector::addFrame(const Frame& frame) {
         downsampleDepth(frame.depth_m, frame.intrinsics, config_.depth.depth_map_cell));
   result.points = static_cast<size_t>(keyframe.points.cols());
 
+  // Nothing below throws for inputs validated above: the matrix is never left half-updated.
   const auto t_matrix = std::chrono::steady_clock::now();
   result.id = matrix_.addKeyframe(std::move(keyframe));
   for (auto& [view, updated] : points.updated) {

@@ -62,6 +62,8 @@ class ViewSelector {
   nlohmann::json params() const;
 
  private:
+  FrameResult insert(const Frame& frame, const CameraPose& pose);
+
   ViewSelectorConfig config_;
   std::unique_ptr<PointSource> points_;
   KeyframePolicy policy_;
