@@ -22,10 +22,13 @@ struct TumPoseEntry {
   CameraPose pose;
 };
 
-/// Reads rgb.txt / depth.txt. Lines starting with '#' and blank lines are skipped; any other
-/// malformed line throws IoError naming the file and the line number.
+/// Reads rgb.txt / depth.txt. Lines starting with '#' and blank lines are skipped; "\r\n" line
+/// endings are fine. Any other line must be exactly "stamp path" with a finite stamp (so a path
+/// cannot contain whitespace); a malformed line or a stamp repeated in the file throws IoError
+/// naming the file and the 1-based line number. Entries are returned in file order.
 std::vector<TumImageEntry> readTumImageList(const std::string& path);
-/// Reads groundtruth.txt (same rules; a non-finite value or a zero quaternion is malformed).
+/// Reads groundtruth.txt (same rules; a non-finite value or a quaternion whose norm is far from 1,
+/// see CameraPose::isValid, is malformed). Quaternions are stored normalised.
 std::vector<TumPoseEntry> readTumTrajectory(const std::string& path);
 /// Writes groundtruth.txt format (8 columns, full double precision). Throws IoError.
 void writeTumTrajectory(const std::string& path, const std::vector<TumPoseEntry>& poses,
@@ -45,8 +48,10 @@ void writeCameraYaml(const std::string& path, const PinholeIntrinsics& intrinsic
 std::optional<PinholeIntrinsics> tumDefaultIntrinsics(const std::string& folder_name);
 
 /// Greedy unique association of two stamp lists, as associate.py does: candidate pairs with
-/// |a - b| < max_difference, best first, each element used once. Returns index pairs sorted by
-/// the first list's index.
+/// |a - b| < max_difference (strict), best first, each element used once. Ties in the difference
+/// are broken as associate.py's tuple sort does: smaller first-list stamp, then smaller
+/// second-list stamp (then smaller indices, for repeated stamps). Returns index pairs sorted by
+/// the first list's index. Throws InvalidArgument for a negative or NaN max_difference.
 std::vector<std::pair<size_t, size_t>> associateStamps(const std::vector<double>& a,
                                                        const std::vector<double>& b,
                                                        double max_difference);
@@ -73,15 +78,25 @@ struct TumDataset {
   std::string image_dir;              ///< folder COLMAP is given as --image_path, relative to root
   std::vector<TumFrame> frames;       ///< associated frames, ascending stamp
   size_t rgb_entries = 0;             ///< lines in rgb.txt
-  size_t dropped_without_depth = 0;   ///< rgb frames with no depth within the tolerance
-  size_t dropped_without_pose = 0;    ///< rgb frames with no ground truth within the tolerance
+  /// rgb frames with no depth within the tolerance (after the unique rgb<->depth association).
+  size_t dropped_without_depth = 0;
+  /// rgb frames with depth (or without depth.txt) but no ground truth within the tolerance; a
+  /// frame is counted once, so rgb_entries = frames + dropped_without_depth + dropped_without_pose.
+  size_t dropped_without_pose = 0;
 
-  /// Image name of a frame relative to image_dir (the name pairs.txt uses).
+  /// Image name of a frame relative to image_dir (the name pairs.txt uses). image_dir is the
+  /// longest directory (whole components) shared by every rgb path, "" when none. Throws
+  /// InvalidArgument for a frame whose rgb_path is not inside image_dir.
   std::string imageName(const TumFrame& frame) const;
 };
 
-/// Loads and associates a TUM-layout folder. Throws IoError (missing folder or files, malformed
-/// lines, no intrinsics) or InvalidInput (no frame left after association), with one clear message.
+/// Loads and associates a TUM-layout folder. rgb<->depth (when depth.txt exists) by
+/// associateStamps; each remaining rgb frame takes the ground-truth pose nearest to its stamp
+/// within the tolerance (not unique: ground truth may be denser; a tie takes the earlier pose).
+/// Intrinsics from camera.yaml, else tumDefaultIntrinsics(folder name). Throws IoError (missing
+/// folder or files, malformed lines, no intrinsics, an associated image file missing) or
+/// InvalidInput (no frame left after association), with one clear message; InvalidArgument for
+/// a non-positive max_time_difference.
 TumDataset loadTumDataset(const std::string& folder, const TumDatasetOptions& options = {});
 
 }  // namespace view_selection
