@@ -124,6 +124,11 @@ FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
   return result;
 }
 
+bool ViewSelector::wantsFrame(const CameraPose& pose) const {
+  KeyframePolicy probe = policy_;
+  return probe.offer(pose);
+}
+
 Selection ViewSelector::select() const { return selectViews(matrix_.table(), config_.selection); }
 
 void ViewSelector::reset() {

@@ -113,3 +113,24 @@ TEST(ViewSelector, PolicySkipsFramesAndSameFramesGiveSameMatrix) {
 
 }  // namespace
 }  // namespace view_selection
+
+namespace view_selection {
+namespace {
+
+TEST(ViewSelector, WantsFrameAsksThePolicyWithoutChangingIt) {
+  ViewSelectorConfig config;
+  config.keyframes = {KeyframeMode::kEveryNth, 3, 0.1, 10.0};
+  ViewSelector selector(config);
+  for (int q = 0; q < 7; ++q) {
+    Frame f = frameAt(q, q * 0.05);
+    const bool wanted = selector.wantsFrame(f.pose);
+    EXPECT_EQ(wanted, q % 3 == 0) << q;
+    EXPECT_EQ(selector.wantsFrame(f.pose), wanted);  // asking twice changes nothing
+    if (!wanted) f.depth_m = cv::Mat();               // skipped frames need no depth
+    EXPECT_EQ(selector.addFrame(f).outcome == FrameOutcome::kKeyframe, wanted);
+  }
+  EXPECT_EQ(selector.matrix().size(), 3u);
+}
+
+}  // namespace
+}  // namespace view_selection

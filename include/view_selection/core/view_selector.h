@@ -51,6 +51,10 @@ class ViewSelector {
   /// stamp not after the previous frame's (duplicate or out of order), applies the keyframe
   /// policy, gets the points and inserts the keyframe.
   FrameResult addFrame(const Frame& frame);
+  /// Whether the keyframe policy would take a frame at `pose` next, without changing anything.
+  /// Lets callers skip loading depth and images for frames that will not become keyframes
+  /// (they still pass those frames to addFrame, without depth, to keep counts and stamps).
+  bool wantsFrame(const CameraPose& pose) const;
   /// The selection for the keyframes so far.
   Selection select() const;
   void reset();
