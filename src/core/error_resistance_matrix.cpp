@@ -42,6 +42,54 @@ void validateKeyframe(const Keyframe& keyframe) {
   }
 }
 
+namespace {
+
+/// Smallest sphere-ish bound: centre of the bounding box, radius to the farthest point.
+void boundingSphere(const Eigen::Matrix3Xd& points, Eigen::Index begin, Eigen::Index end,
+                    Eigen::Vector3d& centre, double& radius) {
+  const auto block = points.middleCols(begin, end - begin);
+  centre = 0.5 * (block.rowwise().minCoeff() + block.rowwise().maxCoeff());
+  radius = (block.colwise() - centre).colwise().norm().maxCoeff();
+}
+
+/// Splits columns [begin, end) at the median of their widest axis until groups are small.
+void buildGroups(Eigen::Matrix3Xd& points, Eigen::Index begin, Eigen::Index end,
+                 std::vector<ErrorResistanceMatrix::PointGroup>& groups) {
+  ErrorResistanceMatrix::PointGroup group;
+  group.begin = begin;
+  group.end = end;
+  boundingSphere(points, begin, end, group.centre, group.radius);
+  if (end - begin <= ErrorResistanceMatrix::kGroupSize) {
+    groups.push_back(group);
+    return;
+  }
+  const auto block = points.middleCols(begin, end - begin);
+  Eigen::Index axis = 0;
+  (block.rowwise().maxCoeff() - block.rowwise().minCoeff()).maxCoeff(&axis);
+  std::vector<Eigen::Index> order(static_cast<size_t>(end - begin));
+  for (size_t q = 0; q < order.size(); ++q) order[q] = begin + static_cast<Eigen::Index>(q);
+  const auto mid = order.begin() + static_cast<std::ptrdiff_t>(order.size() / 2);
+  std::nth_element(order.begin(), mid, order.end(), [&](Eigen::Index a, Eigen::Index b) {
+    return points(axis, a) < points(axis, b) || (points(axis, a) == points(axis, b) && a < b);
+  });
+  Eigen::Matrix3Xd sorted(3, end - begin);
+  for (size_t q = 0; q < order.size(); ++q) sorted.col(static_cast<Eigen::Index>(q)) = points.col(order[q]);
+  points.middleCols(begin, end - begin) = sorted;
+  const Eigen::Index split = begin + static_cast<Eigen::Index>(order.size() / 2);
+  buildGroups(points, begin, split, groups);
+  buildGroups(points, split, end, groups);
+}
+
+/// True when a sphere (centre in camera coordinates) lies wholly outside one frustum plane.
+/// The margin keeps the test conservative under rounding.
+bool outsideFrustum(const Eigen::Matrix<double, 3, 5>& normals, const Eigen::Vector3d& centre,
+                    double radius) {
+  const double margin = radius + 1e-9 * (centre.norm() + radius);
+  return (normals.transpose() * centre).minCoeff() < -margin;
+}
+
+}  // namespace
+
 ErrorResistanceMatrix::View ErrorResistanceMatrix::makeView(Keyframe keyframe) {
   View v;
   keyframe.pose.orientation.normalize();
@@ -54,10 +102,9 @@ ErrorResistanceMatrix::View ErrorResistanceMatrix::makeView(Keyframe keyframe) {
   v.frustum_normals.col(3) = Eigen::Vector3d(0.0, k.fy, k.cy).normalized();
   v.frustum_normals.col(4) = Eigen::Vector3d(0.0, -k.fy, k.height - k.cy).normalized();
   if (keyframe.points.cols() > 0) {
-    const Eigen::Vector3d lo = keyframe.points.rowwise().minCoeff();
-    const Eigen::Vector3d hi = keyframe.points.rowwise().maxCoeff();
-    v.sphere_centre = 0.5 * (lo + hi);
-    v.sphere_radius = (keyframe.points.colwise() - v.sphere_centre).colwise().norm().maxCoeff();
+    boundingSphere(keyframe.points, 0, keyframe.points.cols(), v.sphere_centre, v.sphere_radius);
+    v.grouped_points = keyframe.points;
+    buildGroups(v.grouped_points, 0, v.grouped_points.cols(), v.groups);
   } else {
     v.sphere_centre.setZero();
     v.sphere_radius = -1.0;
@@ -86,31 +133,42 @@ double computeErrorResistance(const ErrorResistanceMatrix::View& view_i,
 
   const Eigen::Matrix3d& r_cw = view_j.world_to_camera;
   const Eigen::Vector3d& o_j = kf_j.pose.position;
-  // Pair-level cull: a bounding sphere of X_i wholly outside one plane of j's frustum means no
-  // point can be visible. The margin keeps the test conservative under rounding.
-  {
-    const Eigen::Vector3d c = r_cw * (view_i.sphere_centre - o_j);
-    const double margin = view_i.sphere_radius + 1e-9 * (c.norm() + view_i.sphere_radius);
-    if ((view_j.frustum_normals.transpose() * c).minCoeff() < -margin) return kInfinity;
+  // Pair-level cull: no point can be visible when X_i's bounding sphere is outside j's frustum.
+  if (outsideFrustum(view_j.frustum_normals, r_cw * (view_i.sphere_centre - o_j), view_i.sphere_radius))
+    return kInfinity;
+  // Group-level cull: keep the groups that may be visible; stop early when they cannot hold
+  // enough points to pass the co-visibility gate.
+  auto& candidates = scratch.groups;
+  candidates.clear();
+  Eigen::Index possible = 0;
+  for (const auto& g : view_i.groups) {
+    if (outsideFrustum(view_j.frustum_normals, r_cw * (g.centre - o_j), g.radius)) continue;
+    candidates.push_back(&g);
+    possible += g.end - g.begin;
   }
+  if (static_cast<double>(possible) < needed) return kInfinity;
   if (evaluated) *evaluated = true;
 
   const PinholeIntrinsics& k = kf_j.intrinsics;
   const DepthMap* depth = kf_j.depth ? kf_j.depth.get() : nullptr;
+  const double width = k.width, height = k.height;
   scratch.points_cam.clear();
-  for (Eigen::Index c = 0; c < n_points; ++c) {
-    const Eigen::Vector3d p = r_cw * (kf_i.points.col(c) - o_j);
-    if (!(p.z() > 0.0)) continue;
-    const double u = k.fx * p.x() / p.z() + k.cx;
-    const double v = k.fy * p.y() / p.z() + k.cy;
-    if (!(u >= 0.0 && v >= 0.0 && u < k.width && v < k.height)) continue;
-    if (depth) {
-      const double d = depth->at(u, v);
-      if (d > 0.0 && std::abs(p.z() - d) > std::max(config.occlusion_abs_tolerance,
-                                                     config.occlusion_rel_tolerance * p.z()))
-        continue;  // occluded (or in front of the surface j saw): not visible
+  for (const auto* g : candidates) {
+    for (Eigen::Index c = g->begin; c < g->end; ++c) {
+      const Eigen::Vector3d p = r_cw * (view_i.grouped_points.col(c) - o_j);
+      if (!(p.z() > 0.0)) continue;
+      const double inv_z = 1.0 / p.z();
+      const double u = k.fx * p.x() * inv_z + k.cx;
+      const double v = k.fy * p.y() * inv_z + k.cy;
+      if (!(u >= 0.0 && v >= 0.0 && u < width && v < height)) continue;
+      if (depth) {
+        const double d = depth->at(u, v);
+        if (d > 0.0 && std::abs(p.z() - d) > std::max(config.occlusion_abs_tolerance,
+                                                       config.occlusion_rel_tolerance * p.z()))
+          continue;  // occluded (or in front of the surface j saw): not visible
+      }
+      scratch.points_cam.push_back(p);
     }
-    scratch.points_cam.push_back(p);
   }
   if (static_cast<double>(scratch.points_cam.size()) < needed) return kInfinity;
 

@@ -59,6 +59,8 @@ TEST(ErrorResistance, ClosedFormMatchesBruteForceTriangulation) {
     ASSERT_TRUE(std::isfinite(brute)) << "trial " << trial;
     ASSERT_GT(closed, 0.0);
     EXPECT_NEAR(closed, brute, 1e-6 * brute) << "trial " << trial;
+    const double sine_law = pointErrorResistanceSineLaw(c.point, c.pose_i.position, c.k_j, c.pose_j);
+    EXPECT_NEAR(sine_law, brute, 1e-6 * brute) << "trial " << trial;
     ++compared;
   }
   EXPECT_EQ(compared, 3000);
@@ -77,6 +79,7 @@ TEST(ErrorResistance, EpipoleAtInfinityUsesTheProjectedBaseline) {
     const double brute = pointErrorResistanceByTriangulation(p, k, pose_i, k, pose_j);
     ASSERT_TRUE(std::isfinite(closed));
     EXPECT_NEAR(closed, brute, 1e-6 * brute);
+    EXPECT_NEAR(pointErrorResistanceSineLaw(p, pose_i.position, k, pose_j), brute, 1e-6 * brute);
     // Fronto-parallel stereo: disparity along the baseline is f b / z; one pixel less moves the
     // depth to f b / (f b / z - 1), and P slides along its ray from O_i by |P| / (f b / z - 1).
     const double b = std::hypot(0.4, 0.1);
@@ -107,6 +110,8 @@ TEST(ErrorResistance, InfiniteWhenBehindCameraOnBaselineOrWithoutParallax) {
   // Parallax far below one pixel: the moved ray turning away never meets the ray from O_i.
   const CameraPose pose_j_tiny = lookAt({1e-6, 0, 0}, {1e-6, 0, 1});
   EXPECT_EQ(pointErrorResistance({0.0, 0.0, 3.0}, pose_i.position, k, pose_j_tiny), kInfinity);
+  EXPECT_EQ(pointErrorResistanceSineLaw({0.0, 0.0, 3.0}, pose_i.position, k, pose_j_tiny), kInfinity);
+  EXPECT_EQ(pointErrorResistanceSineLaw({0.2, 0.0, -2.0}, pose_i.position, k, pose_j), kInfinity);
   // A sane configuration is finite and positive.
   const double r = pointErrorResistance({0.25, 0.0, 2.0}, pose_i.position, k, pose_j);
   EXPECT_TRUE(std::isfinite(r));

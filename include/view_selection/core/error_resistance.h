@@ -6,6 +6,7 @@
 
 #include <Eigen/Core>
 
+#include <cmath>
 #include <limits>
 #include <optional>
 
@@ -17,12 +18,21 @@ constexpr double kInfinity = std::numeric_limits<double>::infinity();
 /// `epipole_h` is the homogeneous epipole K_j * (O_i in camera-j coordinates); when its third
 /// component is 0 the epipole is at infinity and the direction is that of the projected baseline.
 /// Empty when p_j coincides with the epipole (the point lies on the baseline).
-std::optional<Eigen::Vector2d> epipolarDirection(const Eigen::Vector3d& epipole_h,
-                                                 const Eigen::Vector2d& p_j);
+inline std::optional<Eigen::Vector2d> epipolarDirection(const Eigen::Vector3d& epipole_h,
+                                                        const Eigen::Vector2d& p_j) {
+  // The line through p_j and the epipole is l = e_h x (p_j, 1); its direction (l_b, -l_a)
+  // simplifies to e_z * p_j - e_xy. With e_z = 0 (epipole at infinity) this is -e_xy, the
+  // direction of the projected baseline, so one formula covers both cases of METHOD.md.
+  const Eigen::Vector2d dir = epipole_h.z() * p_j - epipole_h.head<2>();
+  const double norm = dir.norm();
+  const double scale = std::abs(epipole_h.z()) * p_j.norm() + epipole_h.head<2>().norm();
+  if (!(norm > 1e-12 * scale) || !std::isfinite(norm)) return std::nullopt;
+  return Eigen::Vector2d(dir / norm);
+}
 
 /// Everything r(P; i -> j) needs that does not depend on P, computed once per ordered pair.
-/// Points are passed in camera-j coordinates, so the per-point cost is a handful of dot products
-/// and two square roots, with no trigonometric call.
+/// Points are passed in camera-j coordinates; each moved ray is intersected with the ray from
+/// O_i in closed form (two square roots a point, no trigonometric call).
 class PairErrorResistance {
  public:
   /// `origin_i` is O_i in world coordinates.
@@ -40,11 +50,17 @@ class PairErrorResistance {
   PinholeIntrinsics k_;
   Eigen::Vector3d o_i_cam_;    // O_i in camera-j coordinates (the baseline from O_j)
   Eigen::Vector3d epipole_h_;  // K_j * o_i_cam_
+  double inv_fx_ = 0.0, inv_fy_ = 0.0;
 };
 
-/// r(P; i -> j) for a world point, closed form (METHOD.md "Closed form").
+/// r(P; i -> j) for a world point, closed form (ray intersection, as PairErrorResistance).
 double pointErrorResistance(const Eigen::Vector3d& point, const Eigen::Vector3d& origin_i,
                             const PinholeIntrinsics& intrinsics_j, const CameraPose& pose_j);
+
+/// The same quantity by METHOD.md's sine-law closed form: |PP'_s| = d_j sin(delta_s) /
+/// sin(gamma +- delta_s). Independent of the intersection form; used to check it.
+double pointErrorResistanceSineLaw(const Eigen::Vector3d& point, const Eigen::Vector3d& origin_i,
+                                   const PinholeIntrinsics& intrinsics_j, const CameraPose& pose_j);
 
 /// The same quantity by brute force: project P into i, move its projection in j by one pixel
 /// along the epipolar line each way, re-triangulate with cv::triangulatePoints (DLT) and take the

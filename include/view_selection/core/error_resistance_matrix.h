@@ -54,20 +54,31 @@ class ErrorResistanceMatrix {
   /// Pairs whose points were projected (not culled by a pair-level test) so far; for benchmarks.
   size_t pairsEvaluated() const { return pairs_evaluated_; }
 
-  /// Per-keyframe data computed once (rotation, frustum, bounding sphere of the points).
+  /// A group of nearby points of X_i with a bounding sphere, for culling against a frustum.
+  struct PointGroup {
+    Eigen::Vector3d centre;
+    double radius = 0.0;
+    Eigen::Index begin = 0, end = 0;  // columns of View::grouped_points
+  };
+
+  /// Per-keyframe data computed once (rotation, frustum, points grouped for culling).
   struct View {
     Keyframe keyframe;
     Eigen::Matrix3d world_to_camera;   // R^T
-    Eigen::Vector3d sphere_centre;     // of X_i, world
+    Eigen::Vector3d sphere_centre;     // of all of X_i, world
     double sphere_radius = -1.0;       // < 0: no points
     Eigen::Matrix<double, 3, 5> frustum_normals;  // camera frame, inward unit normals
+    Eigen::Matrix3Xd grouped_points;   // X_i reordered so each group is contiguous
+    std::vector<PointGroup> groups;    // kd-tree leaves of at most kGroupSize points
   };
+  static constexpr Eigen::Index kGroupSize = 16;
   static View makeView(Keyframe keyframe);
 
   /// Reused storage for one pair's visible points and their r values.
   struct Scratch {
     std::vector<Eigen::Vector3d> points_cam;
     std::vector<double> values;
+    std::vector<const PointGroup*> groups;
   };
 
  private:

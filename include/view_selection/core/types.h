@@ -69,9 +69,13 @@ struct DepthMap {
   bool empty() const { return depth.empty(); }
   /// Depth [m] at a full-resolution pixel, 0 when unknown or outside.
   float at(double u, double v) const {
-    const int c = static_cast<int>(u / cell_width);
-    const int r = static_cast<int>(v / cell_height);
-    if (u < 0.0 || v < 0.0 || c >= cols || r >= rows) return 0.0f;
+    if (u < 0.0 || v < 0.0) return 0.0f;
+    // Multiplying by the inverse is exact for the power-of-two cells used in practice and this
+    // lookup is the inner loop of the matrix; for other sizes a pixel on a cell border may
+    // fall into its neighbour, which the occlusion tolerance absorbs.
+    const int c = static_cast<int>(u * (1.0 / cell_width));
+    const int r = static_cast<int>(v * (1.0 / cell_height));
+    if (c >= cols || r >= rows) return 0.0f;
     return depth[static_cast<size_t>(r) * cols + c];
   }
 };
