@@ -3,6 +3,7 @@
 #include "command_line.h"
 
 #include "view_selection/core/exceptions.h"
+#include "view_selection/core/nearest_pairs.h"
 #include "view_selection/core/selection_io.h"
 #include "view_selection/core/selection_plot.h"
 #include "view_selection/core/tum_frames.h"
@@ -41,6 +42,12 @@ selection:
   --min-covisible-ratio R   co-visibility gate, share of X_i (default 0.1)
   --max-view-angle DEG      optional gate on the angle between optical axes (default off)
   --no-occlusion            do not test visibility against keyframe depth maps
+strategy (the baseline for comparisons):
+  --strategy NAME           ours | nearest (default ours). nearest: each keyframe pairs with
+                            its k nearest camera centres within a viewing-angle limit (poses
+                            only, no points; writes pairs.txt only)
+  --nearest-k N             neighbours per keyframe for nearest (default 5)
+  --nearest-max-angle DEG   limit on the angle between optical axes for nearest (default 30)
 points:
   --points SOURCE           depth | auto (default auto: depth when the folder has depth)
   --grid N                  depth sampling grid N x N cells (default 16)
@@ -67,6 +74,8 @@ struct Options {
   bool dump_points = false;
   long print_sets = 40;
   bool quiet = false;
+  std::string strategy = "ours";
+  NearestPairsConfig nearest;
 };
 
 Options parse(int argc, char** argv) {
@@ -74,7 +83,7 @@ Options parse(int argc, char** argv) {
                         {"dataset", "every", "min-translation", "min-rotation", "max-frames", "k",
                          "completion", "min-covisible-points", "min-covisible-ratio",
                          "max-view-angle", "points", "grid", "max-time-difference", "out",
-                         "print-sets"},
+                         "print-sets", "strategy", "nearest-k", "nearest-max-angle"},
                         {"dump-points", "no-occlusion", "quiet", "help"});
   if (cli.flag("help")) {
     std::cout << kUsage;
@@ -114,6 +123,11 @@ Options parse(int argc, char** argv) {
   o.dump_points = cli.flag("dump-points");
   o.print_sets = cli.integer("print-sets", 40, 0, 100000000);
   o.quiet = cli.flag("quiet");
+  o.strategy = cli.choice("strategy", "ours", {"ours", "nearest"});
+  o.nearest.k = static_cast<int>(cli.integer("nearest-k", o.nearest.k, 1, 1000));
+  o.nearest.max_view_angle_deg = cli.real("nearest-max-angle", o.nearest.max_view_angle_deg, 0.0, 180.0);
+  if (o.strategy != "nearest" && (cli.has("nearest-k") || cli.has("nearest-max-angle")))
+    throw UsageError("--nearest-k and --nearest-max-angle need --strategy nearest");
   return o;
 }
 
@@ -124,11 +138,42 @@ std::string percent(double part, double whole) {
   return s.str();
 }
 
+/// --strategy nearest: the same keyframes (same policy, same frames), paired by pose alone.
+int runNearest(const Options& o, const TumDataset& dataset) {
+  const size_t total = o.max_frames > 0 ? std::min<size_t>(dataset.frames.size(), static_cast<size_t>(o.max_frames))
+                                        : dataset.frames.size();
+  KeyframePolicy policy(o.config.keyframes);
+  std::vector<CameraPose> poses;
+  std::vector<std::string> names;
+  for (size_t q = 0; q < total; ++q) {
+    const TumFrame& f = dataset.frames[q];
+    if (!f.pose.isValid()) throw InvalidInput("frame " + std::to_string(q) + " (" + f.rgb_path + "): invalid pose");
+    if (!policy.offer(f.pose)) continue;
+    policy.keyframeAccepted(f.pose);
+    poses.push_back(f.pose);
+    names.push_back(dataset.imageName(f));
+  }
+  const auto pairs = nearestPairs(poses, o.nearest);
+  std::error_code ec;
+  fs::create_directories(o.out, ec);
+  if (ec) throw IoError("cannot create output folder '" + o.out.string() + "': " + ec.message());
+  writePairsTxt((o.out / "pairs.txt").string(), names, pairs);
+  const double exhaustive = poses.size() > 1 ? 0.5 * static_cast<double>(poses.size()) * (poses.size() - 1) : 0.0;
+  std::printf("dataset     %s: %zu frames used of %zu in rgb.txt\n", o.dataset.c_str(), total, dataset.rgb_entries);
+  std::printf("keyframes   %zu\n", poses.size());
+  std::printf("strategy    nearest: k %d, max view angle %.1f deg\n", o.nearest.k, o.nearest.max_view_angle_deg);
+  std::printf("pairs       %zu to match, exhaustive would be %.0f (%s)\n", pairs.size(), exhaustive,
+              percent(static_cast<double>(pairs.size()), exhaustive).c_str());
+  std::printf("wrote       %s\n", (o.out / "pairs.txt").c_str());
+  return 0;
+}
+
 int run(const Options& o) {
   const auto t_start = std::chrono::steady_clock::now();
   TumDatasetOptions dataset_options;
   dataset_options.max_time_difference = o.max_time_difference;
   const TumDataset dataset = loadTumDataset(o.dataset, dataset_options);
+  if (o.strategy == "nearest") return runNearest(o, dataset);
 
   std::string source = o.points == "auto" ? (dataset.has_depth ? "depth" : "features") : o.points;
   if (source == "depth" && !dataset.has_depth)
