@@ -53,8 +53,16 @@ void SyntheticSequenceConfig::validate() const {
   throw InvalidArgument("synthetic sequence: " + msg.str());
 }
 
+namespace {
+/// Validates before the scene's textures are built: a bad option fails at once.
+const SyntheticSequenceConfig& validated(const SyntheticSequenceConfig& config) {
+  config.validate();
+  return config;
+}
+}  // namespace
+
 SyntheticSequence::SyntheticSequence(const SyntheticSequenceConfig& config)
-    : config_(config), scene_(config.seed, config.scene), path_(syntheticCameraPath(config)) {
+    : config_(validated(config)), scene_(config.seed, config.scene), path_(syntheticCameraPath(config)) {
   for (const TumPoseEntry& e : path_) {
     if (!scene_.isFree(e.pose.position, 0.2)) {
       throw InvalidArgument(
@@ -85,6 +93,7 @@ SyntheticFrame SyntheticSequence::render(size_t index) const {
   const double far = 4.0 * room.norm();  // the colour camera sees every wall; depth stops earlier
   const uint64_t noise_seed = synthetic::streamSeed(config_.seed, 3, index);
   const float sigma = static_cast<float>(config_.noise_sigma);
+  const std::vector<int> in_view = scene_.boxesInView(frame.pose, k);
 
   for (int v = 0; v < k.height; ++v) {
     cv::Vec3b* colour_row = frame.colour.ptr<cv::Vec3b>(v);
@@ -93,7 +102,7 @@ SyntheticFrame SyntheticSequence::render(size_t index) const {
       // Through the pixel's centre (integer coordinates, as PinholeIntrinsics::project gives);
       // the camera ray has z = 1, so the ray parameter t is the z-depth.
       const Eigen::Vector3d ray = r * k.backProject(Eigen::Vector2d(u, v));
-      const std::optional<SurfaceHit> hit = scene_.castRay(origin, ray, far);
+      const std::optional<SurfaceHit> hit = scene_.castRay(origin, ray, far, in_view);
       Eigen::Vector3f c = Eigen::Vector3f::Zero();
       uint16_t depth = 0;
       if (hit) {

@@ -71,15 +71,23 @@ cv::Mat makeTexture(int w, int h, double metres_per_texel, uint64_t seed) {
     return Eigen::Vector3d(base + contrast * (c - base));
   };
 
-  const int soft = std::max(2, static_cast<int>(std::lround(area * 2.0)));
-  for (int q = 0; q < soft; ++q) {
-    const cv::Point centre(rng.below(w), rng.below(h));
-    const double r = rng.uniform(0.2, 0.8) * texels_per_metre;
-    const cv::Size axes(static_cast<int>(r), static_cast<int>(r * rng.uniform(0.4, 1.0)));
-    cv::ellipse(tex, centre, axes, rng.uniform(0, 180), 0, 360, bgr(mixed(rng.uniform(0.1, 0.3))),
-                cv::FILLED, cv::LINE_AA);
+  // Soft, low-contrast blobs: drawn and blurred at 1/8 resolution, then enlarged (cheap).
+  {
+    const int sw = std::max(2, w / 8), sh = std::max(2, h / 8);
+    cv::Mat small(sh, sw, CV_8UC3, bgr(base));
+    const double small_texels_per_metre = texels_per_metre * sw / w;
+    const int soft = std::max(2, static_cast<int>(std::lround(area * 2.0)));
+    for (int q = 0; q < soft; ++q) {
+      const cv::Point centre(rng.below(sw), rng.below(sh));
+      const double r = rng.uniform(0.2, 0.8) * small_texels_per_metre;
+      const cv::Size axes(std::max(1, static_cast<int>(r)),
+                          std::max(1, static_cast<int>(r * rng.uniform(0.4, 1.0))));
+      cv::ellipse(small, centre, axes, rng.uniform(0, 180), 0, 360,
+                  bgr(mixed(rng.uniform(0.1, 0.3))), cv::FILLED, cv::LINE_AA);
+    }
+    cv::GaussianBlur(small, small, cv::Size(0, 0), std::max(0.5, 0.08 * small_texels_per_metre));
+    cv::resize(small, tex, tex.size(), 0, 0, cv::INTER_LINEAR);
   }
-  cv::GaussianBlur(tex, tex, cv::Size(0, 0), 0.08 * texels_per_metre);
 
   const int shapes = std::max(4, static_cast<int>(std::lround(area * 110.0)));
   for (int q = 0; q < shapes; ++q) {
@@ -235,7 +243,10 @@ SyntheticScene::SyntheticScene(uint64_t seed, const SyntheticSceneConfig& config
     }
   }
 
-  for (const SceneBox& box : boxes_) yaw_cos_sin_.emplace_back(std::cos(box.yaw), std::sin(box.yaw));
+  for (size_t b = 0; b < boxes_.size(); ++b) {
+    yaw_cos_sin_.emplace_back(std::cos(boxes_[b].yaw), std::sin(boxes_[b].yaw));
+    all_boxes_.push_back(static_cast<int>(b));
+  }
 
   // One texture per face, each from its own stream: changing one box leaves the others alone.
   const double metres_per_texel = 1.0 / config_.texels_per_metre;
@@ -261,9 +272,43 @@ SyntheticScene::SyntheticScene(uint64_t seed, const SyntheticSceneConfig& config
 std::optional<SurfaceHit> SyntheticScene::castRay(const Eigen::Vector3d& origin,
                                                   const Eigen::Vector3d& direction,
                                                   double max_t) const {
+  return castRay(origin, direction, max_t, all_boxes_);
+}
+
+std::vector<int> SyntheticScene::boxesInView(const CameraPose& pose,
+                                             const PinholeIntrinsics& k) const {
+  // Inward normals of the frustum's side planes in camera coordinates, half a pixel outside the
+  // image, and the plane z = 0 (a box behind the camera cannot be seen).
+  const double left = (-0.5 - k.cx) / k.fx, right = (k.width - 0.5 - k.cx) / k.fx;
+  const double top = (-0.5 - k.cy) / k.fy, bottom = (k.height - 0.5 - k.cy) / k.fy;
+  const Eigen::Vector3d planes[5] = {
+      Eigen::Vector3d(1.0, 0.0, -left).normalized(), Eigen::Vector3d(-1.0, 0.0, right).normalized(),
+      Eigen::Vector3d(0.0, 1.0, -top).normalized(), Eigen::Vector3d(0.0, -1.0, bottom).normalized(),
+      Eigen::Vector3d(0.0, 0.0, 1.0)};
+  std::vector<int> in_view;
+  for (size_t b = 0; b < boxes_.size(); ++b) {
+    const Eigen::Vector3d c = pose.worldToCamera(boxes_[b].centre);
+    const double radius = boxes_[b].half_size.norm();
+    bool visible = boxes_[b].inside;  // the room surrounds the camera
+    if (!visible) {
+      visible = true;
+      for (const Eigen::Vector3d& n : planes) visible = visible && n.dot(c) >= -radius;
+    }
+    if (visible) in_view.push_back(static_cast<int>(b));
+  }
+  return in_view;
+}
+
+std::optional<SurfaceHit> SyntheticScene::castRay(const Eigen::Vector3d& origin,
+                                                  const Eigen::Vector3d& direction, double max_t,
+                                                  const std::vector<int>& among) const {
   double best_t = max_t;
   int best_box = -1, best_face = -1;
-  for (size_t b = 0; b < boxes_.size(); ++b) {
+  for (const int id : among) {
+    if (id < 0 || id >= static_cast<int>(boxes_.size())) {
+      throw InvalidArgument("SyntheticScene::castRay: no box " + std::to_string(id));
+    }
+    const size_t b = static_cast<size_t>(id);
     const SceneBox& box = boxes_[b];
     const Yaw yaw(yaw_cos_sin_[b]);
     const Eigen::Vector3d o = yaw.toLocal(origin - box.centre);

@@ -65,6 +65,12 @@ class SyntheticScene {
   /// be unit length (t is then in its units). Empty when nothing is hit.
   std::optional<SurfaceHit> castRay(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction,
                                     double max_t) const;
+  /// The same, against the listed boxes only (indices into boxes(), e.g. from boxesInView).
+  std::optional<SurfaceHit> castRay(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction,
+                                    double max_t, const std::vector<int>& among) const;
+  /// Boxes that may appear in the image of a camera at `pose` (bounding spheres against the
+  /// view frustum; conservative), in ascending order. Rendering casts only against these.
+  std::vector<int> boxesInView(const CameraPose& pose, const PinholeIntrinsics& intrinsics) const;
   /// Exact Euclidean distance from `p` to the nearest surface of any box (room walls included).
   double distanceToSurface(const Eigen::Vector3d& p) const;
   /// True when `p` is inside the room and outside every object, at least `margin` from all.
@@ -84,6 +90,7 @@ class SyntheticScene {
   SyntheticSceneConfig config_;
   std::vector<SceneBox> boxes_;
   std::vector<Eigen::Vector2d> yaw_cos_sin_;  ///< of every box's yaw, for fast ray casting
+  std::vector<int> all_boxes_;  ///< 0, 1, ..., boxes_.size() - 1
   std::vector<FaceTexture> textures_;
 };
 
