@@ -51,8 +51,8 @@ std::string describe(const SyntheticSequence& sequence) {
     << "This folder is SYNTHETIC: rendered by view_selection's built-in generator, not recorded\n"
     << "with a camera. Same seed and options give byte-identical files.\n\n"
     << "- seed " << c.seed << ", " << sequence.size() << " frames at " << c.fps << " Hz, "
-    << k.width << "x" << k.height << ", fx " << k.fx << " fy " << k.fy << " cx " << k.cx
-    << " cy " << k.cy << "\n"
+    << k.width << "x" << k.height << ", fx " << k.fx << " fy " << k.fy << " cx " << k.cx << " cy "
+    << k.cy << "\n"
     << "- walking speed " << c.speed << " m/s, colour noise sigma " << c.noise_sigma
     << " grey levels, depth range " << c.max_range << " m\n"
     << "- scene: a " << c.scene.room_size.x() << " x " << c.scene.room_size.y() << " x "

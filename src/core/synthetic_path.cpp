@@ -18,12 +18,14 @@ struct Sway {
   std::vector<Term> terms;
   double operator()(double t) const {
     double v = 0.0;
-    for (const Term& term : terms) v += term.amplitude * std::sin(2.0 * kPi * term.frequency * t + term.phase);
+    for (const Term& term : terms)
+      v += term.amplitude * std::sin(2.0 * kPi * term.frequency * t + term.phase);
     return v;
   }
 };
 
-Sway sway(synthetic::Rng& rng, std::initializer_list<std::pair<double, double>> amplitude_frequency) {
+Sway sway(synthetic::Rng& rng,
+          std::initializer_list<std::pair<double, double>> amplitude_frequency) {
   Sway s;
   for (const auto& [a, f] : amplitude_frequency) {
     // Frequencies vary a little with the seed too, so two seeds do not sway in lockstep.

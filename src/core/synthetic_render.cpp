@@ -62,7 +62,9 @@ const SyntheticSequenceConfig& validated(const SyntheticSequenceConfig& config) 
 }  // namespace
 
 SyntheticSequence::SyntheticSequence(const SyntheticSequenceConfig& config)
-    : config_(validated(config)), scene_(config.seed, config.scene), path_(syntheticCameraPath(config)) {
+    : config_(validated(config)),
+      scene_(config.seed, config.scene),
+      path_(syntheticCameraPath(config)) {
   for (const TumPoseEntry& e : path_) {
     if (!scene_.isFree(e.pose.position, 0.2)) {
       throw InvalidArgument(
@@ -120,10 +122,9 @@ SyntheticFrame SyntheticSequence::render(size_t index) const {
         c = scene_.albedo(*hit, footprint) * shade;
       }
       cv::Vec3b& out = colour_row[u];
-      uint64_t bits = sigma > 0.0f
-                          ? synthetic::mix64(noise_seed ^ (static_cast<uint64_t>(v) << 32 |
-                                                           static_cast<uint64_t>(u)))
-                          : 0;
+      uint64_t bits = sigma > 0.0f ? synthetic::mix64(noise_seed ^ (static_cast<uint64_t>(v) << 32 |
+                                                                    static_cast<uint64_t>(u)))
+                                   : 0;
       for (int ch = 0; ch < 3; ++ch) {
         float value = 255.0f * c[ch];
         if (sigma > 0.0f) {

@@ -145,8 +145,8 @@ cv::Mat makeTexture(int w, int h, double metres_per_texel, uint64_t seed) {
 
 void SyntheticSceneConfig::validate() const {
   std::ostringstream msg;
-  if (!room_size.allFinite() || room_size.x() < 3.0 || room_size.y() < 3.0 ||
-      room_size.z() < 2.0 || room_size.maxCoeff() > 50.0) {
+  if (!room_size.allFinite() || room_size.x() < 3.0 || room_size.y() < 3.0 || room_size.z() < 2.0 ||
+      room_size.maxCoeff() > 50.0) {
     msg << "room size " << room_size.transpose()
         << " m is out of range (x and y 3..50 m, z 2..50 m)";
   } else if (wall_objects < 0 || wall_objects > 40) {
@@ -218,11 +218,11 @@ SyntheticScene::SyntheticScene(uint64_t seed, const SyntheticSceneConfig& config
     for (int attempt = 0; attempt < 100; ++attempt) {
       const double width = rng.uniform(0.4, 1.2), depth = rng.uniform(0.3, 0.6);
       const bool tall = rng.uniform() < 0.35;
-      const double height = tall ? rng.uniform(1.2, std::min(2.0, room.z() - 0.3))
-                                 : rng.uniform(0.3, 0.9);
+      const double height =
+          tall ? rng.uniform(1.2, std::min(2.0, room.z() - 0.3)) : rng.uniform(0.3, 0.9);
       const double gap = rng.uniform(0.02, 0.15);
-      const double along = rng.uniform(-wall_length / 2 + width / 2 + 0.1,
-                                       wall_length / 2 - width / 2 - 0.1);
+      const double along =
+          rng.uniform(-wall_length / 2 + width / 2 + 0.1, wall_length / 2 - width / 2 - 0.1);
       const double tilt = rng.uniform(-0.15, 0.15);
       const double sign = wall % 2 == 0 ? -1.0 : 1.0;
       // The extra 0.1 m keeps a tilted box's back corners inside the wall.
@@ -255,8 +255,10 @@ SyntheticScene::SyntheticScene(uint64_t seed, const SyntheticSceneConfig& config
       int ua, va;
       faceAxes(face, &ua, &va);
       const Eigen::Vector3d& h = boxes_[b].half_size;
-      const int w = std::max(4, static_cast<int>(std::ceil(2.0 * h[ua] * config_.texels_per_metre)));
-      const int ht = std::max(4, static_cast<int>(std::ceil(2.0 * h[va] * config_.texels_per_metre)));
+      const int w =
+          std::max(4, static_cast<int>(std::ceil(2.0 * h[ua] * config_.texels_per_metre)));
+      const int ht =
+          std::max(4, static_cast<int>(std::ceil(2.0 * h[va] * config_.texels_per_metre)));
       FaceTexture t;
       t.levels.push_back(makeTexture(w, ht, metres_per_texel, streamSeed(seed, 100 + b, face)));
       while (std::min(t.levels.back().cols, t.levels.back().rows) >= 4) {
@@ -386,7 +388,8 @@ double SyntheticScene::distanceToSurface(const Eigen::Vector3d& p) const {
 bool SyntheticScene::isFree(const Eigen::Vector3d& p, double margin) const {
   for (size_t b = 0; b < boxes_.size(); ++b) {
     const SceneBox& box = boxes_[b];
-    const double sd = signedBoxDistance(Yaw(yaw_cos_sin_[b]).toLocal(p - box.centre), box.half_size);
+    const double sd =
+        signedBoxDistance(Yaw(yaw_cos_sin_[b]).toLocal(p - box.centre), box.half_size);
     if (box.inside ? sd > -margin : sd < margin) return false;
   }
   return true;

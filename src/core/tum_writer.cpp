@@ -88,9 +88,8 @@ void writeTumImageList(const std::string& path, const std::vector<TumImageEntry>
       throw IoError("cannot write " + inQuotes(path) + ": entry " + std::to_string(q) +
                     " has a non-finite stamp");
     }
-    if (e.path.empty() || std::any_of(e.path.begin(), e.path.end(), [](unsigned char c) {
-          return std::isspace(c) != 0;
-        })) {
+    if (e.path.empty() || std::any_of(e.path.begin(), e.path.end(),
+                                      [](unsigned char c) { return std::isspace(c) != 0; })) {
       throw IoError("cannot write " + inQuotes(path) + ": image path " + inQuotes(e.path) +
                     " is empty or contains whitespace, which the list format cannot hold");
     }

@@ -49,10 +49,10 @@ struct Options {
 };
 
 Options parse(int argc, char** argv) {
-  const CommandLine cli(argc, argv,
-                        {"out", "frames", "seed", "width", "height", "fx", "fy", "cx", "cy", "fps",
-                         "speed", "noise"},
-                        {"force", "quiet", "help"});
+  const CommandLine cli(
+      argc, argv,
+      {"out", "frames", "seed", "width", "height", "fx", "fy", "cx", "cy", "fps", "speed", "noise"},
+      {"force", "quiet", "help"});
   if (cli.flag("help")) {
     std::cout << kUsage;
     std::exit(0);
@@ -105,9 +105,10 @@ int run(const Options& o) {
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const SyntheticSequenceConfig& c = sequence.config();
   const PinholeIntrinsics& k = c.intrinsics;
-  std::printf("wrote %zu frames (%dx%d, fx %.2f fy %.2f cx %.2f cy %.2f, seed %llu) to %s in %.1f s\n",
-              sequence.size(), k.width, k.height, k.fx, k.fy, k.cx, k.cy,
-              static_cast<unsigned long long>(c.seed), o.out.c_str(), seconds);
+  std::printf(
+      "wrote %zu frames (%dx%d, fx %.2f fy %.2f cx %.2f cy %.2f, seed %llu) to %s in %.1f s\n",
+      sequence.size(), k.width, k.height, k.fx, k.fy, k.cx, k.cy,
+      static_cast<unsigned long long>(c.seed), o.out.c_str(), seconds);
   std::printf("      rgb/ depth/ rgb.txt depth.txt groundtruth.txt camera.yaml SOURCE.md\n");
   std::printf("scene %zu boxes in a %.1f x %.1f x %.1f m room; path %.2f s at %.2f m/s\n",
               sequence.scene().boxes().size() - 1, c.scene.room_size.x(), c.scene.room_size.y(),

@@ -156,7 +156,7 @@ TEST(SyntheticScene, RayHitsLieOnSurfacesAndDistanceIsALowerBound) {
 
 TEST(SyntheticScene, FreeSpaceAndCulling) {
   const SyntheticScene scene(2);
-  EXPECT_FALSE(scene.isFree(Eigen::Vector3d(10.0, 0.0, 1.0)));  // outside the room
+  EXPECT_FALSE(scene.isFree(Eigen::Vector3d(10.0, 0.0, 1.0)));      // outside the room
   EXPECT_FALSE(scene.isFree(Eigen::Vector3d(0.0, 0.0, 1.0), 0.6));  // within 0.6 m of the table
   const SceneBox& top = scene.boxes()[1];
   ASSERT_EQ(top.name, "table top");
@@ -237,7 +237,8 @@ TEST(SyntheticSequence, DepthIsTheRayCastZDepthAndOnTheSurface) {
         // within half a depth unit along the ray.
         const double z = depthMetres(f.depth, u, v);
         const Eigen::Vector3d p = pose.position + pose.rotation() * (z * ray_cam);
-        ASSERT_LT(sequence.scene().distanceToSurface(p), 0.5 / kUnitsPerMetre * ray_cam.norm() + 1e-9);
+        ASSERT_LT(sequence.scene().distanceToSurface(p),
+                  0.5 / kUnitsPerMetre * ray_cam.norm() + 1e-9);
       }
     }
   }
@@ -252,7 +253,10 @@ TEST(SyntheticSequence, DepthBeyondMaxRangeIsZero) {
   for (int v = 0; v < f.depth.rows; ++v) {
     for (int u = 0; u < f.depth.cols; ++u) {
       const uint16_t d = f.depth.at<uint16_t>(v, u);
-      if (d == 0) ++zero; else ++valid;
+      if (d == 0)
+        ++zero;
+      else
+        ++valid;
       EXPECT_LE(d, std::lround(1.8 * kUnitsPerMetre));
     }
   }
@@ -280,7 +284,8 @@ TEST(SyntheticSequence, DepthAgreesBetweenFramesThroughTheExactPoses) {
         const int u0 = std::min(static_cast<int>(px.x()), k.width - 2);
         const int v0 = std::min(static_cast<int>(px.y()), k.height - 2);
         const double d00 = depthMetres(b.depth, u0, v0), d10 = depthMetres(b.depth, u0 + 1, v0);
-        const double d01 = depthMetres(b.depth, u0, v0 + 1), d11 = depthMetres(b.depth, u0 + 1, v0 + 1);
+        const double d01 = depthMetres(b.depth, u0, v0 + 1),
+                     d11 = depthMetres(b.depth, u0 + 1, v0 + 1);
         const double lo = std::min({d00, d10, d01, d11}), hi = std::max({d00, d10, d01, d11});
         if (hi - lo > 0.02) continue;  // a depth edge in b's 2x2 cell
         const double fx = px.x() - u0, fy = px.y() - v0;
@@ -292,7 +297,7 @@ TEST(SyntheticSequence, DepthAgreesBetweenFramesThroughTheExactPoses) {
           ++agree;
         } else if (pb.z() < db - tolerance) {
           ++see_through;  // b would see through a surface a saw: wrong depth or pose
-        }  // else hidden in b behind something nearer: occlusion
+        }                 // else hidden in b behind something nearer: occlusion
       }
     }
     EXPECT_GT(projected, 400) << "frames " << ia << " and " << ib << " overlap too little";
@@ -327,7 +332,8 @@ TEST(SyntheticSequence, TexturesGiveManyDistinctiveMatchableCorners) {
     const int u = std::lround(pa.x), v = std::lround(pa.y);
     if (u < 0 || v < 0 || u >= k.width || v >= k.height) continue;
     const double z = depthMetres(a.depth, u, v);
-    const Eigen::Vector3d p = a.pose.position + a.pose.rotation() * (z * k.backProject({pa.x, pa.y}));
+    const Eigen::Vector3d p =
+        a.pose.position + a.pose.rotation() * (z * k.backProject({pa.x, pa.y}));
     const Eigen::Vector2d expected = k.project(b.pose.worldToCamera(p));
     if ((expected - Eigen::Vector2d(pb.x, pb.y)).norm() < 4.0) ++correct;
   }
@@ -429,7 +435,8 @@ TEST(SyntheticSequence, FolderReadsBackWithExactPosesAndIntrinsics) {
   cv::Mat metres;
   rendered.depth.convertTo(metres, CV_32F, 1.0 / 5000.0);
   EXPECT_LT(cv::norm(loaded.depth_m, metres, cv::NORM_INF), 1e-6);
-  const cv::Mat raw = cv::imread(folder + "/" + dataset.frames[17].depth_path, cv::IMREAD_UNCHANGED);
+  const cv::Mat raw =
+      cv::imread(folder + "/" + dataset.frames[17].depth_path, cv::IMREAD_UNCHANGED);
   ASSERT_EQ(raw.type(), CV_16UC1);
   EXPECT_EQ(cv::norm(raw, rendered.depth, cv::NORM_INF), 0.0);
 }
@@ -466,7 +473,8 @@ TEST(TumWriters, TrajectoryRoundTripsExactly) {
     EXPECT_EQ(back[i].stamp, poses[i].stamp);  // shortest round-trip text: exact
     EXPECT_EQ(back[i].pose.position, poses[i].pose.position);
     // The reader normalises again, which may move the last bit.
-    EXPECT_LT((back[i].pose.orientation.coeffs() - poses[i].pose.orientation.coeffs()).norm(), 1e-15);
+    EXPECT_LT((back[i].pose.orientation.coeffs() - poses[i].pose.orientation.coeffs()).norm(),
+              1e-15);
   }
   const std::string text = readBytes(path);
   EXPECT_EQ(text.rfind("# two\n# comment lines\n# timestamp tx ty tz qx qy qz qw\n", 0), 0u);
@@ -484,9 +492,10 @@ TEST(TumWriters, TrajectoryRoundTripsExactly) {
 
 TEST(TumWriters, ImageListRoundTripsAtSixDecimals) {
   TempDir dir;
-  const std::vector<TumImageEntry> entries = {
-      {1305031102.175304, "rgb/1305031102.175304.png"}, {1305031102.211214, "rgb/b.png"},
-      {0.5, "c.png"}, {7.0000004, "deeper/folder/d.png"}};
+  const std::vector<TumImageEntry> entries = {{1305031102.175304, "rgb/1305031102.175304.png"},
+                                              {1305031102.211214, "rgb/b.png"},
+                                              {0.5, "c.png"},
+                                              {7.0000004, "deeper/folder/d.png"}};
   const std::string path = (dir.path() / "rgb.txt").string();
   writeTumImageList(path, entries);
   const auto back = readTumImageList(path);
@@ -539,7 +548,8 @@ TEST(SyntheticSequence, ViewSelectionRunsOnIt) {
   config.keyframes.mode = KeyframeMode::kEveryNth;
   config.keyframes.every_n = 3;
   ViewSelector selector(config);
-  for (const TumFrame& f : dataset.frames) selector.addFrame(loadTumFrame(dataset, f, {true, false}));
+  for (const TumFrame& f : dataset.frames)
+    selector.addFrame(loadTumFrame(dataset, f, {true, false}));
   const ErrorResistanceMatrix& matrix = selector.matrix();
   ASSERT_EQ(matrix.size(), 10u);
   // Neighbouring keyframes (0.07 m apart on a smooth path) see the same walls.

@@ -24,18 +24,18 @@ namespace view_selection {
 /// An oriented box: the room (seen from inside) or an object (seen from outside). World frame:
 /// z up, the floor at z = 0, the room centred on x = y = 0.
 struct SceneBox {
-  std::string name;                                   ///< "room", "table top", "box 3", ...
-  Eigen::Vector3d centre = Eigen::Vector3d::Zero();   ///< [m]
-  Eigen::Vector3d half_size = Eigen::Vector3d::Ones();///< half extents along its own axes [m]
-  double yaw = 0.0;                                   ///< rotation about world z [rad]
-  bool inside = false;                                ///< true for the room: rays hit it from within
+  std::string name;                                     ///< "room", "table top", "box 3", ...
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();     ///< [m]
+  Eigen::Vector3d half_size = Eigen::Vector3d::Ones();  ///< half extents along its own axes [m]
+  double yaw = 0.0;                                     ///< rotation about world z [rad]
+  bool inside = false;  ///< true for the room: rays hit it from within
 };
 
 struct SyntheticSceneConfig {
   Eigen::Vector3d room_size{6.0, 5.0, 3.0};  ///< x, y, z extent of the room [m]
-  int wall_objects = 8;            ///< boxes standing along the walls (cabinets, crates, shelves)
-  bool table = true;               ///< a table (top and four legs) with a box on it, in the middle
-  double texels_per_metre = 250.0; ///< texture resolution on every surface
+  int wall_objects = 8;             ///< boxes standing along the walls (cabinets, crates, shelves)
+  bool table = true;                ///< a table (top and four legs) with a box on it, in the middle
+  double texels_per_metre = 250.0;  ///< texture resolution on every surface
 
   /// Throws InvalidArgument naming the bad value.
   void validate() const;
@@ -43,11 +43,11 @@ struct SyntheticSceneConfig {
 
 /// Where a ray meets the scene.
 struct SurfaceHit {
-  double t = 0.0;                  ///< ray parameter: point = origin + t * direction
+  double t = 0.0;  ///< ray parameter: point = origin + t * direction
   Eigen::Vector3d point = Eigen::Vector3d::Zero();
   Eigen::Vector3d normal = Eigen::Vector3d::Zero();  ///< unit, towards the side the ray came from
-  int box = -1;                    ///< index into SyntheticScene::boxes()
-  int face = -1;                   ///< 0..5: -x, +x, -y, +y, -z, +z of the box's own axes
+  int box = -1;                                      ///< index into SyntheticScene::boxes()
+  int face = -1;  ///< 0..5: -x, +x, -y, +y, -z, +z of the box's own axes
   Eigen::Vector2d uv = Eigen::Vector2d::Zero();  ///< position on the face [m], from its corner
 };
 
@@ -90,7 +90,7 @@ class SyntheticScene {
   SyntheticSceneConfig config_;
   std::vector<SceneBox> boxes_;
   std::vector<Eigen::Vector2d> yaw_cos_sin_;  ///< of every box's yaw, for fast ray casting
-  std::vector<int> all_boxes_;  ///< 0, 1, ..., boxes_.size() - 1
+  std::vector<int> all_boxes_;                ///< 0, 1, ..., boxes_.size() - 1
   std::vector<FaceTexture> textures_;
 };
 
@@ -102,14 +102,14 @@ class SyntheticScene {
 PinholeIntrinsics syntheticIntrinsics(int width = 640, int height = 480);
 
 struct SyntheticSequenceConfig {
-  uint64_t seed = 1;              ///< textures, object layout, path phases and noise
+  uint64_t seed = 1;  ///< textures, object layout, path phases and noise
   int frames = 300;
   PinholeIntrinsics intrinsics = syntheticIntrinsics();
-  double fps = 30.0;              ///< frame rate [Hz]
-  double speed = 0.7;             ///< walking speed along the loop [m/s]
-  double start_stamp = 1000.0;    ///< stamp of frame 0 [s]
-  double noise_sigma = 2.0;       ///< colour noise [8-bit grey levels]; 0 for none
-  double max_range = 8.0;         ///< depth beyond this is 0 (no surface) [m]; at most 13.1
+  double fps = 30.0;            ///< frame rate [Hz]
+  double speed = 0.7;           ///< walking speed along the loop [m/s]
+  double start_stamp = 1000.0;  ///< stamp of frame 0 [s]
+  double noise_sigma = 2.0;     ///< colour noise [8-bit grey levels]; 0 for none
+  double max_range = 8.0;       ///< depth beyond this is 0 (no surface) [m]; at most 13.1
   SyntheticSceneConfig scene;
 
   /// Throws InvalidArgument naming the bad value.
@@ -117,10 +117,10 @@ struct SyntheticSequenceConfig {
 };
 
 struct SyntheticFrame {
-  double stamp = 0.0;   ///< [s], a whole number of microseconds (written exactly in TUM lists)
-  CameraPose pose;      ///< camera-to-world, optical frame (z forward, x right, y down)
-  cv::Mat colour;       ///< CV_8UC3, BGR (cv::imwrite stores it as an RGB PNG)
-  cv::Mat depth;        ///< CV_16UC1, TUM units: 5000 per metre of z-depth, 0 = no surface
+  double stamp = 0.0;  ///< [s], a whole number of microseconds (written exactly in TUM lists)
+  CameraPose pose;     ///< camera-to-world, optical frame (z forward, x right, y down)
+  cv::Mat colour;      ///< CV_8UC3, BGR (cv::imwrite stores it as an RGB PNG)
+  cv::Mat depth;       ///< CV_16UC1, TUM units: 5000 per metre of z-depth, 0 = no surface
 };
 
 /// Progress callback: frames done, frames in total.
