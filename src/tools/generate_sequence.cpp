@@ -53,10 +53,10 @@ struct Options {
 };
 
 Options parse(int argc, char** argv) {
-  const CommandLine cli(
-      argc, argv,
-      {"out", "frames", "seed", "width", "height", "fx", "fy", "cx", "cy", "fps", "speed", "noise"},
-      {"force", "quiet", "help"});
+  const CommandLine cli(argc, argv,
+                        {"out", "frames", "seed", "width", "height", "fx", "fy", "cx", "cy", "fps",
+                         "speed", "noise", "threads"},
+                        {"force", "quiet", "help"});
   if (cli.flag("help")) {
     std::cout << kUsage;
     std::exit(0);

@@ -609,7 +609,7 @@ TEST(GenerateSequenceTool, WritesAFolderAndExplainsMistakes) {
   EXPECT_EQ(status, 1);
   EXPECT_NE(text.find("not empty"), std::string::npos) << text;
   EXPECT_NE(text.find("--force"), std::string::npos) << text;
-  std::tie(status, text) = run(tool + " --out " + out + small + " --force --seed 4");
+  std::tie(status, text) = run(tool + " --out " + out + small + " --force --seed 4 --threads 1");
   EXPECT_EQ(status, 0) << text;
 
   std::tie(status, text) = run(tool + small);
