@@ -2,10 +2,13 @@
 
 #include "view_selection/core/exceptions.h"
 
+#include <opencv2/core/hal/hal.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
 #include <chrono>
+#include <cstdint>
+#include <cstring>
 #include <cmath>
 #include <set>
 #include <sstream>
@@ -23,6 +26,26 @@ double median(std::vector<double> values) {
   const size_t mid = values.size() / 2;
   std::nth_element(values.begin(), values.begin() + static_cast<std::ptrdiff_t>(mid), values.end());
   return values[mid];
+}
+
+// Hamming distance of two ORB descriptors (32 bytes): the hardware popcount when the processor
+// has one (checked at run time; the package is built for the baseline instruction set).
+__attribute__((target("popcnt"))) int hammingPopcnt(const uchar* a, const uchar* b, int bytes) {
+  int d = 0;
+  int i = 0;
+  for (; i + 8 <= bytes; i += 8) {
+    uint64_t x, y;
+    std::memcpy(&x, a + i, 8);
+    std::memcpy(&y, b + i, 8);
+    d += __builtin_popcountll(x ^ y);
+  }
+  for (; i < bytes; ++i) d += __builtin_popcount(static_cast<unsigned>(a[i] ^ b[i]));
+  return d;
+}
+
+int hamming(const uchar* a, const uchar* b, int bytes) {
+  static const bool has_popcnt = __builtin_cpu_supports("popcnt");
+  return has_popcnt ? hammingPopcnt(a, b, bytes) : cv::hal::normHamming(a, b, bytes);
 }
 
 Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
@@ -172,28 +195,88 @@ std::vector<int> FeaturePointSource::chooseCandidates(const TriangulationCamera&
   return chosen;
 }
 
+void FeaturePointSource::StripIndex::build(const std::vector<cv::KeyPoint>& keypoints, int width,
+                                           int height) {
+  by_x.assign(static_cast<size_t>(width / kStrip + 1), {});
+  by_y.assign(static_cast<size_t>(height / kStrip + 1), {});
+  for (size_t k = 0; k < keypoints.size(); ++k) {
+    const cv::Point2f& p = keypoints[k].pt;
+    const int sx = std::clamp(static_cast<int>(p.x) / kStrip, 0, static_cast<int>(by_x.size()) - 1);
+    const int sy = std::clamp(static_cast<int>(p.y) / kStrip, 0, static_cast<int>(by_y.size()) - 1);
+    by_x[static_cast<size_t>(sx)].emplace_back(p.y, static_cast<int>(k));
+    by_y[static_cast<size_t>(sy)].emplace_back(p.x, static_cast<int>(k));
+  }
+  for (auto& strip : by_x) std::sort(strip.begin(), strip.end());
+  for (auto& strip : by_y) std::sort(strip.begin(), strip.end());
+}
+
+void FeaturePointSource::StripIndex::near(const Eigen::Vector3d& line, double band,
+                                          const std::vector<cv::KeyPoint>& keypoints,
+                                          std::vector<int>& out) const {
+  const double a = line.x(), b = line.y(), c = line.z();
+  const double norm = std::hypot(a, b);
+  if (!(norm > 0.0)) return;
+  // Along the axis the line changes slower in: strips across x when |b| >= |a| (y = f(x)).
+  const bool across_x = std::abs(b) >= std::abs(a);
+  const auto& strips = across_x ? by_x : by_y;
+  const double p = across_x ? a : b, q = across_x ? b : a;   // p * s + q * t + c = 0, t = f(s)
+  const double widen = band * norm / std::abs(q);             // band measured along t
+  for (size_t k = 0; k < strips.size(); ++k) {
+    if (strips[k].empty()) continue;
+    const double s0 = static_cast<double>(k) * kStrip, s1 = s0 + kStrip;
+    const double t0 = -(p * s0 + c) / q, t1 = -(p * s1 + c) / q;
+    const float lo = static_cast<float>(std::min(t0, t1) - widen);
+    const float hi = static_cast<float>(std::max(t0, t1) + widen);
+    auto it = std::lower_bound(strips[k].begin(), strips[k].end(), std::make_pair(lo, -1));
+    for (; it != strips[k].end() && it->first <= hi; ++it) {
+      const cv::Point2f& pt = keypoints[static_cast<size_t>(it->second)].pt;
+      if (std::abs(a * pt.x + b * pt.y + c) <= band * norm) out.push_back(it->second);
+    }
+  }
+}
+
 std::vector<cv::DMatch> FeaturePointSource::match(const View& next, int candidate) const {
   const View& other = views_[static_cast<size_t>(candidate)];
   if (next.descriptors.empty() || other.descriptors.rows < 2) return {};
-  cv::BFMatcher matcher(norm_);
-  std::vector<std::vector<cv::DMatch>> knn;
-  matcher.knnMatch(next.descriptors, other.descriptors, knn, 2);
+  // x_next^T F x_other = 0: the line of a new feature in the other image is F^T x_next.
   const Eigen::Matrix3d f = fundamental(cameras_[static_cast<size_t>(candidate)], cameras_.back());
+  const double band = kBandFactor * config_.max_sampson_px;
+  const bool binary = norm_ == cv::NORM_HAMMING;
+  const int length = next.descriptors.cols;
+  std::vector<int> near;
   // At most one match per feature of the other view: the closest.
   std::vector<int> best_for(static_cast<size_t>(other.descriptors.rows), -1);
   std::vector<cv::DMatch> kept;
-  for (const auto& m : knn) {
-    if (m.size() < 2 || !(m[0].distance < config_.ratio * m[1].distance)) continue;
-    const cv::Point2f& a = other.keypoints[static_cast<size_t>(m[0].trainIdx)].pt;
-    const cv::Point2f& b = next.keypoints[static_cast<size_t>(m[0].queryIdx)].pt;
-    if (sampsonDistance(f, Eigen::Vector2d(a.x, a.y), Eigen::Vector2d(b.x, b.y)) > config_.max_sampson_px)
-      continue;
-    int& slot = best_for[static_cast<size_t>(m[0].trainIdx)];
+  for (int a = 0; a < next.descriptors.rows; ++a) {
+    const cv::Point2f& pa = next.keypoints[static_cast<size_t>(a)].pt;
+    const Eigen::Vector2d xa(pa.x, pa.y);
+    near.clear();
+    other.index.near(f.transpose() * xa.homogeneous(), band, other.keypoints, near);
+    if (near.size() < 2) continue;  // no competitor: the ratio test cannot vouch for it
+    float best = std::numeric_limits<float>::infinity(), second = best;
+    int best_k = -1;
+    for (const int k : near) {
+      const float d = binary
+          ? static_cast<float>(hamming(next.descriptors.ptr<uchar>(a), other.descriptors.ptr<uchar>(k), length))
+          : std::sqrt(cv::hal::normL2Sqr_(next.descriptors.ptr<float>(a), other.descriptors.ptr<float>(k), length));
+      if (d < best) {
+        second = best;
+        best = d;
+        best_k = k;
+      } else if (d < second) {
+        second = d;
+      }
+    }
+    if (!(best < static_cast<float>(config_.ratio) * second)) continue;
+    const cv::Point2f& pb = other.keypoints[static_cast<size_t>(best_k)].pt;
+    if (sampsonDistance(f, Eigen::Vector2d(pb.x, pb.y), xa) > config_.max_sampson_px) continue;
+    const cv::DMatch m(a, best_k, best);
+    int& slot = best_for[static_cast<size_t>(best_k)];
     if (slot < 0) {
       slot = static_cast<int>(kept.size());
-      kept.push_back(m[0]);
-    } else if (m[0].distance < kept[static_cast<size_t>(slot)].distance) {
-      kept[static_cast<size_t>(slot)] = m[0];
+      kept.push_back(m);
+    } else if (m.distance < kept[static_cast<size_t>(slot)].distance) {
+      kept[static_cast<size_t>(slot)] = m;
     }
   }
   return kept;
@@ -238,7 +321,9 @@ void FeaturePointSource::triangulateTracks(const std::vector<int>& tracks) {
       points.push_back(x);
       observations.push_back(std::move(obs));
     }
+    const auto t_refine = std::chrono::steady_clock::now();
     refinePoints(points, observations, cameras_, refine);
+    refine_seconds_ += secondsSince(t_refine);
 
     std::vector<int> again;
     for (size_t q = 0; q < ids.size(); ++q) {
@@ -324,6 +409,7 @@ PointSourceResult FeaturePointSource::process(ViewId id, const Frame& frame) {
   next.id = id;
   detector_->detectAndCompute(grey, cv::noArray(), next.keypoints, next.descriptors);
   next.track_of.assign(next.keypoints.size(), -1);
+  next.index.build(next.keypoints, frame.intrinsics.width, frame.intrinsics.height);
   stats.extract_seconds = secondsSince(t0);
   stats.features = next.keypoints.size();
 
@@ -395,7 +481,9 @@ PointSourceResult FeaturePointSource::process(ViewId id, const Frame& frame) {
     live.push_back(t);
     for (const auto& [v, f] : tracks_[static_cast<size_t>(t)].obs) affected.insert(v);
   }
+  refine_seconds_ = 0.0;
   triangulateTracks(live);
+  stats.refine_seconds = refine_seconds_;
 
   PointSourceResult result;
   for (const int v : affected) {
@@ -418,6 +506,7 @@ PointSourceResult FeaturePointSource::process(ViewId id, const Frame& frame) {
   total_.extract_seconds += stats.extract_seconds;
   total_.match_seconds += stats.match_seconds;
   total_.triangulate_seconds += stats.triangulate_seconds;
+  total_.refine_seconds += stats.refine_seconds;
   total_.features += stats.features;
   total_.candidates += stats.candidates;
   total_.matches += stats.matches;

@@ -39,6 +39,7 @@ struct FeatureStats {
   double extract_seconds = 0.0;      ///< detection and description
   double match_seconds = 0.0;        ///< candidate choice, matching, ratio and epipolar checks
   double triangulate_seconds = 0.0;  ///< tracks, DLT, Ceres, acceptance, point sets
+  double refine_seconds = 0.0;       ///< the Ceres part of triangulate_seconds
   size_t features = 0;
   size_t candidates = 0;             ///< earlier keyframes matched against
   size_t matches = 0;                ///< after ratio and epipolar checks
@@ -76,8 +77,19 @@ class FeaturePointSource : public PointSource {
                                 const Eigen::Vector2d& to);
 
  private:
+  /// Keypoints bucketed in strips for epipolar-band look-ups: strips across x (each sorted by
+  /// y) for lines closer to horizontal, strips across y (sorted by x) for the others.
+  struct StripIndex {
+    static constexpr int kStrip = 16;  // [px]
+    std::vector<std::vector<std::pair<float, int>>> by_x, by_y;
+    void build(const std::vector<cv::KeyPoint>& keypoints, int width, int height);
+    /// Features within `band` px of the line a x + b y + c = 0, appended to `out`.
+    void near(const Eigen::Vector3d& line, double band, const std::vector<cv::KeyPoint>& keypoints,
+              std::vector<int>& out) const;
+  };
   struct View {
     ViewId id = -1;
+    StripIndex index;
     std::vector<cv::KeyPoint> keypoints;
     cv::Mat descriptors;
     std::vector<int> track_of;   ///< per feature, -1 when in no track
@@ -90,6 +102,12 @@ class FeaturePointSource : public PointSource {
     bool valid = false;
     bool alive = true;
   };
+
+  /// Features of the other view within kBandFactor * max_sampson_px of the epipolar line are a
+  /// new feature's candidates (and the ratio test's competitors); the best must then pass the
+  /// Sampson check. The wider band admits correspondences whose Sampson distance is small but
+  /// whose distance to the line in one image is larger (different scales of the two views).
+  static constexpr double kBandFactor = 2.0;
 
   std::vector<int> chooseCandidates(const TriangulationCamera& camera) const;
   std::vector<cv::DMatch> match(const View& next, int candidate) const;
@@ -107,6 +125,7 @@ class FeaturePointSource : public PointSource {
   std::vector<Track> tracks_;
   std::vector<ViewId> last_candidates_;
   FeatureStats last_, total_;
+  double refine_seconds_ = 0.0;
 };
 
 }  // namespace view_selection

@@ -35,13 +35,13 @@ Eigen::Vector3d triangulateLinear(const std::vector<PixelObservation>& observati
 
 struct RefineOptions {
   double huber_px = 1.0;       ///< Huber loss scale [px]: quadratic below, linear above
-  int max_iterations = 20;     ///< Levenberg-Marquardt iterations (all points at once)
+  int max_iterations = 20;     ///< Levenberg-Marquardt iterations per point
 };
 
-/// Minimises sum Huber(|project(X) - pixel|) over each point's observations, cameras fixed.
-/// Every point is an independent 3-parameter block of one Ceres problem (one solve for a whole
-/// keyframe's tracks). Points with an empty observation list or non-finite values are left as
-/// they are. Throws InvalidArgument when sizes differ or an observation names no camera.
+/// Minimises sum Huber(|project(X) - pixel|^2) over each point's observations, cameras fixed,
+/// with Ceres (TinySolver, one small problem per point, Huber folded into the residuals).
+/// Points with an empty observation list, non-finite values or behind an observing camera are
+/// left as they are. Throws InvalidArgument when sizes differ or an observation names no camera.
 void refinePoints(std::vector<Eigen::Vector3d>& points,
                   const std::vector<std::vector<PixelObservation>>& observations,
                   const std::vector<TriangulationCamera>& cameras, const RefineOptions& options);
