@@ -4,7 +4,7 @@
 
 #include <ceres/tiny_solver.h>
 #include <ceres/tiny_solver_autodiff_function.h>
-#include <Eigen/SVD>
+#include <Eigen/Eigenvalues>
 
 #include <cmath>
 #include <limits>
@@ -26,26 +26,33 @@ Eigen::Vector3d triangulateLinear(const std::vector<PixelObservation>& observati
   if (observations.size() < 2) return nan;
   // Normalise the world: centre on the observing cameras, unit mean distance from it.
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  for (const auto& o : observations) mean += cameras.at(static_cast<size_t>(o.camera)).centre;
+  for (const auto& o : observations) {
+    if (o.camera < 0 || static_cast<size_t>(o.camera) >= cameras.size())
+      throw InvalidArgument("triangulateLinear: observation of unknown camera " + std::to_string(o.camera));
+    mean += cameras[static_cast<size_t>(o.camera)].centre;
+  }
   mean /= static_cast<double>(observations.size());
   double spread = 0.0;
   for (const auto& o : observations) spread += (cameras[static_cast<size_t>(o.camera)].centre - mean).norm();
   spread /= static_cast<double>(observations.size());
   if (!(spread > 0.0)) return nan;  // all centres equal: no baseline
 
-  Eigen::MatrixXd a(2 * observations.size(), 4);
-  for (size_t q = 0; q < observations.size(); ++q) {
-    const TriangulationCamera& c = cameras[static_cast<size_t>(observations[q].camera)];
-    const Eigen::Vector3d ray = c.intrinsics.backProject(observations[q].pixel);  // normalised
+  // Least squares on the stacked DLT rows: the eigenvector of A^T A with the smallest
+  // eigenvalue (4x4, so no SVD of a tall matrix per point).
+  Eigen::Matrix4d ata = Eigen::Matrix4d::Zero();
+  for (const auto& o : observations) {
+    const TriangulationCamera& c = cameras[static_cast<size_t>(o.camera)];
+    const Eigen::Vector3d ray = c.intrinsics.backProject(o.pixel);  // normalised
     // P = [R^T | -R^T O] applied to (mean + spread * X', 1) = [spread R^T | R^T (mean - O)].
     Eigen::Matrix<double, 3, 4> p;
     p.leftCols<3>() = spread * c.world_to_camera;
     p.col(3) = c.world_to_camera * (mean - c.centre);
-    a.row(static_cast<Eigen::Index>(2 * q)) = ray.x() * p.row(2) - p.row(0);
-    a.row(static_cast<Eigen::Index>(2 * q + 1)) = ray.y() * p.row(2) - p.row(1);
+    const Eigen::RowVector4d r0 = ray.x() * p.row(2) - p.row(0);
+    const Eigen::RowVector4d r1 = ray.y() * p.row(2) - p.row(1);
+    ata += r0.transpose() * r0 + r1.transpose() * r1;
   }
-  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(a, Eigen::ComputeFullV);
-  const Eigen::Vector4d h = svd.matrixV().col(3);
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d> eigen(ata);
+  const Eigen::Vector4d h = eigen.eigenvectors().col(0);  // eigenvalues ascending
   if (!(std::abs(h.w()) > 1e-12 * h.head<3>().norm())) return nan;  // point at infinity
   return mean + spread * h.head<3>() / h.w();
 }
