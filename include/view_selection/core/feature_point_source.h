@@ -34,7 +34,8 @@ struct FeaturePointSourceConfig {
   nlohmann::json toJson() const;
 };
 
-/// Per-keyframe work of the last process() call, and running totals.
+/// Per-keyframe work of the last process() call, and running totals. Times are CPU seconds of
+/// the process (all threads), i.e. one core's work, not wall time.
 struct FeatureStats {
   double extract_seconds = 0.0;      ///< detection and description
   double match_seconds = 0.0;        ///< candidate choice, matching, ratio and epipolar checks
