@@ -6,10 +6,10 @@
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
-#include <ctime>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
-#include <cmath>
+#include <ctime>
 #include <set>
 #include <sstream>
 
@@ -66,9 +66,14 @@ cv::Mat toGrey(const cv::Mat& image) {
     throw InvalidInput("point source 'features' needs an 8-bit image (grey, BGR or BGRA)");
   cv::Mat grey;
   switch (image.channels()) {
-    case 1: return image;
-    case 3: cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY); return grey;
-    case 4: cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY); return grey;
+    case 1:
+      return image;
+    case 3:
+      cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+      return grey;
+    case 4:
+      cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY);
+      return grey;
     default:
       throw InvalidInput("point source 'features' needs a grey, BGR or BGRA image, got " +
                          std::to_string(image.channels()) + " channels");
@@ -78,8 +83,11 @@ cv::Mat toGrey(const cv::Mat& image) {
 }  // namespace
 
 void FeaturePointSourceConfig::validate() const {
-  auto fail = [](const std::string& what) { throw InvalidArgument("feature point source: " + what); };
-  if (detector != "orb" && detector != "sift") fail("detector must be 'orb' or 'sift', got '" + detector + "'");
+  auto fail = [](const std::string& what) {
+    throw InvalidArgument("feature point source: " + what);
+  };
+  if (detector != "orb" && detector != "sift")
+    fail("detector must be 'orb' or 'sift', got '" + detector + "'");
   if (max_features < 1 || max_features > 1000000) fail("max_features must be in [1, 1000000]");
   if (max_match_views < 1 || max_match_views > 1000) fail("max_match_views must be in [1, 1000]");
   if (!(min_overlap >= 0.0 && min_overlap <= 1.0)) fail("min_overlap must be in [0, 1]");
@@ -87,7 +95,8 @@ void FeaturePointSourceConfig::validate() const {
   if (!(max_sampson_px > 0.0) || !std::isfinite(max_sampson_px)) fail("max_sampson_px must be > 0");
   if (!(max_reprojection_px > 0.0) || !std::isfinite(max_reprojection_px))
     fail("max_reprojection_px must be > 0");
-  if (!(min_parallax_deg >= 0.0 && min_parallax_deg < 90.0)) fail("min_parallax_deg must be in [0, 90)");
+  if (!(min_parallax_deg >= 0.0 && min_parallax_deg < 90.0))
+    fail("min_parallax_deg must be in [0, 90)");
   if (!(huber_px > 0.0) || !std::isfinite(huber_px)) fail("huber_px must be > 0");
   if (max_refine_iterations < 1) fail("max_refine_iterations must be >= 1");
 }
@@ -105,7 +114,8 @@ nlohmann::json FeaturePointSourceConfig::toJson() const {
           {"max_refine_iterations", max_refine_iterations}};
 }
 
-FeaturePointSource::FeaturePointSource(FeaturePointSourceConfig config) : config_(std::move(config)) {
+FeaturePointSource::FeaturePointSource(FeaturePointSourceConfig config)
+    : config_(std::move(config)) {
   config_.validate();
   if (config_.detector == "orb") {
     detector_ = cv::ORB::create(config_.max_features);
@@ -125,7 +135,8 @@ void FeaturePointSource::reset() {
   last_ = total_ = FeatureStats{};
 }
 
-double FeaturePointSource::frustumOverlap(const TriangulationCamera& a, const TriangulationCamera& b,
+double FeaturePointSource::frustumOverlap(const TriangulationCamera& a,
+                                          const TriangulationCamera& b,
                                           const std::vector<double>& depths) {
   constexpr int kCols = 8, kRows = 6;
   int seen = 0, total = 0;
@@ -162,7 +173,8 @@ double FeaturePointSource::sampsonDistance(const Eigen::Matrix3d& f, const Eigen
   const Eigen::Vector3d x1 = from.homogeneous(), x2 = to.homogeneous();
   const Eigen::Vector3d fx1 = f * x1, ftx2 = f.transpose() * x2;
   const double e = x2.dot(fx1);
-  const double denom = fx1.x() * fx1.x() + fx1.y() * fx1.y() + ftx2.x() * ftx2.x() + ftx2.y() * ftx2.y();
+  const double denom =
+      fx1.x() * fx1.x() + fx1.y() * fx1.y() + ftx2.x() * ftx2.x() + ftx2.y() * ftx2.y();
   if (!(denom > 0.0)) return std::numeric_limits<double>::infinity();
   return std::sqrt(e * e / denom);
 }
@@ -186,7 +198,8 @@ std::vector<int> FeaturePointSource::chooseCandidates(const TriangulationCamera&
     else
       depths = {2.0 * baseline, 5.0 * baseline, 20.0 * baseline};
     const double overlap = frustumOverlap(other, camera, depths);
-    if (overlap >= config_.min_overlap && overlap > 0.0) scored.emplace_back(overlap, static_cast<int>(v));
+    if (overlap >= config_.min_overlap && overlap > 0.0)
+      scored.emplace_back(overlap, static_cast<int>(v));
   }
   // Best overlap first; among equals the most recent view.
   std::sort(scored.begin(), scored.end(), [](const auto& a, const auto& b) {
@@ -224,8 +237,8 @@ void FeaturePointSource::StripIndex::near(const Eigen::Vector3d& line, double ba
   // Along the axis the line changes slower in: strips across x when |b| >= |a| (y = f(x)).
   const bool across_x = std::abs(b) >= std::abs(a);
   const auto& strips = across_x ? by_x : by_y;
-  const double p = across_x ? a : b, q = across_x ? b : a;   // p * s + q * t + c = 0, t = f(s)
-  const double widen = band * norm / std::abs(q);             // band measured along t
+  const double p = across_x ? a : b, q = across_x ? b : a;  // p * s + q * t + c = 0, t = f(s)
+  const double widen = band * norm / std::abs(q);           // band measured along t
   for (size_t k = 0; k < strips.size(); ++k) {
     if (strips[k].empty()) continue;
     const double s0 = static_cast<double>(k) * kStrip, s1 = s0 + kStrip;
@@ -262,8 +275,10 @@ std::vector<cv::DMatch> FeaturePointSource::match(const View& next, int candidat
     int best_k = -1;
     for (const int k : near) {
       const float d = binary
-          ? static_cast<float>(hamming(next.descriptors.ptr<uchar>(a), other.descriptors.ptr<uchar>(k), length))
-          : std::sqrt(cv::hal::normL2Sqr_(next.descriptors.ptr<float>(a), other.descriptors.ptr<float>(k), length));
+                          ? static_cast<float>(hamming(next.descriptors.ptr<uchar>(a),
+                                                       other.descriptors.ptr<uchar>(k), length))
+                          : std::sqrt(cv::hal::normL2Sqr_(next.descriptors.ptr<float>(a),
+                                                          other.descriptors.ptr<float>(k), length));
       if (d < best) {
         second = best;
         best = d;
@@ -348,7 +363,8 @@ void FeaturePointSource::triangulateTracks(const std::vector<int>& tracks) {
             if (errors[k] <= config_.max_reprojection_px) {
               kept.push_back(track.obs[k]);
             } else {
-              views_[static_cast<size_t>(track.obs[k].first)].track_of[static_cast<size_t>(track.obs[k].second)] = -1;
+              views_[static_cast<size_t>(track.obs[k].first)]
+                  .track_of[static_cast<size_t>(track.obs[k].second)] = -1;
             }
           }
           track.obs = std::move(kept);
@@ -462,10 +478,12 @@ PointSourceResult FeaturePointSource::process(ViewId id, const Frame& frame) {
       } else if (ta != tb) {
         // Merge the smaller track into the larger unless they share a view.
         int keep = ta, drop = tb;
-        if (tracks_[static_cast<size_t>(keep)].obs.size() < tracks_[static_cast<size_t>(drop)].obs.size())
+        if (tracks_[static_cast<size_t>(keep)].obs.size() <
+            tracks_[static_cast<size_t>(drop)].obs.size())
           std::swap(keep, drop);
         bool conflict = false;
-        for (const auto& [v, f] : tracks_[static_cast<size_t>(drop)].obs) conflict = conflict || trackHasView(keep, v);
+        for (const auto& [v, f] : tracks_[static_cast<size_t>(drop)].obs)
+          conflict = conflict || trackHasView(keep, v);
         if (conflict) continue;
         Track& dropped = tracks_[static_cast<size_t>(drop)];
         for (const auto& [v, f] : dropped.obs) {

@@ -10,7 +10,8 @@ namespace view_selection {
 
 void MapPointSourceConfig::validate() const {
   auto fail = [](const std::string& what) { throw InvalidArgument("map point source: " + what); };
-  if (std::isnan(max_depth) || std::isinf(max_depth)) fail("max_depth must be finite (<= 0 disables it)");
+  if (std::isnan(max_depth) || std::isinf(max_depth))
+    fail("max_depth must be finite (<= 0 disables it)");
   if (max_points < 0) fail("max_points must be >= 0 (0: no limit)");
   if (!(occlusion_abs_tolerance >= 0.0) || !std::isfinite(occlusion_abs_tolerance))
     fail("occlusion_abs_tolerance must be >= 0");
@@ -28,9 +29,9 @@ nlohmann::json MapPointSourceConfig::toJson() const {
           {"depth_map_cell", depth_map_cell}};
 }
 
-Eigen::Matrix3Xd visibleMapPoints(const Eigen::Matrix3Xd& points, const PinholeIntrinsics& intrinsics,
-                                  const CameraPose& pose, const DepthMap* depth,
-                                  const MapPointSourceConfig& config) {
+Eigen::Matrix3Xd visibleMapPoints(const Eigen::Matrix3Xd& points,
+                                  const PinholeIntrinsics& intrinsics, const CameraPose& pose,
+                                  const DepthMap* depth, const MapPointSourceConfig& config) {
   const Eigen::Matrix3d world_to_camera = pose.rotation().transpose();
   std::vector<Eigen::Index> visible;
   for (Eigen::Index c = 0; c < points.cols(); ++c) {
@@ -58,7 +59,9 @@ Eigen::Matrix3Xd visibleMapPoints(const Eigen::Matrix3Xd& points, const PinholeI
   return out;
 }
 
-MapPointSource::MapPointSource(MapPointSourceConfig config) : config_(config) { config_.validate(); }
+MapPointSource::MapPointSource(MapPointSourceConfig config) : config_(config) {
+  config_.validate();
+}
 
 void MapPointSource::reset() {
   map_.resize(3, 0);
@@ -69,7 +72,8 @@ void MapPointSource::setMapPoints(Eigen::Matrix3Xd points) {
   if (!points.allFinite()) throw InvalidInput("map point source: map points must be finite");
   map_ = std::move(points);
   for (View& v : views_) {
-    Eigen::Matrix3Xd assigned = visibleMapPoints(map_, v.intrinsics, v.pose, v.depth.get(), config_);
+    Eigen::Matrix3Xd assigned =
+        visibleMapPoints(map_, v.intrinsics, v.pose, v.depth.get(), config_);
     if (assigned.cols() == v.assigned.cols() && assigned == v.assigned) continue;
     v.assigned = std::move(assigned);
     v.pending = true;

@@ -10,7 +10,8 @@ void PointSourceParams::validate() const {
   map.validate();
 }
 
-AutoPointSource::AutoPointSource(const DepthSamplerConfig& depth, const FeaturePointSourceConfig& features)
+AutoPointSource::AutoPointSource(const DepthSamplerConfig& depth,
+                                 const FeaturePointSourceConfig& features)
     : depth_(depth), features_(features) {}
 
 PointSourceResult AutoPointSource::process(ViewId id, const Frame& frame) {
@@ -31,7 +32,8 @@ const std::vector<std::string>& pointSourceNames() {
   return names;
 }
 
-std::unique_ptr<PointSource> makePointSource(const std::string& name, const PointSourceParams& params) {
+std::unique_ptr<PointSource> makePointSource(const std::string& name,
+                                             const PointSourceParams& params) {
   if (name == "depth") return std::make_unique<DepthPointSource>(params.depth);
   if (name == "features") return std::make_unique<FeaturePointSource>(params.features);
   if (name == "map") return std::make_unique<MapPointSource>(params.map);

@@ -28,12 +28,14 @@ Eigen::Vector3d triangulateLinear(const std::vector<PixelObservation>& observati
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
   for (const auto& o : observations) {
     if (o.camera < 0 || static_cast<size_t>(o.camera) >= cameras.size())
-      throw InvalidArgument("triangulateLinear: observation of unknown camera " + std::to_string(o.camera));
+      throw InvalidArgument("triangulateLinear: observation of unknown camera " +
+                            std::to_string(o.camera));
     mean += cameras[static_cast<size_t>(o.camera)].centre;
   }
   mean /= static_cast<double>(observations.size());
   double spread = 0.0;
-  for (const auto& o : observations) spread += (cameras[static_cast<size_t>(o.camera)].centre - mean).norm();
+  for (const auto& o : observations)
+    spread += (cameras[static_cast<size_t>(o.camera)].centre - mean).norm();
   spread /= static_cast<double>(observations.size());
   if (!(spread > 0.0)) return nan;  // all centres equal: no baseline
 
@@ -52,7 +54,7 @@ Eigen::Vector3d triangulateLinear(const std::vector<PixelObservation>& observati
     ata += r0.transpose() * r0 + r1.transpose() * r1;
   }
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d> eigen(ata);
-  const Eigen::Vector4d h = eigen.eigenvectors().col(0);  // eigenvalues ascending
+  const Eigen::Vector4d h = eigen.eigenvectors().col(0);            // eigenvalues ascending
   if (!(std::abs(h.w()) > 1e-12 * h.head<3>().norm())) return nan;  // point at infinity
   return mean + spread * h.head<3>() / h.w();
 }
@@ -111,7 +113,8 @@ void refinePoints(std::vector<Eigen::Vector3d>& points,
   for (const auto& list : observations)
     for (const auto& o : list)
       if (o.camera < 0 || static_cast<size_t>(o.camera) >= cameras.size())
-        throw InvalidArgument("refinePoints: observation of unknown camera " + std::to_string(o.camera));
+        throw InvalidArgument("refinePoints: observation of unknown camera " +
+                              std::to_string(o.camera));
   // Ceres' TinySolver (Levenberg-Marquardt for small dense problems): each point is independent
   // (cameras fixed), and one general ceres::Problem per point, or one for all, spends 20-60x
   // longer in set-up than in solving 3 unknowns.
@@ -144,9 +147,11 @@ double maxParallaxDeg(const Eigen::Vector3d& x, const std::vector<PixelObservati
                       const std::vector<TriangulationCamera>& cameras) {
   double best = 0.0;
   for (size_t a = 0; a < observations.size(); ++a) {
-    const Eigen::Vector3d ra = (cameras.at(static_cast<size_t>(observations[a].camera)).centre - x).normalized();
+    const Eigen::Vector3d ra =
+        (cameras.at(static_cast<size_t>(observations[a].camera)).centre - x).normalized();
     for (size_t b = a + 1; b < observations.size(); ++b) {
-      const Eigen::Vector3d rb = (cameras.at(static_cast<size_t>(observations[b].camera)).centre - x).normalized();
+      const Eigen::Vector3d rb =
+          (cameras.at(static_cast<size_t>(observations[b].camera)).centre - x).normalized();
       best = std::max(best, std::atan2(ra.cross(rb).norm(), ra.dot(rb)));
     }
   }

@@ -73,12 +73,15 @@ TEST(FeaturePointSource, TriangulatedPointsLieOnTheWalls) {
     const Eigen::Matrix3Xd points = source.pointsOf(q);
     EXPECT_GT(points.cols(), 150) << "keyframe " << q;
     total += static_cast<size_t>(points.cols());
-    for (Eigen::Index c = 0; c < points.cols(); ++c) distances.push_back(room().distanceToSurface(points.col(c)));
+    for (Eigen::Index c = 0; c < points.cols(); ++c)
+      distances.push_back(room().distanceToSurface(points.col(c)));
   }
   ASSERT_GT(total, 1500u);
   const double median = percentile(distances, 0.5), p95 = percentile(distances, 0.95);
-  std::printf("[          ] %zu point memberships, %zu tracks: distance to the walls median %.4f m, 95%% %.4f m, max %.3f m\n",
-              total, source.validTracks(), median, p95, percentile(distances, 1.0));
+  std::printf(
+      "[          ] %zu point memberships, %zu tracks: distance to the walls median %.4f m, 95%% "
+      "%.4f m, max %.3f m\n",
+      total, source.validTracks(), median, p95, percentile(distances, 1.0));
   EXPECT_LT(median, 0.02);
   EXPECT_LT(p95, 0.08);
 }
@@ -92,7 +95,8 @@ TEST(FeaturePointSource, SiftAlsoTriangulatesOnTheWalls) {
   for (int q = 0; q < 4; ++q) {
     const Eigen::Matrix3Xd points = source.pointsOf(q);
     EXPECT_GT(points.cols(), 100) << "keyframe " << q;
-    for (Eigen::Index c = 0; c < points.cols(); ++c) distances.push_back(room().distanceToSurface(points.col(c)));
+    for (Eigen::Index c = 0; c < points.cols(); ++c)
+      distances.push_back(room().distanceToSurface(points.col(c)));
   }
   ASSERT_FALSE(distances.empty());
   EXPECT_LT(percentile(distances, 0.5), 0.02);
@@ -136,7 +140,8 @@ TEST(Triangulation, CeresRefinementLowersReprojectionErrorFromTheLinearStart) {
   std::vector<TriangulationCamera> cams;
   for (int c = 0; c < 4; ++c) {
     const Eigen::Vector3d eye(0.6 * c - 0.9, 0.1 * c, -1.0 - 2.0 * c);
-    cams.push_back(TriangulationCamera::from(vgaIntrinsics(), lookAt(eye, Eigen::Vector3d(0, 0, 3))));
+    cams.push_back(
+        TriangulationCamera::from(vgaIntrinsics(), lookAt(eye, Eigen::Vector3d(0, 0, 3))));
   }
   std::vector<Eigen::Vector3d> truth, linear;
   std::vector<std::vector<PixelObservation>> obs;
@@ -144,7 +149,8 @@ TEST(Triangulation, CeresRefinementLowersReprojectionErrorFromTheLinearStart) {
     const Eigen::Vector3d x(uniform(rng), 0.6 * uniform(rng), 3.0 + 0.5 * uniform(rng));
     std::vector<PixelObservation> o;
     for (int c = 0; c < 2 + i % 3; ++c)
-      o.push_back({c, cams[static_cast<size_t>(c)].intrinsics.project(cams[static_cast<size_t>(c)].toCamera(x)) +
+      o.push_back({c, cams[static_cast<size_t>(c)].intrinsics.project(
+                          cams[static_cast<size_t>(c)].toCamera(x)) +
                           Eigen::Vector2d(noise(rng), noise(rng))});
     truth.push_back(x);
     linear.push_back(triangulateLinear(o, cams));
@@ -158,7 +164,8 @@ TEST(Triangulation, CeresRefinementLowersReprojectionErrorFromTheLinearStart) {
   for (size_t i = 0; i < truth.size(); ++i) {
     ASSERT_TRUE(linear[i].allFinite());
     ASSERT_LT((linear[i] - truth[i]).norm(), 0.5);  // the linear start is sane
-    const double cb = huberCost(linear[i], obs[i], cams, 1.0), ca = huberCost(refined[i], obs[i], cams, 1.0);
+    const double cb = huberCost(linear[i], obs[i], cams, 1.0),
+                 ca = huberCost(refined[i], obs[i], cams, 1.0);
     EXPECT_LE(ca, cb + 1e-9) << "point " << i;
     strictly_lower += ca < cb - 1e-6 ? 1 : 0;
     for (const auto& o : obs[i]) {
@@ -176,9 +183,10 @@ TEST(Triangulation, CeresRefinementLowersReprojectionErrorFromTheLinearStart) {
     Eigen::Vector3d x = linear[i];
     ceres::Problem problem;
     for (const auto& o : obs[i])
-      problem.AddResidualBlock(new ceres::AutoDiffCostFunction<HuberReference, 2, 3>(
-                                   new HuberReference(cams[static_cast<size_t>(o.camera)], o.pixel)),
-                               new ceres::HuberLoss(1.0), x.data());
+      problem.AddResidualBlock(
+          new ceres::AutoDiffCostFunction<HuberReference, 2, 3>(
+              new HuberReference(cams[static_cast<size_t>(o.camera)], o.pixel)),
+          new ceres::HuberLoss(1.0), x.data());
     ceres::Solver::Options options;
     options.linear_solver_type = ceres::DENSE_QR;
     options.logging_type = ceres::SILENT;
@@ -186,13 +194,15 @@ TEST(Triangulation, CeresRefinementLowersReprojectionErrorFromTheLinearStart) {
     options.max_num_iterations = 100;
     ceres::Solver::Summary summary;
     ceres::Solve(options, &problem, &summary);
-    EXPECT_NEAR(huberCost(refined[i], obs[i], cams, 1.0), huberCost(x, obs[i], cams, 1.0), 1e-6) << "point " << i;
+    EXPECT_NEAR(huberCost(refined[i], obs[i], cams, 1.0), huberCost(x, obs[i], cams, 1.0), 1e-6)
+        << "point " << i;
     EXPECT_LT((refined[i] - x).norm(), 5e-4) << "point " << i;  // a flat minimum 3-10 m away
   }
 }
 
 TEST(Triangulation, RejectsBadInput) {
-  std::vector<TriangulationCamera> cams(2, TriangulationCamera::from(vgaIntrinsics(), CameraPose{}));
+  std::vector<TriangulationCamera> cams(2,
+                                        TriangulationCamera::from(vgaIntrinsics(), CameraPose{}));
   // Two observations from one centre: no baseline, no point.
   EXPECT_FALSE(triangulateLinear({{0, {300, 200}}, {1, {310, 200}}}, cams).allFinite());
   EXPECT_THROW(triangulateLinear({{0, {300, 200}}, {5, {310, 200}}}, cams), InvalidArgument);
@@ -210,7 +220,8 @@ TEST(FeaturePointSource, SampsonDistanceMeasuresEpipolarError) {
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   for (int i = 0; i < 50; ++i) {
     const Eigen::Vector3d x(u(rng), 0.7 * u(rng), 4.0 + u(rng));
-    const Eigen::Vector2d pa = a.intrinsics.project(a.toCamera(x)), pb = b.intrinsics.project(b.toCamera(x));
+    const Eigen::Vector2d pa = a.intrinsics.project(a.toCamera(x)),
+                          pb = b.intrinsics.project(b.toCamera(x));
     EXPECT_LT(FeaturePointSource::sampsonDistance(f, pa, pb), 1e-6);
     // 3 px across the epipolar line in b: the first-order distance shares it between the images.
     const Eigen::Vector3d line = f * pa.homogeneous();
@@ -234,7 +245,8 @@ TEST(FeaturePointSource, LaterKeyframesUpdateExactlyTheChangedEarlierRows) {
   const int n = 7;
   for (int q = 0; q < n; ++q) {
     std::vector<Eigen::Matrix3Xd> before;
-    for (size_t i = 0; i < selector.matrix().size(); ++i) before.push_back(selector.matrix().keyframe(static_cast<ViewId>(i)).points);
+    for (size_t i = 0; i < selector.matrix().size(); ++i)
+      before.push_back(selector.matrix().keyframe(static_cast<ViewId>(i)).points);
     const FrameResult r = selector.addFrame(roomFrame(q));
     ASSERT_EQ(r.outcome, FrameOutcome::kKeyframe);
     if (q == 0) {
@@ -250,7 +262,8 @@ TEST(FeaturePointSource, LaterKeyframesUpdateExactlyTheChangedEarlierRows) {
     for (ViewId i = 0; i < q; ++i) {
       const Eigen::Matrix3Xd& now = selector.matrix().keyframe(i).points;
       const bool reported = std::count(r.updated_rows.begin(), r.updated_rows.end(), i) == 1;
-      const bool changed = now.cols() != before[static_cast<size_t>(i)].cols() || now != before[static_cast<size_t>(i)];
+      const bool changed = now.cols() != before[static_cast<size_t>(i)].cols() ||
+                           now != before[static_cast<size_t>(i)];
       EXPECT_EQ(reported, changed) << "keyframe " << q << ", row " << i;
       // The matrix holds exactly the source's current point set of every keyframe.
       const Eigen::Matrix3Xd current = source.pointsOf(i);
@@ -268,7 +281,8 @@ TEST(FeaturePointSource, LaterKeyframesUpdateExactlyTheChangedEarlierRows) {
   for (ViewId i = 0; i < n; ++i) {
     for (ViewId j = 0; j < n; ++j) {
       if (i == j) continue;
-      EXPECT_EQ(m.at(i, j), computeErrorResistance(m.keyframe(i), m.keyframe(j), selector.config().matrix))
+      EXPECT_EQ(m.at(i, j),
+                computeErrorResistance(m.keyframe(i), m.keyframe(j), selector.config().matrix))
           << i << " -> " << j;
     }
   }
@@ -321,7 +335,8 @@ TEST(FeaturePointSource, BadParametersAndInputsThrow) {
   try {
     makePointSource("lidar");
   } catch (const InvalidArgument& e) {
-    EXPECT_NE(std::string(e.what()).find("depth, features, map, auto"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("depth, features, map, auto"), std::string::npos)
+        << e.what();
   }
 
   FeaturePointSource source;
@@ -364,7 +379,8 @@ TEST(PointSourceFactory, NamesAndAuto) {
 }
 
 TEST(FeaturePointSourceRealData, DtuScan24EveryViewGetsNextViews) {
-  const std::filesystem::path root = std::filesystem::path(VIEW_SELECTION_SOURCE_DIR) / ".." / "shared" / "data" / "dtu-scan24";
+  const std::filesystem::path root =
+      std::filesystem::path(VIEW_SELECTION_SOURCE_DIR) / ".." / "shared" / "data" / "dtu-scan24";
   if (!std::filesystem::exists(root / "rgb.txt")) GTEST_SKIP() << root << " not present";
   const TumDataset ds = loadTumDataset(root.string());
   ASSERT_FALSE(ds.has_depth);
@@ -378,7 +394,8 @@ TEST(FeaturePointSourceRealData, DtuScan24EveryViewGetsNextViews) {
     EXPECT_GT(selector.matrix().keyframe(i).points.cols(), 50) << "view " << i;
     points += static_cast<size_t>(selector.matrix().keyframe(i).points.cols());
   }
-  std::printf("[          ] dtu-scan24: %zu points over 49 views, %zu pairs\n", points, s.pairs.size());
+  std::printf("[          ] dtu-scan24: %zu points over 49 views, %zu pairs\n", points,
+              s.pairs.size());
   EXPECT_TRUE(s.isolated.empty());
 }
 

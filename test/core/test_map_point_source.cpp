@@ -27,14 +27,14 @@ TEST(MapPointSource, VisibilityOnHandBuiltCases) {
   MapPointSourceConfig config;
   config.max_depth = 10.0;
   const Eigen::Matrix3Xd points = columns({
-      {0.0, 0.0, 2.0},     // 0: centre, visible
-      {0.0, 0.0, -2.0},    // 1: behind
-      {10.0, 0.0, 2.0},    // 2: projects far right of the image
-      {0.0, 0.0, 20.0},    // 3: beyond max_depth
-      {1.2, 0.9, 2.0},     // 4: u = 525 * 0.6 + 319.5 = 634.5, v = 475.75: inside
-      {1.3, 0.0, 2.0},     // 5: u = 660.75: outside
-      {0.1, 0.0, 5.0},     // 6: behind the 2 m wall of the depth image below
-      {-0.1, 0.1, 2.05},   // 7: on that wall within tolerance
+      {0.0, 0.0, 2.0},    // 0: centre, visible
+      {0.0, 0.0, -2.0},   // 1: behind
+      {10.0, 0.0, 2.0},   // 2: projects far right of the image
+      {0.0, 0.0, 20.0},   // 3: beyond max_depth
+      {1.2, 0.9, 2.0},    // 4: u = 525 * 0.6 + 319.5 = 634.5, v = 475.75: inside
+      {1.3, 0.0, 2.0},    // 5: u = 660.75: outside
+      {0.1, 0.0, 5.0},    // 6: behind the 2 m wall of the depth image below
+      {-0.1, 0.1, 2.05},  // 7: on that wall within tolerance
   });
   Eigen::Matrix3Xd v = visibleMapPoints(points, k, identity, nullptr, config);
   ASSERT_EQ(v.cols(), 4);  // 0, 4, 6, 7; not 1, 2, 3, 5
@@ -71,7 +71,8 @@ TEST(MapPointSource, ThinsEvenlyToMaxPoints) {
   for (int c = 0; c < 100; ++c) points.col(c) = Eigen::Vector3d(0.01 * c - 0.5, 0.0, 2.0);
   MapPointSourceConfig config;
   config.max_points = 10;
-  const Eigen::Matrix3Xd v = visibleMapPoints(points, vgaIntrinsics(), CameraPose{}, nullptr, config);
+  const Eigen::Matrix3Xd v =
+      visibleMapPoints(points, vgaIntrinsics(), CameraPose{}, nullptr, config);
   ASSERT_EQ(v.cols(), 10);
   for (int q = 0; q < 10; ++q) EXPECT_EQ(v.col(q), points.col(10 * q));
 }
@@ -95,7 +96,8 @@ Frame frameAt(double stamp, const CameraPose& pose) {
 Eigen::Matrix3Xd wall(double z, int n = 21) {
   Eigen::Matrix3Xd m(3, n * n);
   for (int a = 0; a < n; ++a)
-    for (int b = 0; b < n; ++b) m.col(a * n + b) = Eigen::Vector3d(-1.0 + 2.0 * a / (n - 1), -1.0 + 2.0 * b / (n - 1), z);
+    for (int b = 0; b < n; ++b)
+      m.col(a * n + b) = Eigen::Vector3d(-1.0 + 2.0 * a / (n - 1), -1.0 + 2.0 * b / (n - 1), z);
   return m;
 }
 
@@ -131,7 +133,8 @@ TEST(MapPointSource, MapChangesUpdateOnlyAffectedRows) {
   for (ViewId i = 0; i < 4; ++i)
     for (ViewId j = 0; j < 4; ++j)
       if (i != j) {
-        EXPECT_EQ(m.at(i, j), computeErrorResistance(m.keyframe(i), m.keyframe(j), selector.config().matrix));
+        EXPECT_EQ(m.at(i, j),
+                  computeErrorResistance(m.keyframe(i), m.keyframe(j), selector.config().matrix));
       }
 }
 

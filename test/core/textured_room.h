@@ -54,7 +54,8 @@ class TexturedRoom {
   }
 
   /// Grey image rendered with 2 x 2 samples per pixel; `depth` (CV_32FC1 z-depth) if not null.
-  cv::Mat render(const PinholeIntrinsics& k, const CameraPose& pose, cv::Mat* depth = nullptr) const {
+  cv::Mat render(const PinholeIntrinsics& k, const CameraPose& pose,
+                 cv::Mat* depth = nullptr) const {
     cv::Mat image(k.height, k.width, CV_8UC1);
     if (depth) depth->create(k.height, k.width, CV_32FC1);
     const Eigen::Matrix3d r = pose.rotation();

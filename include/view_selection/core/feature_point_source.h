@@ -42,10 +42,10 @@ struct FeatureStats {
   double triangulate_seconds = 0.0;  ///< tracks, DLT, Ceres, acceptance, point sets
   double refine_seconds = 0.0;       ///< the Ceres part of triangulate_seconds
   size_t features = 0;
-  size_t candidates = 0;             ///< earlier keyframes matched against
-  size_t matches = 0;                ///< after ratio and epipolar checks
-  size_t points = 0;                 ///< of the new keyframe
-  size_t keyframes = 0;              ///< in totals: keyframes summed over
+  size_t candidates = 0;  ///< earlier keyframes matched against
+  size_t matches = 0;     ///< after ratio and epipolar checks
+  size_t points = 0;      ///< of the new keyframe
+  size_t keyframes = 0;   ///< in totals: keyframes summed over
 };
 
 class FeaturePointSource : public PointSource {
@@ -73,7 +73,8 @@ class FeaturePointSource : public PointSource {
                                const std::vector<double>& depths);
   /// Sampson distance [px] of a correspondence (pixel in a, pixel in b) under the fundamental
   /// matrix of the two known cameras.
-  static Eigen::Matrix3d fundamental(const TriangulationCamera& from, const TriangulationCamera& to);
+  static Eigen::Matrix3d fundamental(const TriangulationCamera& from,
+                                     const TriangulationCamera& to);
   static double sampsonDistance(const Eigen::Matrix3d& f, const Eigen::Vector2d& from,
                                 const Eigen::Vector2d& to);
 
@@ -93,9 +94,9 @@ class FeaturePointSource : public PointSource {
     StripIndex index;
     std::vector<cv::KeyPoint> keypoints;
     cv::Mat descriptors;
-    std::vector<int> track_of;   ///< per feature, -1 when in no track
-    double median_depth = 0.0;   ///< of its points, 0 while it has none
-    Eigen::Matrix3Xd emitted;    ///< the point set last reported for it
+    std::vector<int> track_of;  ///< per feature, -1 when in no track
+    double median_depth = 0.0;  ///< of its points, 0 while it has none
+    Eigen::Matrix3Xd emitted;   ///< the point set last reported for it
   };
   struct Track {
     std::vector<std::pair<int, int>> obs;  ///< (view index, feature)
@@ -120,8 +121,8 @@ class FeaturePointSource : public PointSource {
   FeaturePointSourceConfig config_;
   cv::Ptr<cv::Feature2D> detector_;
   int norm_ = cv::NORM_HAMMING;
-  std::vector<View> views_;                  // arrival order
-  std::vector<TriangulationCamera> cameras_; // same index as views_
+  std::vector<View> views_;                   // arrival order
+  std::vector<TriangulationCamera> cameras_;  // same index as views_
   std::map<ViewId, int> index_of_;
   std::vector<Track> tracks_;
   std::vector<ViewId> last_candidates_;

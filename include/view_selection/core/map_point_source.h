@@ -10,12 +10,13 @@
 namespace view_selection {
 
 struct MapPointSourceConfig {
-  double max_depth = 0.0;            ///< points farther along the optical axis are not assigned; <= 0: no limit [scene units]
-  int max_points = 2000;             ///< per keyframe, evenly thinned by index beyond this; 0: all
-  bool occlusion_test = true;        ///< drop points the keyframe's depth (when it has one) contradicts
+  /// Points farther along the optical axis are not assigned; <= 0: no limit [scene units].
+  double max_depth = 0.0;
+  int max_points = 2000;       ///< per keyframe, evenly thinned by index beyond this; 0: all
+  bool occlusion_test = true;  ///< drop points the keyframe's depth (when it has one) contradicts
   double occlusion_abs_tolerance = 0.05;  ///< visible when |z - D(p)| <= max(abs, rel * z) [m]
   double occlusion_rel_tolerance = 0.03;
-  int depth_map_cell = 8;            ///< occlusion depth map: one value per n x n pixels
+  int depth_map_cell = 8;  ///< occlusion depth map: one value per n x n pixels
 
   /// Throws InvalidArgument naming the first field out of range.
   void validate() const;
@@ -25,9 +26,9 @@ struct MapPointSourceConfig {
 /// The points of `points` that a camera sees: in front (z > 0, and z <= max_depth when set),
 /// projecting inside the image, and (with a depth map) not contradicted by it. Then thinned to
 /// config.max_points. Column order follows `points`.
-Eigen::Matrix3Xd visibleMapPoints(const Eigen::Matrix3Xd& points, const PinholeIntrinsics& intrinsics,
-                                  const CameraPose& pose, const DepthMap* depth,
-                                  const MapPointSourceConfig& config);
+Eigen::Matrix3Xd visibleMapPoints(const Eigen::Matrix3Xd& points,
+                                  const PinholeIntrinsics& intrinsics, const CameraPose& pose,
+                                  const DepthMap* depth, const MapPointSourceConfig& config);
 
 class MapPointSource : public PointSource {
  public:

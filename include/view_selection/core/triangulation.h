@@ -14,11 +14,13 @@ namespace view_selection {
 /// A camera with its world-to-camera transform cached.
 struct TriangulationCamera {
   PinholeIntrinsics intrinsics;
-  Eigen::Vector3d centre = Eigen::Vector3d::Zero();                  ///< O, world
-  Eigen::Matrix3d world_to_camera = Eigen::Matrix3d::Identity();     ///< R^T
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();               ///< O, world
+  Eigen::Matrix3d world_to_camera = Eigen::Matrix3d::Identity();  ///< R^T
 
   static TriangulationCamera from(const PinholeIntrinsics& intrinsics, const CameraPose& pose);
-  Eigen::Vector3d toCamera(const Eigen::Vector3d& x) const { return world_to_camera * (x - centre); }
+  Eigen::Vector3d toCamera(const Eigen::Vector3d& x) const {
+    return world_to_camera * (x - centre);
+  }
 };
 
 /// One pixel observation of a point in camera `camera` (an index into the camera list).
@@ -34,8 +36,8 @@ Eigen::Vector3d triangulateLinear(const std::vector<PixelObservation>& observati
                                   const std::vector<TriangulationCamera>& cameras);
 
 struct RefineOptions {
-  double huber_px = 1.0;       ///< Huber loss scale [px]: quadratic below, linear above
-  int max_iterations = 20;     ///< Levenberg-Marquardt iterations per point
+  double huber_px = 1.0;    ///< Huber loss scale [px]: quadratic below, linear above
+  int max_iterations = 20;  ///< Levenberg-Marquardt iterations per point
 };
 
 /// Minimises sum Huber(|project(X) - pixel|^2) over each point's observations, cameras fixed,
