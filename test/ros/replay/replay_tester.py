@@ -30,9 +30,12 @@ PKG = 'view_selection'
 def find_tool(name):
     """Path of an executable of this package as rosrun finds it (devel space or install), or None."""
     try:
-        return roslib.packages.find_node(PKG, name)
-    except Exception:  # several candidates or a broken workspace: report as not found
+        found = roslib.packages.find_node(PKG, name)  # a list in Noetic, a path in older releases
+    except Exception:  # a broken workspace: report as not found
         return None
+    if isinstance(found, (list, tuple)):
+        found = found[0] if found else None
+    return found or None
 
 
 def run(cmd, timeout, what):
