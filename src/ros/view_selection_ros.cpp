@@ -330,6 +330,9 @@ void ViewSelectionRos::process(const PendingFrame& frame) {
   core.image_name = keyframeImageName(core.stamp);
   core.intrinsics = intrinsics;
   core.pose = *pose;
+  // Normalised here as the TUM reader normalises groundtruth.txt, so that for the same frames the
+  // point source sees bit-identical rotations and the matrix equals select_views' exactly.
+  core.pose.orientation.normalize();
   // As select_views does: only frames the policy will take get their depth converted.
   const bool wanted = selector_->wantsFrame(*pose);
   try {

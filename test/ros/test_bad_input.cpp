@@ -1,0 +1,422 @@
+// Bad-input rostest: good frames interleaved with every kind of wrong input. The node must drop
+// each bad frame for the right reason, stay up, keep answering, and end with exactly the good
+// frames as keyframes, with the same matrix and selection as the core computes on them.
+//
+// Good frames come from ../shared/data/redkitchen-0-499 (relative to the source folder) when it
+// is there, otherwise from a synthetic tilted wall seen by a camera moving sideways.
+#include "view_selection/ros/messages.h"  // first: see there why
+
+#include "view_selection/core/depth_sampler.h"
+#include "view_selection/core/tum_dataset.h"
+#include "view_selection/core/tum_frames.h"
+#include "view_selection/core/view_selector.h"
+#include "view_selection/ros/conversions.h"
+
+#include <cv_bridge/cv_bridge.h>
+#include <geometry_msgs/PoseStamped.h>
+#include <gtest/gtest.h>
+#include <ros/ros.h>
+#include <sensor_msgs/image_encodings.h>
+#include <std_srvs/Trigger.h>
+#include <tf2_msgs/TFMessage.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <mutex>
+#include <string>
+#include <vector>
+
+namespace fs = std::filesystem;
+using namespace view_selection;
+
+namespace {
+
+struct GoodFrame {
+  ros::Time stamp;
+  PinholeIntrinsics intrinsics;
+  CameraPose pose;
+  cv::Mat image;    // BGR
+  cv::Mat depth;    // as published: CV_32FC1 metres or CV_16UC1 millimetres
+};
+
+std::vector<GoodFrame> realFrames(const std::string& folder, size_t count, size_t step) {
+  const TumDataset dataset = loadTumDataset(folder);
+  std::vector<GoodFrame> frames;
+  for (size_t q = 0; q < count && q * step < dataset.frames.size(); ++q) {
+    const Frame f = loadTumFrame(dataset, dataset.frames[q * step], {true, true});
+    GoodFrame g;
+    g.intrinsics = f.intrinsics;
+    g.pose = f.pose;
+    g.image = f.image;
+    g.depth = f.depth_m;
+    frames.push_back(g);
+  }
+  return frames;
+}
+
+// A wall z = 2 + 0.3 x (world) with a bump, seen by a camera moving along x, looking along +z.
+std::vector<GoodFrame> syntheticFrames(size_t count) {
+  std::vector<GoodFrame> frames;
+  PinholeIntrinsics k;
+  k.fx = k.fy = 150.0;
+  k.cx = 80.0;
+  k.cy = 60.0;
+  k.width = 160;
+  k.height = 120;
+  for (size_t i = 0; i < count; ++i) {
+    GoodFrame g;
+    g.intrinsics = k;
+    g.pose.position = {0.08 * static_cast<double>(i), 0.02 * std::sin(static_cast<double>(i)), 0.0};
+    g.pose.orientation = Eigen::Quaterniond(Eigen::AngleAxisd(0.02 * static_cast<double>(i), Eigen::Vector3d::UnitY()));
+    g.depth = cv::Mat(k.height, k.width, CV_32FC1);
+    g.image = cv::Mat(k.height, k.width, CV_8UC3, cv::Scalar(90, 120, 150));
+    const Eigen::Matrix3d R = g.pose.rotation();
+    for (int v = 0; v < k.height; ++v)
+      for (int u = 0; u < k.width; ++u) {
+        const Eigen::Vector3d ray_cam = k.backProject({u + 0.5, v + 0.5});
+        const Eigen::Vector3d d = R * ray_cam;
+        const Eigen::Vector3d& o = g.pose.position;
+        // o.z + t d.z = 2 + 0.3 (o.x + t d.x) + 0.1 sin(3 (o.y + t d.y)) ~ solve the plane part.
+        const double t = (2.0 + 0.3 * o.x() - o.z()) / (d.z() - 0.3 * d.x());
+        g.depth.at<float>(v, u) = static_cast<float>(t * (1.0 + 0.02 * std::sin(0.1 * u)));
+      }
+    frames.push_back(g);
+  }
+  return frames;
+}
+
+class BadInputTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    ros::NodeHandle pnh("~");
+    pnh.param<std::string>("node", node_, "/view_selection");
+    pnh.param<std::string>("pose_source", pose_source_, "tf");
+    pnh.param<int>("k", k_, 5);
+    image_pub_ = nh_.advertise<sensor_msgs::Image>("camera/image", 50);
+    info_pub_ = nh_.advertise<sensor_msgs::CameraInfo>("camera/camera_info", 50);
+    depth_pub_ = nh_.advertise<sensor_msgs::Image>("camera/depth", 50);
+    if (pose_source_ == "tf")
+      tf_pub_ = nh_.advertise<tf2_msgs::TFMessage>("/tf", 50);
+    else
+      pose_pub_ = nh_.advertise<geometry_msgs::PoseStamped>("camera/pose", 50);
+    stats_sub_ = nh_.subscribe(node_ + "/statistics", 10, &BadInputTest::onStatistics, this);
+  }
+
+  void onStatistics(const view_selection::InputStatistics::ConstPtr& msg) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stats_ = msg;
+  }
+  view_selection::InputStatistics::ConstPtr stats() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return stats_;
+  }
+  uint64_t handled() {
+    const auto s = stats();
+    return s ? s->frames_offered + s->frames_dropped : 0;
+  }
+
+  bool waitForSubscribers() {
+    const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(20.0);
+    while (ros::WallTime::now() < deadline) {
+      const bool poses = pose_source_ == "tf" ? tf_pub_.getNumSubscribers() > 0 : pose_pub_.getNumSubscribers() > 0;
+      if (image_pub_.getNumSubscribers() > 0 && info_pub_.getNumSubscribers() > 0 &&
+          depth_pub_.getNumSubscribers() > 0 && poses && stats())
+        return true;
+      ros::WallDuration(0.05).sleep();
+    }
+    return false;
+  }
+
+  /// Publishes one frame and waits (bounded) until the node has offered or dropped it.
+  struct Send {
+    ros::Time stamp;
+    sensor_msgs::ImagePtr image, depth;
+    sensor_msgs::CameraInfo info;
+    std::string camera_frame;       // "" = no pose published at all
+    CameraPose pose;
+    std::string pose_frame = "world";
+  };
+  Send makeSend(const GoodFrame& g, const ros::Time& stamp, const std::string& camera) {
+    Send s;
+    s.stamp = stamp;
+    std_msgs::Header h;
+    h.stamp = stamp;
+    h.frame_id = "/" + camera;  // leading '/' as in old bags: the node normalises it
+    s.image = cv_bridge::CvImage(h, sensor_msgs::image_encodings::BGR8, g.image).toImageMsg();
+    s.depth = cv_bridge::CvImage(h, g.depth.type() == CV_16UC1 ? sensor_msgs::image_encodings::TYPE_16UC1
+                                                                : sensor_msgs::image_encodings::TYPE_32FC1,
+                                 g.depth)
+                  .toImageMsg();
+    s.info.header = h;
+    s.info.width = static_cast<uint32_t>(g.intrinsics.width);
+    s.info.height = static_cast<uint32_t>(g.intrinsics.height);
+    s.info.K = {g.intrinsics.fx, 0.0, g.intrinsics.cx, 0.0, g.intrinsics.fy, g.intrinsics.cy, 0.0, 0.0, 1.0};
+    s.camera_frame = camera;
+    s.pose = g.pose;
+    return s;
+  }
+  void publish(const Send& s, uint64_t expect_handled) {
+    if (!s.camera_frame.empty()) {
+      if (pose_source_ == "tf") {
+        geometry_msgs::TransformStamped t;
+        t.header.stamp = s.stamp;
+        t.header.frame_id = "world";
+        t.child_frame_id = s.camera_frame;
+        t.transform.translation.x = s.pose.position.x();
+        t.transform.translation.y = s.pose.position.y();
+        t.transform.translation.z = s.pose.position.z();
+        t.transform.rotation.w = s.pose.orientation.w();
+        t.transform.rotation.x = s.pose.orientation.x();
+        t.transform.rotation.y = s.pose.orientation.y();
+        t.transform.rotation.z = s.pose.orientation.z();
+        tf2_msgs::TFMessage m;
+        m.transforms.push_back(t);
+        tf_pub_.publish(m);
+      } else {
+        geometry_msgs::PoseStamped p;
+        p.header.stamp = s.stamp;
+        p.header.frame_id = s.pose_frame;
+        p.pose = ros_node::poseToMsg(s.pose);
+        pose_pub_.publish(p);
+      }
+    }
+    depth_pub_.publish(s.depth);
+    info_pub_.publish(s.info);
+    image_pub_.publish(s.image);
+    const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(10.0);
+    while (handled() < expect_handled && ros::WallTime::now() < deadline) ros::WallDuration(0.01).sleep();
+    ASSERT_GE(handled(), expect_handled) << "the node did not handle the frame at " << s.stamp;
+  }
+
+  ros::NodeHandle nh_;
+  std::string node_, pose_source_;
+  int k_ = 5;
+  ros::Publisher image_pub_, info_pub_, depth_pub_, tf_pub_, pose_pub_;
+  ros::Subscriber stats_sub_;
+  std::mutex mutex_;
+  view_selection::InputStatistics::ConstPtr stats_;
+};
+
+TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames) {
+  const fs::path data = fs::path(VIEW_SELECTION_SOURCE_DIR).parent_path() / "shared" / "data" / "redkitchen-0-499";
+  bool synthetic = false;  // ~synthetic forces the built-in frames even when the data is there
+  ros::NodeHandle("~").param("synthetic", synthetic, false);
+  std::vector<GoodFrame> good =
+      !synthetic && fs::exists(data / "rgb.txt") ? realFrames(data.string(), 6, 15) : syntheticFrames(6);
+  ASSERT_EQ(good.size(), 6u);
+  // One good frame in 16UC1 millimetres, the other path the node reads.
+  {
+    cv::Mat mm(good[3].depth.size(), CV_16UC1);
+    for (int v = 0; v < mm.rows; ++v)
+      for (int u = 0; u < mm.cols; ++u)
+        mm.at<uint16_t>(v, u) = static_cast<uint16_t>(std::lround(good[3].depth.at<float>(v, u) * 1000.0f));
+    good[3].depth = mm;
+  }
+  ASSERT_TRUE(waitForSubscribers()) << "the node under test did not subscribe within 20 s";
+
+  const double t0 = 1000.0;
+  double t = t0;
+  int camera = 0;
+  uint64_t sent = 0;
+  std::vector<GoodFrame> expected;
+  std::vector<ros::Time> expected_stamps;
+  std::map<std::string, uint64_t> expected_drops;
+  auto next = [&](const GoodFrame& g) {
+    t += 0.1;
+    return makeSend(g, ros::Time(t), "cam_" + std::to_string(camera++));
+  };
+  auto sendGood = [&](size_t i) {
+    Send s = next(good[i]);
+    expected.push_back(good[i]);
+    expected_stamps.push_back(s.stamp);
+    publish(s, ++sent);
+  };
+  auto sendBad = [&](Send s, const std::string& reason) {
+    ++expected_drops[reason];
+    publish(s, ++sent);
+  };
+
+  sendGood(0);
+  {  // a depth-like encoding on the image topic
+    Send s = next(good[1]);
+    s.image->encoding = "32FC1";
+    s.image->step = s.image->width * 4;
+    s.image->data.resize(s.image->step * s.image->height);
+    sendBad(s, "bad_image");
+  }
+  {  // an encoding nobody knows
+    Send s = next(good[1]);
+    s.image->encoding = "not_an_encoding";
+    sendBad(s, "bad_image");
+  }
+  sendGood(1);
+  {  // an empty image
+    Send s = next(good[2]);
+    s.image->width = s.image->height = 0;
+    s.image->step = 0;
+    s.image->data.clear();
+    sendBad(s, "bad_image");
+  }
+  {  // a truncated image
+    Send s = next(good[2]);
+    s.image->data.resize(s.image->data.size() / 2);
+    sendBad(s, "bad_image");
+  }
+  {  // colour on the depth topic
+    Send s = next(good[2]);
+    s.depth = cv_bridge::CvImage(s.image->header, sensor_msgs::image_encodings::BGR8, good[2].image).toImageMsg();
+    sendBad(s, "bad_depth");
+  }
+  sendGood(2);
+  {  // camera_info with zero focal length
+    Send s = next(good[3]);
+    s.info.K[0] = 0.0;
+    s.info.K[4] = 0.0;
+    sendBad(s, "bad_camera_info");
+  }
+  {  // a NaN pose (tf2 refuses it, so under tf the frame finds no pose)
+    Send s = next(good[3]);
+    s.pose.position.x() = std::numeric_limits<double>::quiet_NaN();
+    sendBad(s, pose_source_ == "tf" ? "no_pose" : "bad_pose");
+  }
+  {  // an unknown frame: the image's frame has no transform / the pose is in another frame
+    Send s = next(good[3]);
+    if (pose_source_ == "tf")
+      s.camera_frame.clear();  // nothing is published for it
+    else
+      s.pose_frame = "mars";
+    sendBad(s, pose_source_ == "tf" ? "no_pose" : "bad_pose");
+  }
+  sendGood(3);
+  {  // the same stamp again
+    Send s = makeSend(good[4], expected_stamps.back(), "cam_" + std::to_string(camera++));
+    sendBad(s, "duplicate_stamp");
+  }
+  {  // a stamp before the last good one
+    Send s = makeSend(good[4], expected_stamps[1] + ros::Duration(0.05), "cam_" + std::to_string(camera++));
+    sendBad(s, "out_of_order_stamp");
+  }
+  sendGood(4);
+  sendGood(5);
+
+  // The statistics name every reason with its count.
+  const auto s = stats();
+  ASSERT_TRUE(s);
+  std::map<std::string, uint64_t> drops;
+  for (size_t i = 0; i < s->drop_reasons.size(); ++i) drops[s->drop_reasons[i]] = s->drop_counts[i];
+  EXPECT_EQ(drops, expected_drops);
+  EXPECT_EQ(s->frames_received, sent);
+  EXPECT_EQ(s->frames_offered, expected.size());
+  EXPECT_FALSE(s->last_error.empty());
+
+  // The node still answers, from the good frames only.
+  view_selection::GetSelection srv;
+  ASSERT_TRUE(ros::service::waitForService(node_ + "/get_selection", ros::Duration(10.0)));
+  ASSERT_TRUE(ros::service::call(node_ + "/get_selection", srv));
+  ASSERT_TRUE(srv.response.success) << srv.response.message;
+  const auto& sel = srv.response.selection;
+  ASSERT_EQ(sel.keyframes.size(), expected.size());
+  for (size_t i = 0; i < expected.size(); ++i) EXPECT_EQ(sel.keyframes[i].stamp, expected_stamps[i]) << i;
+
+  // The same frames through the core directly: the node's selection must equal it exactly.
+  ViewSelectorConfig config;
+  config.keyframes.mode = KeyframeMode::kEveryFrame;
+  config.selection.k = k_;
+  ViewSelector selector(config);
+  for (size_t i = 0; i < expected.size(); ++i) {
+    Frame f;
+    f.stamp = expected_stamps[i].toSec();
+    f.image_name = ros_node::keyframeImageName(f.stamp);
+    f.intrinsics = expected[i].intrinsics;
+    f.pose = expected[i].pose;
+    f.depth_m = depthToMetres(expected[i].depth, expected[i].depth.type() == CV_16UC1 ? 0.001 : 1.0);
+    ASSERT_EQ(selector.addFrame(f).outcome, FrameOutcome::kKeyframe);
+  }
+  const Selection want = selector.select();
+  ASSERT_EQ(sel.next_view_sets.size(), want.next_views.size());
+  size_t finite = 0;
+  for (size_t i = 0; i < want.next_views.size(); ++i) {
+    const auto& got = sel.next_view_sets[i];
+    EXPECT_EQ(std::vector<int>(got.next_views.begin(), got.next_views.end()), want.next_views[i]) << "view " << i;
+    for (size_t q = 0; q < got.next_views.size(); ++q) {
+      EXPECT_EQ(got.error_resistance[q], selector.matrix().at(static_cast<ViewId>(i), got.next_views[q]));
+      ++finite;
+    }
+  }
+  EXPECT_GT(finite, 0u) << "the good frames should see each other";
+  EXPECT_EQ(sel.start_view, want.start_view);
+  EXPECT_EQ(sel.finite_entries, selector.matrix().table().finiteCount());
+  ASSERT_EQ(sel.pairs.size(), want.pairs.size());
+  for (size_t p = 0; p < want.pairs.size(); ++p) {
+    EXPECT_EQ(sel.pairs[p].first, want.pairs[p].first);
+    EXPECT_EQ(sel.pairs[p].second, want.pairs[p].second);
+  }
+
+  // An unknown view is still a clean error after all that.
+  view_selection::GetNextViews next_views;
+  next_views.request.view = static_cast<int>(expected.size());
+  ASSERT_TRUE(ros::service::call(node_ + "/get_next_views", next_views));
+  EXPECT_FALSE(next_views.response.success);
+  next_views.request.view = 0;
+  ASSERT_TRUE(ros::service::call(node_ + "/get_next_views", next_views));
+  EXPECT_TRUE(next_views.response.success) << next_views.response.message;
+
+  // Markers: one frustum (16 line points) per keyframe, the start view's in its own namespace.
+  const auto markers = ros::topic::waitForMessage<visualization_msgs::MarkerArray>(node_ + "/markers", nh_,
+                                                                                    ros::Duration(10.0));
+  ASSERT_TRUE(markers) << "no markers";
+  size_t frustum_points = 0;
+  for (const auto& m : markers->markers)
+    if (m.ns == "frusta" || m.ns == "start_view") frustum_points += m.points.size();
+  EXPECT_EQ(frustum_points, 16 * expected.size());
+
+  // Export with ~save_keyframe_images: every name in pairs.txt is a written image.
+  view_selection::Export exp;
+  const fs::path dir = fs::temp_directory_path() / ("view_selection_bad_input_" + std::to_string(::getpid()));
+  exp.request.directory = dir.string();
+  ASSERT_TRUE(ros::service::call(node_ + "/export", exp));
+  ASSERT_TRUE(exp.response.success) << exp.response.message;
+  EXPECT_EQ(exp.response.images_written, static_cast<int>(expected.size()));
+  std::ifstream pairs(exp.response.pairs_txt);
+  std::string a, b;
+  size_t lines = 0;
+  while (pairs >> a >> b) {
+    ++lines;
+    EXPECT_TRUE(fs::exists(dir / a)) << a;
+    EXPECT_TRUE(fs::exists(dir / b)) << b;
+  }
+  EXPECT_EQ(lines, want.pairs.size());
+  EXPECT_TRUE(fs::exists(dir / "selection.png"));
+  std::error_code ec;
+  fs::remove_all(dir, ec);
+
+  // After ~reset the node starts over: an earlier stamp is fine again.
+  std_srvs::Trigger reset;
+  ASSERT_TRUE(ros::service::call(node_ + "/reset", reset));
+  EXPECT_TRUE(reset.response.success) << reset.response.message;
+  ASSERT_TRUE(ros::service::call(node_ + "/get_selection", srv));
+  EXPECT_TRUE(srv.response.selection.keyframes.empty());
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(10.0);
+  while (handled() != 0 && ros::WallTime::now() < deadline) ros::WallDuration(0.01).sleep();
+  ASSERT_EQ(handled(), 0u) << "statistics were not reset";
+  publish(makeSend(good[0], ros::Time(t0), "cam_" + std::to_string(camera++)), 1);
+  ASSERT_TRUE(ros::service::call(node_ + "/get_selection", srv));
+  EXPECT_EQ(srv.response.selection.keyframes.size(), 1u);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_bad_input");
+  ros::NodeHandle nh;
+  ros::AsyncSpinner spinner(1);
+  spinner.start();
+  return RUN_ALL_TESTS();
+}

@@ -1,0 +1,147 @@
+// Interface rostest: the node (or nodelet) named by ~node advertises its topics and services,
+// subscribes to its inputs, and an empty node answers every service sensibly.
+#include "view_selection/ros/messages.h"
+
+#include <gtest/gtest.h>
+#include <ros/ros.h>
+#include <std_srvs/Trigger.h>
+
+#include <algorithm>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+std::string nodeName() {
+  std::string name = "/view_selection";
+  ros::NodeHandle("~").getParam("node", name);
+  return name;
+}
+
+template <typename Srv>
+bool call(const std::string& name, Srv& srv) {
+  if (!ros::service::waitForService(name, ros::Duration(20.0))) return false;
+  return ros::service::call(name, srv);
+}
+
+// Names of topics with at least one subscriber / publisher, from the master.
+void systemState(std::vector<std::string>& published, std::vector<std::string>& subscribed) {
+  XmlRpc::XmlRpcValue args, result, payload;
+  args[0] = ros::this_node::getName();
+  ASSERT_TRUE(ros::master::execute("getSystemState", args, result, payload, true));
+  for (int kind = 0; kind < 2; ++kind) {
+    auto& out = kind == 0 ? published : subscribed;
+    for (int i = 0; i < payload[kind].size(); ++i) out.push_back(static_cast<std::string>(payload[kind][i][0]));
+  }
+}
+
+bool contains(const std::vector<std::string>& list, const std::string& item) {
+  return std::find(list.begin(), list.end(), item) != list.end();
+}
+
+TEST(Interface, AdvertisesTopicsAndSubscribesToInputs) {
+  const std::string node = nodeName();
+  ASSERT_TRUE(ros::service::waitForService(node + "/get_selection", ros::Duration(20.0)))
+      << node << " did not come up";
+  std::vector<std::string> published, subscribed;
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(10.0);
+  // The subscriptions are made right after the services; give them a moment.
+  do {
+    published.clear();
+    subscribed.clear();
+    systemState(published, subscribed);
+    if (contains(subscribed, "/camera/depth") && contains(published, node + "/statistics")) break;
+    ros::WallDuration(0.1).sleep();
+  } while (ros::WallTime::now() < deadline);
+  for (const char* topic : {"/selection", "/markers", "/statistics"})
+    EXPECT_TRUE(contains(published, node + topic)) << node + topic << " is not advertised";
+  // The launch file remaps image/camera_info/depth under /camera.
+  for (const char* topic : {"/camera/image", "/camera/camera_info", "/camera/depth"})
+    EXPECT_TRUE(contains(subscribed, topic)) << topic << " has no subscriber";
+  for (const char* srv : {"/get_next_views", "/get_selection", "/export", "/reset"})
+    EXPECT_TRUE(ros::service::exists(node + srv, false)) << node + srv << " is not advertised";
+}
+
+TEST(Interface, EmptyNodeAnswersSensibly) {
+  const std::string node = nodeName();
+  view_selection::GetSelection selection;
+  ASSERT_TRUE(call(node + "/get_selection", selection));
+  EXPECT_TRUE(selection.response.success) << selection.response.message;
+  EXPECT_TRUE(selection.response.selection.keyframes.empty());
+  EXPECT_EQ(selection.response.selection.start_view, -1);
+  EXPECT_TRUE(selection.response.selection.pairs.empty());
+  EXPECT_EQ(selection.response.selection.k, 3);  // ~k from the launch file, not the default 5
+  EXPECT_EQ(selection.response.selection.completion, "reachable");
+  EXPECT_EQ(selection.response.selection.header.frame_id, "map");  // "/map" normalised
+
+  // The latched topic carries the same empty selection.
+  ros::NodeHandle nh;
+  view_selection::ViewSelection::ConstPtr latched = ros::topic::waitForMessage<view_selection::ViewSelection>(
+      node + "/selection", nh, ros::Duration(10.0));
+  ASSERT_TRUE(latched) << "no latched message on " << node << "/selection";
+  EXPECT_TRUE(latched->keyframes.empty());
+  view_selection::InputStatistics::ConstPtr stats = ros::topic::waitForMessage<view_selection::InputStatistics>(
+      node + "/statistics", nh, ros::Duration(10.0));
+  ASSERT_TRUE(stats) << "no latched message on " << node << "/statistics";
+  EXPECT_EQ(stats->keyframes, 0u);
+  EXPECT_EQ(stats->frames_dropped, 0u);
+
+  view_selection::Export exp;
+  exp.request.directory = (std::filesystem::temp_directory_path() /
+                           ("view_selection_test_" + std::to_string(::getpid()) + node))
+                              .string();
+  ASSERT_TRUE(call(node + "/export", exp));
+  EXPECT_TRUE(exp.response.success) << exp.response.message;
+  std::ifstream pairs(exp.response.pairs_txt);
+  EXPECT_TRUE(pairs.good()) << exp.response.pairs_txt << " was not written";
+  std::ifstream json(exp.response.selection_json);
+  EXPECT_TRUE(json.good()) << exp.response.selection_json << " was not written";
+  std::error_code ec;
+  std::filesystem::remove_all(std::filesystem::path(exp.request.directory).parent_path(), ec);
+
+  std_srvs::Trigger reset;
+  ASSERT_TRUE(call(node + "/reset", reset));
+  EXPECT_TRUE(reset.response.success) << reset.response.message;
+}
+
+TEST(Interface, UnknownViewIsAnErrorWithAMessage) {
+  const std::string node = nodeName();
+  for (const int view : {0, 7, -1}) {
+    view_selection::GetNextViews srv;
+    srv.request.view = view;
+    srv.request.after_completion = view == 7;
+    ASSERT_TRUE(call(node + "/get_next_views", srv));
+    EXPECT_FALSE(srv.response.success) << "view " << view;
+    EXPECT_NE(srv.response.message.find("unknown"), std::string::npos) << srv.response.message;
+    EXPECT_TRUE(srv.response.next_views.empty());
+  }
+}
+
+TEST(Interface, ExportWithoutDirectoryIsAnError) {
+  const std::string node = nodeName();
+  view_selection::Export exp;
+  ASSERT_TRUE(call(node + "/export", exp));
+  EXPECT_FALSE(exp.response.success);
+  EXPECT_FALSE(exp.response.message.empty());
+  // A path under a regular file cannot be created.
+  exp.request.directory = "/proc/version/cannot_be_a_folder";
+  ASSERT_TRUE(call(node + "/export", exp));
+  EXPECT_FALSE(exp.response.success);
+  EXPECT_NE(exp.response.message.find("cannot"), std::string::npos) << exp.response.message;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_interface");
+  ros::NodeHandle nh;
+  ros::AsyncSpinner spinner(1);
+  spinner.start();
+  return RUN_ALL_TESTS();
+}
