@@ -153,7 +153,12 @@ double computeErrorResistance(const ErrorResistanceMatrix::View& view_i,
   const DepthMap* depth = kf_j.depth ? kf_j.depth.get() : nullptr;
   const double width = k.width, height = k.height;
   scratch.points_cam.clear();
+  // Points not yet looked at; when they cannot lift the visible count to the gate, stop.
+  Eigen::Index unseen = possible;
   for (const auto* g : candidates) {
+    if (static_cast<double>(scratch.points_cam.size() + static_cast<size_t>(unseen)) < needed)
+      return kInfinity;
+    unseen -= g->end - g->begin;
     for (Eigen::Index c = g->begin; c < g->end; ++c) {
       const Eigen::Vector3d p = r_cw * (view_i.grouped_points.col(c) - o_j);
       if (!(p.z() > 0.0)) continue;

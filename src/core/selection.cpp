@@ -38,21 +38,49 @@ std::pair<ViewId, ViewId> Selection::initialPair() const {
 }
 
 std::vector<NextViewSet> computeNextViewSets(const ErrorResistanceTable& e, int k) {
+  // One pass per row keeping the k best so far, sorted: most entries lose to the current k-th
+  // with a single comparison, so this is O(finite entries) with no copy of the row.
+  const size_t keep = static_cast<size_t>(std::max(k, 0));
   std::vector<NextViewSet> sets(e.size());
-  std::vector<TableEntry> buffer;
+  std::vector<TableEntry> best;
+  best.reserve(keep + 1);
   for (size_t i = 0; i < e.size(); ++i) {
-    const auto& row = e.row(static_cast<ViewId>(i));
-    buffer.assign(row.begin(), row.end());
-    const size_t take = std::min(buffer.size(), static_cast<size_t>(std::max(k, 0)));
-    std::partial_sort(buffer.begin(), buffer.begin() + static_cast<std::ptrdiff_t>(take),
-                      buffer.end(), [](const TableEntry& a, const TableEntry& b) {
-                        return better(a.value, a.view, b.value, b.view);
-                      });
-    sets[i].reserve(take);
-    for (size_t q = 0; q < take; ++q) sets[i].push_back(buffer[q].view);
+    best.clear();
+    for (const TableEntry& entry : e.row(static_cast<ViewId>(i))) {
+      if (best.size() == keep &&
+          (keep == 0 || !better(entry.value, entry.view, best.back().value, best.back().view)))
+        continue;
+      auto pos = best.end();
+      while (pos != best.begin() && better(entry.value, entry.view, (pos - 1)->value, (pos - 1)->view))
+        --pos;
+      best.insert(pos, entry);
+      if (best.size() > keep) best.pop_back();
+    }
+    sets[i].reserve(best.size());
+    for (const TableEntry& entry : best) sets[i].push_back(entry.view);
   }
   return sets;
 }
+
+namespace {
+
+/// Start view from the next view sets: C_i[0] is row i's smallest entry (ties to the smaller
+/// column), so the smallest entry of E, ties to the smaller row, is the best of the C_i[0].
+ViewId startViewFromSets(const ErrorResistanceTable& e, const std::vector<NextViewSet>& sets) {
+  ViewId best_row = -1;
+  double best_value = 0.0;
+  for (size_t i = 0; i < sets.size(); ++i) {
+    if (sets[i].empty()) continue;
+    const double value = e.at(static_cast<ViewId>(i), sets[i].front());
+    if (best_row < 0 || value < best_value) {  // rows ascend: a tie keeps the smaller row
+      best_row = static_cast<ViewId>(i);
+      best_value = value;
+    }
+  }
+  return best_row;
+}
+
+}  // namespace
 
 ViewId findStartView(const ErrorResistanceTable& e) {
   ViewId best_row = -1;
@@ -173,7 +201,7 @@ Selection selectViews(const ErrorResistanceTable& e, const SelectionConfig& conf
   Selection out;
   out.next_views = computeNextViewSets(e, config.k);
   out.final_next_views = out.next_views;
-  out.start_view = findStartView(e);
+  out.start_view = config.k >= 1 ? startViewFromSets(e, out.next_views) : findStartView(e);
   std::vector<char> visited(e.size(), 0);
   if (out.start_view >= 0) traverse(out.next_views, out.start_view, visited, out.order);
   if (config.completion == CompletionMode::kPaper)

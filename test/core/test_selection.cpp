@@ -184,7 +184,15 @@ TEST(Selection, RandomMatricesKeepTheInvariants) {
           const double a = e.at(static_cast<ViewId>(i), c[q - 1]), b = e.at(static_cast<ViewId>(i), c[q]);
           ASSERT_TRUE(a < b || (a == b && c[q - 1] < c[q]));
         }
+        // ... and they are the k best of the row: a full sort of the row agrees.
+        std::vector<TableEntry> row = e.row(static_cast<ViewId>(i));
+        std::sort(row.begin(), row.end(), [](const TableEntry& a, const TableEntry& b) {
+          return a.value < b.value || (a.value == b.value && a.view < b.view);
+        });
+        for (size_t q = 0; q < c.size(); ++q) ASSERT_EQ(c[q], row[q].view) << "trial " << trial;
       }
+      // The start view taken from the sets is the row of E's smallest entry (full scan).
+      ASSERT_EQ(s.start_view, findStartView(e)) << "trial " << trial;
       // Order is a list of distinct views; every view is visited or isolated or completed.
       const std::set<ViewId> ordered(s.order.begin(), s.order.end());
       ASSERT_EQ(ordered.size(), s.order.size());
