@@ -8,7 +8,6 @@ The data: ~dataset (default ../shared/data/redkitchen-0-499 next to the package)
 generate_sequence; when that tool is not built either, the test is skipped with a message.
 """
 import json
-import math
 import os
 import shutil
 import subprocess
@@ -304,6 +303,80 @@ class Replay(unittest.TestCase):
             for k in exported['keyframes']:
                 self.assertTrue(os.path.isfile(os.path.join(directory, exported['params'].get('image_path', ''),
                                                             k['image'])), node + ' image ' + k['image'])
+
+    def test_2_bag_has_the_tum_layout(self):
+        """tum_to_bag: topics, types, encodings, frame ids, stamps and pixel values of the TUM folder."""
+        import cv2
+        import numpy
+        import rosbag
+
+        def read_list(name):
+            entries = []
+            with open(os.path.join(self.source, name)) as f:
+                for line in f:
+                    if line.strip() and not line.startswith('#'):
+                        stamp, path = line.split()
+                        entries.append((float(stamp), path))
+            return entries
+        rgb, depth = read_list('rgb.txt'), read_list('depth.txt')
+        # The kitchen and the synthetic sequence have one depth image per colour image, same stamps.
+        self.assertEqual([s for s, _ in rgb], [s for s, _ in depth], 'this check assumes aligned lists')
+        frames = list(zip(rgb, depth))[:self.max_frames]
+        expected_types = {'/camera/rgb/image_color': 'sensor_msgs/Image', '/camera/rgb/camera_info': 'sensor_msgs/CameraInfo',
+                          '/camera/depth/image': 'sensor_msgs/Image', '/camera/depth/camera_info': 'sensor_msgs/CameraInfo',
+                          '/tf': 'tf2_msgs/TFMessage', '/camera/pose': 'geometry_msgs/PoseStamped'}
+        with rosbag.Bag(self.bag) as bag:
+            info = bag.get_type_and_topic_info().topics
+            self.assertEqual({t: i.msg_type for t, i in info.items()}, expected_types)
+            for topic in expected_types:
+                self.assertEqual(info[topic].message_count, len(frames), topic)
+            seen = {t: [] for t in expected_types}
+            checked = 0
+            for topic, msg, t in bag.read_messages():
+                header = msg.transforms[0].header if topic == '/tf' else msg.header
+                self.assertEqual(msg_stamp_ns(t), msg_stamp_ns(header.stamp), topic + ': bag time is the stamp')
+                seen[topic].append(msg_stamp_ns(header.stamp))
+                if topic == '/tf':
+                    self.assertEqual((header.frame_id, msg.transforms[0].child_frame_id),
+                                     ('/world', '/openni_rgb_optical_frame'))
+                elif topic == '/camera/pose':
+                    self.assertEqual(header.frame_id, '/world')
+                else:
+                    self.assertEqual(header.frame_id, '/openni_rgb_optical_frame', topic)
+                index = len(seen[topic]) - 1
+                if topic == '/camera/rgb/image_color' and index < 3:
+                    self.assertEqual(msg.encoding, 'rgb8')
+                    image = numpy.frombuffer(msg.data, numpy.uint8).reshape(msg.height, msg.width, 3)
+                    bgr = cv2.imread(os.path.join(self.source, frames[index][0][1]), cv2.IMREAD_COLOR)
+                    self.assertTrue(numpy.array_equal(image, bgr[:, :, ::-1]), 'rgb8 pixels of frame %d' % index)
+                    checked += 1
+                if topic == '/camera/depth/image' and index < 3:
+                    self.assertEqual(msg.encoding, '32FC1')
+                    image = numpy.frombuffer(msg.data, numpy.float32).reshape(msg.height, msg.width)
+                    png = cv2.imread(os.path.join(self.source, frames[index][1][1]), cv2.IMREAD_ANYDEPTH)
+                    valid = png > 0
+                    self.assertTrue(numpy.all(numpy.isnan(image[~valid])), 'missing depth is NaN')
+                    self.assertTrue(numpy.array_equal(image[valid], (png[valid] * (1.0 / 5000.0)).astype(numpy.float32)),
+                                    'depth in metres of frame %d' % index)
+                    checked += 1
+            self.assertEqual(checked, 6)
+        stamps = [stamp_ns(s) for (s, _), _ in frames]
+        for topic in expected_types:
+            self.assertEqual(seen[topic], stamps, topic + ' stamps are the TUM stamps, in order')
+
+    def test_3_tum_to_bag_reports_bad_input(self):
+        tool = find_tool('tum_to_bag')
+        missing = os.path.join(self.tmp, 'no_such_folder')
+        cases = [([], 2, '--dataset DIR is required'),
+                 (['--dataset', self.source], 2, '--out BAG is required'),
+                 (['--dataset', self.source, '--out', os.path.join(self.tmp, 'x.bag'), '--every', '0'], 2, '--every'),
+                 (['--dataset', missing, '--out', os.path.join(self.tmp, 'y.bag')], 1, missing)]
+        for args, code, text in cases:
+            done = subprocess.run([tool] + args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, timeout=60,
+                                  universal_newlines=True)
+            self.assertEqual(done.returncode, code, '%s: %s' % (args, done.stdout))
+            self.assertIn(text, done.stdout, args)
+        self.assertFalse(os.path.exists(os.path.join(self.tmp, 'y.bag')), 'no bag is left after an error')
 
     # One test method a node, so that a failure names the pose source.
     def test_0_topic_pose_source(self):
