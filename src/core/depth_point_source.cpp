@@ -15,4 +15,11 @@ PointSourceResult DepthPointSource::process(ViewId /*id*/, const Frame& frame) {
   return result;
 }
 
+nlohmann::json DepthPointSource::params() const {
+  return {{"grid_cols", config_.grid_cols},         {"grid_rows", config_.grid_rows},
+          {"min_depth", config_.min_depth},         {"max_depth", config_.max_depth},
+          {"min_valid_fraction", config_.min_valid_fraction},
+          {"pixel_stride", config_.pixel_stride},   {"depth_map_cell", config_.depth_map_cell}};
+}
+
 }  // namespace view_selection

@@ -129,6 +129,20 @@ bool ViewSelector::wantsFrame(const CameraPose& pose) const {
   return probe.offer(pose);
 }
 
+std::vector<ViewId> ViewSelector::applyPointUpdates() {
+  auto updates = points_->takeUpdates();
+  for (const auto& [view, updated] : updates) {
+    if (view < 0 || static_cast<size_t>(view) >= matrix_.size() || !updated.allFinite())
+      throw InvalidInput("point source produced an invalid update for view " + std::to_string(view));
+  }
+  std::vector<ViewId> rows;
+  for (auto& [view, updated] : updates) {
+    matrix_.setPoints(view, std::move(updated));
+    rows.push_back(view);
+  }
+  return rows;
+}
+
 Selection ViewSelector::select() const { return selectViews(matrix_.table(), config_.selection); }
 
 void ViewSelector::reset() {
@@ -161,6 +175,7 @@ nlohmann::json ViewSelector::params() const {
       {"depth_min_valid_fraction", c.depth.min_valid_fraction},
       {"depth_pixel_stride", c.depth.pixel_stride},
       {"depth_map_cell", c.depth.depth_map_cell},
+      {"point_source_params", points_->params()},
   };
 }
 

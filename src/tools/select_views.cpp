@@ -3,6 +3,7 @@
 #include "command_line.h"
 
 #include "view_selection/core/exceptions.h"
+#include "view_selection/core/point_source_factory.h"
 #include "view_selection/core/selection_io.h"
 #include "view_selection/core/selection_plot.h"
 #include "view_selection/core/tum_frames.h"
@@ -26,7 +27,7 @@ namespace {
 
 const char* kUsage = R"(usage: select_views --dataset DIR [options]
 
-Error-resistant view selection on a TUM RGB-D layout folder (rgb.txt, depth.txt,
+Error-resistant view selection on a TUM RGB-D layout folder (rgb.txt, depth.txt if any,
 groundtruth.txt, camera.yaml). Writes selection.json, pairs.txt and selection.png.
 
 keyframes (default: --min-translation 0.10 --min-rotation 10):
@@ -42,7 +43,9 @@ selection:
   --max-view-angle DEG      optional gate on the angle between optical axes (default off)
   --no-occlusion            do not test visibility against keyframe depth maps
 points:
-  --points SOURCE           depth | auto (default auto: depth when the folder has depth)
+  --points SOURCE           depth | features | auto (default auto: depth when the folder
+                            has depth, else features triangulated with the known poses)
+  --features DETECTOR       orb | sift, for --points features (default orb)
   --grid N                  depth sampling grid N x N cells (default 16)
 input and output:
   --max-time-difference S   rgb/depth/pose association tolerance [s] (default 0.02)
@@ -62,6 +65,7 @@ struct Options {
   fs::path out;
   ViewSelectorConfig config;
   std::string points;
+  PointSourceParams point_params;
   long max_frames = 0;
   double max_time_difference = 0.02;
   bool dump_points = false;
@@ -73,7 +77,7 @@ Options parse(int argc, char** argv) {
   const CommandLine cli(argc, argv,
                         {"dataset", "every", "min-translation", "min-rotation", "max-frames", "k",
                          "completion", "min-covisible-points", "min-covisible-ratio",
-                         "max-view-angle", "points", "grid", "max-time-difference", "out",
+                         "max-view-angle", "points", "features", "grid", "max-time-difference", "out",
                          "print-sets"},
                         {"dump-points", "no-occlusion", "quiet", "help"});
   if (cli.flag("help")) {
@@ -108,8 +112,10 @@ Options parse(int argc, char** argv) {
   m.max_view_angle_deg = cli.real("max-view-angle", m.max_view_angle_deg, 0.0, 180.0);
   o.config.occlusion_test = !cli.flag("no-occlusion");
   o.points = cli.choice("points", "auto", {"auto", "depth", "features"});
+  o.point_params.features.detector = cli.choice("features", "orb", {"orb", "sift"});
   const int grid = static_cast<int>(cli.integer("grid", o.config.depth.grid_cols, 1, 256));
   o.config.depth.grid_cols = o.config.depth.grid_rows = grid;
+  o.point_params.depth = o.config.depth;
   o.max_time_difference = cli.real("max-time-difference", o.max_time_difference, 0.0, 10.0);
   o.dump_points = cli.flag("dump-points");
   o.print_sets = cli.integer("print-sets", 40, 0, 100000000);
@@ -133,11 +139,9 @@ int run(const Options& o) {
   std::string source = o.points == "auto" ? (dataset.has_depth ? "depth" : "features") : o.points;
   if (source == "depth" && !dataset.has_depth)
     throw InvalidInput("'" + o.dataset + "' has no depth (no depth.txt): the depth point source cannot run on it");
-  if (source != "depth")
-    throw InvalidInput("'" + o.dataset + "' has no depth, and the feature point source is not available in this build; "
-                       "use a folder with depth.txt");
+  const bool features = source == "features";
 
-  ViewSelector selector(o.config);
+  ViewSelector selector(o.config, makePointSource(source, o.point_params));
   const size_t total = o.max_frames > 0 ? std::min<size_t>(dataset.frames.size(), static_cast<size_t>(o.max_frames))
                                         : dataset.frames.size();
   const bool tty = isatty(fileno(stderr));
@@ -147,7 +151,7 @@ int run(const Options& o) {
     const auto t0 = std::chrono::steady_clock::now();
     // Frames the policy will skip are passed without depth: reading PNGs is the slow part.
     const bool wanted = selector.wantsFrame(dataset.frames[q].pose);
-    const Frame frame = loadTumFrame(dataset, dataset.frames[q], {wanted, false});
+    const Frame frame = loadTumFrame(dataset, dataset.frames[q], {wanted && !features, wanted && features});
     t_read += seconds(t0);
     FrameResult r;
     try {
@@ -211,6 +215,14 @@ int run(const Options& o) {
                      std::to_string(o.config.keyframes.min_rotation_deg).substr(0, 5) + " deg").c_str()
                   : ("every " + std::to_string(o.config.keyframes.every_n) + " frames").c_str(),
               median_points, selector.pointSource().name().c_str());
+  if (const auto* fs = dynamic_cast<const FeaturePointSource*>(&selector.pointSource())) {
+    const FeatureStats& t = fs->totalStats();
+    const double kf = std::max<double>(1.0, static_cast<double>(t.keyframes));
+    std::printf("features    %s, per keyframe (mean of %zu): extract %.1f ms | match %.1f ms | triangulate %.1f ms (Ceres %.1f)"
+                " | %.0f features, %.1f views matched, %.0f matches, %.0f points\n",
+                fs->config().detector.c_str(), t.keyframes, 1e3 * t.extract_seconds / kf, 1e3 * t.match_seconds / kf,
+                1e3 * t.triangulate_seconds / kf, 1e3 * t.refine_seconds / kf, t.features / kf, t.candidates / kf, t.matches / kf, t.points / kf);
+  }
   std::printf("matrix      %zu x %zu, %zu finite entries of %.0f off-diagonal (%s)\n", n, n,
               matrix.table().finiteCount(), offdiag, percent(static_cast<double>(matrix.table().finiteCount()), offdiag).c_str());
   std::printf("selection   k %d, completion %s: start view %d, traversal reached %zu, completed %zu, isolated %zu\n",

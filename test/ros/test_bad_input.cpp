@@ -367,6 +367,22 @@ TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames
   ASSERT_TRUE(ros::service::call(node_ + "/get_next_views", next_views));
   EXPECT_TRUE(next_views.response.success) << next_views.response.message;
 
+  // The latched ~selection catches up with the same keyframes (rate-limited, so wait for it).
+  {
+    view_selection::ViewSelection::ConstPtr latched;
+    const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(10.0);
+    while (ros::WallTime::now() < deadline) {
+      latched = ros::topic::waitForMessage<view_selection::ViewSelection>(node_ + "/selection", nh_,
+                                                                          ros::Duration(2.0));
+      if (latched && latched->keyframes.size() == expected.size()) break;
+      ros::WallDuration(0.05).sleep();
+    }
+    ASSERT_TRUE(latched) << "nothing on " << node_ << "/selection";
+    EXPECT_EQ(latched->keyframes.size(), expected.size());
+    EXPECT_EQ(latched->pairs.size(), want.pairs.size());
+    EXPECT_EQ(latched->header.frame_id, "world");
+  }
+
   // Markers: one frustum (16 line points) per keyframe, the start view's in its own namespace.
   const auto markers = ros::topic::waitForMessage<visualization_msgs::MarkerArray>(node_ + "/markers", nh_,
                                                                                     ros::Duration(10.0));

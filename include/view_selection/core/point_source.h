@@ -6,6 +6,7 @@
 #include "view_selection/core/types.h"
 
 #include <Eigen/Core>
+#include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
 #include <memory>
@@ -42,6 +43,12 @@ class PointSource {
   virtual PointSourceResult process(ViewId id, const Frame& frame) = 0;
   /// Forgets everything.
   virtual void reset() = 0;
+  /// Point-set changes of earlier keyframes made outside process() (e.g. new map points) since
+  /// the last call, as full new point sets; the ViewSelector recomputes exactly these rows
+  /// (ViewSelector::applyPointUpdates). Sources whose sets change only in process(): none.
+  virtual std::vector<std::pair<ViewId, Eigen::Matrix3Xd>> takeUpdates() { return {}; }
+  /// The parameters that shape the points, for selection.json's "point_source_params".
+  virtual nlohmann::json params() const { return nlohmann::json::object(); }
 };
 
 /// Points back-projected from the frame's depth image (one per grid cell).
@@ -51,6 +58,7 @@ class DepthPointSource : public PointSource {
   std::string name() const override { return "depth"; }
   PointSourceResult process(ViewId id, const Frame& frame) override;
   void reset() override {}
+  nlohmann::json params() const override;
 
  private:
   DepthSamplerConfig config_;

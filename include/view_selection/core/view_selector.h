@@ -62,6 +62,12 @@ class ViewSelector {
   const ErrorResistanceMatrix& matrix() const { return matrix_; }
   const ViewSelectorConfig& config() const { return config_; }
   const PointSource& pointSource() const { return *points_; }
+  /// For sources fed from outside (MapPointSource::setMapPoints); call applyPointUpdates after.
+  PointSource& pointSource() { return *points_; }
+  /// Applies the point source's pending changes to earlier keyframes (PointSource::takeUpdates):
+  /// recomputes exactly those rows and returns their ids. Throws InvalidInput for an update of
+  /// an unknown keyframe or with non-finite points; nothing changes then.
+  std::vector<ViewId> applyPointUpdates();
   /// Every parameter that shapes the result, as written to selection.json's "params".
   nlohmann::json params() const;
 
