@@ -8,8 +8,8 @@
 #include "view_selection/core/tum_frames.h"
 
 #include <geometry_msgs/PoseStamped.h>
-#include <rosbag/bag.h>
 #include <ros/time.h>
+#include <rosbag/bag.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/image_encodings.h>
@@ -73,8 +73,8 @@ struct Options {
 
 Options parse(int argc, char** argv) {
   const CommandLine cli(argc, argv,
-                        {"dataset", "out", "max-frames", "every", "max-time-difference", "world-frame",
-                         "camera-frame", "compression"},
+                        {"dataset", "out", "max-frames", "every", "max-time-difference",
+                         "world-frame", "camera-frame", "compression"},
                         {"quiet", "help"});
   if (cli.flag("help")) {
     std::cout << kUsage;
@@ -90,8 +90,10 @@ Options parse(int argc, char** argv) {
   o.max_time_difference = cli.real("max-time-difference", o.max_time_difference, 0.0, 10.0);
   o.world_frame = cli.text("world-frame", o.world_frame);
   o.camera_frame = cli.text("camera-frame", o.camera_frame);
-  if (o.world_frame.empty() || o.camera_frame.empty()) throw UsageError("frame names must not be empty");
-  if (o.world_frame == o.camera_frame) throw UsageError("--world-frame and --camera-frame must differ");
+  if (o.world_frame.empty() || o.camera_frame.empty())
+    throw UsageError("frame names must not be empty");
+  if (o.world_frame == o.camera_frame)
+    throw UsageError("--world-frame and --camera-frame must differ");
   o.compression = cli.choice("compression", o.compression, {"none", "lz4", "bz2"});
   o.quiet = cli.flag("quiet");
   return o;
@@ -125,7 +127,8 @@ sensor_msgs::CameraInfo cameraInfo(const PinholeIntrinsics& k, const std_msgs::H
   return info;
 }
 
-sensor_msgs::Image imageMessage(const cv::Mat& mat, const std::string& encoding, const std_msgs::Header& header) {
+sensor_msgs::Image imageMessage(const cv::Mat& mat, const std::string& encoding,
+                                const std_msgs::Header& header) {
   sensor_msgs::Image msg;
   msg.header = header;
   msg.height = static_cast<uint32_t>(mat.rows);
@@ -152,17 +155,20 @@ int run(const Options& o) {
   TumDatasetOptions dataset_options;
   dataset_options.max_time_difference = o.max_time_difference;
   const TumDataset dataset = loadTumDataset(o.dataset, dataset_options);
-  const size_t total = o.max_frames > 0 ? std::min<size_t>(dataset.frames.size(), static_cast<size_t>(o.max_frames))
-                                        : dataset.frames.size();
+  const size_t total =
+      o.max_frames > 0 ? std::min<size_t>(dataset.frames.size(), static_cast<size_t>(o.max_frames))
+                       : dataset.frames.size();
   if (!dataset.has_depth)
-    std::fprintf(stderr, "tum_to_bag: warning: '%s' has no depth.txt; the bag has no depth topics\n",
+    std::fprintf(stderr,
+                 "tum_to_bag: warning: '%s' has no depth.txt; the bag has no depth topics\n",
                  o.dataset.c_str());
 
   const fs::path out(o.out);
   if (out.has_parent_path()) {
     std::error_code ec;
     fs::create_directories(out.parent_path(), ec);
-    if (ec) throw IoError("cannot create folder '" + out.parent_path().string() + "': " + ec.message());
+    if (ec)
+      throw IoError("cannot create folder '" + out.parent_path().string() + "': " + ec.message());
   }
   rosbag::Bag bag;
   try {
@@ -184,10 +190,12 @@ int run(const Options& o) {
       const TumFrame& tum = dataset.frames[q];
       const Frame frame = loadTumFrame(dataset, tum, {true, true});
       const std::string what = "frame " + std::to_string(q) + " (" + tum.rgb_path + ")";
-      if (frame.image.cols != dataset.intrinsics.width || frame.image.rows != dataset.intrinsics.height)
+      if (frame.image.cols != dataset.intrinsics.width ||
+          frame.image.rows != dataset.intrinsics.height)
         throw InvalidInput(what + ": image is " + std::to_string(frame.image.cols) + "x" +
                            std::to_string(frame.image.rows) + " but the intrinsics say " +
-                           std::to_string(dataset.intrinsics.width) + "x" + std::to_string(dataset.intrinsics.height));
+                           std::to_string(dataset.intrinsics.width) + "x" +
+                           std::to_string(dataset.intrinsics.height));
       const ros::Time stamp = toRosTime(tum.stamp, what);
 
       std_msgs::Header header;
@@ -225,7 +233,8 @@ int run(const Options& o) {
         depth_header.stamp = toRosTime(tum.depth_stamp, what + " depth");
         cv::Mat depth = frame.depth_m.clone();
         depth.setTo(nan, depth == 0.0f);  // TUM's 32FC1 bags mark missing depth with NaN
-        bag.write("/camera/depth/camera_info", depth_header.stamp, cameraInfo(dataset.intrinsics, depth_header));
+        bag.write("/camera/depth/camera_info", depth_header.stamp,
+                  cameraInfo(dataset.intrinsics, depth_header));
         bag.write("/camera/depth/image", depth_header.stamp,
                   imageMessage(depth, sensor_msgs::image_encodings::TYPE_32FC1, depth_header));
       }
@@ -234,11 +243,12 @@ int run(const Options& o) {
       if (frame.image.channels() == 3) {
         cv::cvtColor(frame.image, rgb, cv::COLOR_BGR2RGB);
       } else {
-        throw InvalidInput(what + ": expected a colour image, got " + std::to_string(frame.image.channels()) +
-                           " channel(s)");
+        throw InvalidInput(what + ": expected a colour image, got " +
+                           std::to_string(frame.image.channels()) + " channel(s)");
       }
       bag.write("/camera/rgb/camera_info", stamp, cameraInfo(dataset.intrinsics, header));
-      bag.write("/camera/rgb/image_color", stamp, imageMessage(rgb, sensor_msgs::image_encodings::RGB8, header));
+      bag.write("/camera/rgb/image_color", stamp,
+                imageMessage(rgb, sensor_msgs::image_encodings::RGB8, header));
 
       if (written == 0) first = tum.stamp;
       last = tum.stamp;
@@ -256,10 +266,11 @@ int run(const Options& o) {
     throw;
   }
   bag.close();
-  std::printf("tum_to_bag: wrote %s: %zu frames (%.3f s to %.3f s) of %zu associated in %s, depth %s, "
-              "intrinsics from %s\n",
-              o.out.c_str(), written, first, last, dataset.frames.size(), o.dataset.c_str(),
-              dataset.has_depth ? "yes" : "no", dataset.intrinsics_source.c_str());
+  std::printf(
+      "tum_to_bag: wrote %s: %zu frames (%.3f s to %.3f s) of %zu associated in %s, depth %s, "
+      "intrinsics from %s\n",
+      o.out.c_str(), written, first, last, dataset.frames.size(), o.dataset.c_str(),
+      dataset.has_depth ? "yes" : "no", dataset.intrinsics_source.c_str());
   return 0;
 }
 
