@@ -59,6 +59,9 @@ void checkImageMessage(const sensor_msgs::Image& msg, const std::string& what) {
       << " needs " << static_cast<uint64_t>(msg.step) * msg.height;
     throw InvalidInput(s.str());
   }
+  if (what == "image" && !enc::isColor(msg.encoding) && !enc::isMono(msg.encoding) && !enc::isBayer(msg.encoding))
+    throw InvalidInput("image encoding '" + msg.encoding +
+                       "' is not a colour or grey image (expected rgb8, bgr8, mono8, ...)");
   const bool little = [] {
     const uint16_t one = 1;
     return *reinterpret_cast<const uint8_t*>(&one) == 1;

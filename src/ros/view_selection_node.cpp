@@ -6,9 +6,11 @@
 
 int main(int argc, char** argv) {
   ros::init(argc, argv, "view_selection_node");
+  // Handles outlive the constructor: if it throws, ROS (and its logging) must still be up.
+  ros::NodeHandle nh, private_nh("~");
   std::unique_ptr<view_selection::ros_node::ViewSelectionRos> node;
   try {
-    node = std::make_unique<view_selection::ros_node::ViewSelectionRos>(ros::NodeHandle(), ros::NodeHandle("~"));
+    node = std::make_unique<view_selection::ros_node::ViewSelectionRos>(nh, private_nh);
   } catch (const std::exception& e) {
     ROS_FATAL("view_selection_node: %s", e.what());
     return 1;

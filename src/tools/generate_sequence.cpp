@@ -5,6 +5,8 @@
 #include "view_selection/core/exceptions.h"
 #include "view_selection/core/synthetic_sequence.h"
 
+#include <opencv2/core/utility.hpp>
+
 #include <unistd.h>
 
 #include <chrono>
@@ -36,6 +38,7 @@ The same seed and options give byte-identical files.
   --fps R          frame rate [Hz] (default 30)
   --speed V        walking speed [m/s] (default 0.7: about one loop in 300 frames)
   --noise SIGMA    colour noise [grey levels] (default 2; 0 for none)
+  --threads N      frames rendered at once (default 0: one per core; the files are the same)
   --force          write into a non-empty folder, replacing files of the same names
   --quiet          no progress lines
   --help           this text
@@ -44,15 +47,16 @@ The same seed and options give byte-identical files.
 struct Options {
   fs::path out;
   SyntheticSequenceConfig config;
+  int threads = 0;  ///< 0: OpenCV's default, one per core
   bool force = false;
   bool quiet = false;
 };
 
 Options parse(int argc, char** argv) {
-  const CommandLine cli(
-      argc, argv,
-      {"out", "frames", "seed", "width", "height", "fx", "fy", "cx", "cy", "fps", "speed", "noise"},
-      {"force", "quiet", "help"});
+  const CommandLine cli(argc, argv,
+                        {"out", "frames", "seed", "width", "height", "fx", "fy", "cx", "cy", "fps",
+                         "speed", "noise", "threads"},
+                        {"force", "quiet", "help"});
   if (cli.flag("help")) {
     std::cout << kUsage;
     std::exit(0);
@@ -74,6 +78,7 @@ Options parse(int argc, char** argv) {
   c.fps = cli.real("fps", c.fps, 0.1, 1000.0);
   c.speed = cli.real("speed", c.speed, 0.0, 10.0);
   c.noise_sigma = cli.real("noise", c.noise_sigma, 0.0, 50.0);
+  o.threads = static_cast<int>(cli.integer("threads", 0, 0, 1024));
   o.force = cli.flag("force");
   o.quiet = cli.flag("quiet");
   return o;
@@ -89,6 +94,7 @@ int run(const Options& o) {
                     "' exists and is not empty; choose another --out or add --force to write "
                     "into it");
   }
+  if (o.threads > 0) cv::setNumThreads(o.threads);
   const auto start = std::chrono::steady_clock::now();
   const SyntheticSequence sequence(o.config);
   const bool tty = isatty(fileno(stderr));

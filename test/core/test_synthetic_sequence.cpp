@@ -9,6 +9,7 @@
 #include "view_selection/core/view_selector.h"
 
 #include <gtest/gtest.h>
+#include <opencv2/core/utility.hpp>
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgcodecs.hpp>
 
@@ -386,6 +387,12 @@ TEST(SyntheticSequence, SameSeedSameBytesOtherSeedOtherImages) {
   const auto other = folderContents(dir.path() / "c");
   ASSERT_EQ(a.size(), 6u * 2 + 5);  // 6 colour + 6 depth PNGs, 3 lists, camera.yaml, SOURCE.md
   EXPECT_TRUE(a == b) << "the same seed must give byte-identical files";
+  // Whatever the number of threads rendering frames.
+  const int threads = cv::getNumThreads();
+  cv::setNumThreads(threads == 1 ? 3 : 1);
+  SyntheticSequence(c).writeTumFolder((dir.path() / "d").string());
+  cv::setNumThreads(threads);
+  EXPECT_TRUE(folderContents(dir.path() / "d") == a) << "thread count changed the files";
   ASSERT_EQ(other.size(), a.size());
   int differing_images = 0;
   for (const auto& [name, bytes] : a) {
@@ -448,6 +455,17 @@ TEST(SyntheticSequence, WritingAgainReplacesTheLists) {
   SyntheticSequence(smallConfig(3, 4)).writeTumFolder(folder);
   EXPECT_EQ(loadTumDataset(folder).frames.size(), 4u);
   EXPECT_THROW(SyntheticSequence(smallConfig(3, 2)).writeTumFolder(folder + "/rgb.txt"), IoError);
+  // A frame that cannot be written (here a folder stands in its way) fails the whole write with
+  // the file named, from whichever thread wrote it, and leaves no rgb.txt behind.
+  const std::string blocked = (dir.path() / "blocked").string();
+  fs::create_directories(blocked + "/depth/1000.100000.png");
+  try {
+    SyntheticSequence(smallConfig(3, 8)).writeTumFolder(blocked);
+    ADD_FAILURE() << "expected IoError";
+  } catch (const IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("depth/1000.100000.png"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(blocked + "/rgb.txt"));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -591,7 +609,7 @@ TEST(GenerateSequenceTool, WritesAFolderAndExplainsMistakes) {
   EXPECT_EQ(status, 1);
   EXPECT_NE(text.find("not empty"), std::string::npos) << text;
   EXPECT_NE(text.find("--force"), std::string::npos) << text;
-  std::tie(status, text) = run(tool + " --out " + out + small + " --force --seed 4");
+  std::tie(status, text) = run(tool + " --out " + out + small + " --force --seed 4 --threads 1");
   EXPECT_EQ(status, 0) << text;
 
   std::tie(status, text) = run(tool + small);

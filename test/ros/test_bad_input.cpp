@@ -17,10 +17,15 @@
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 #include <sensor_msgs/image_encodings.h>
+#include <std_srvs/Trigger.h>
 #include <tf2_msgs/TFMessage.h>
+#include <visualization_msgs/MarkerArray.h>
+
+#include <unistd.h>
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <map>
 #include <mutex>
@@ -361,6 +366,64 @@ TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames
   next_views.request.view = 0;
   ASSERT_TRUE(ros::service::call(node_ + "/get_next_views", next_views));
   EXPECT_TRUE(next_views.response.success) << next_views.response.message;
+
+  // The latched ~selection catches up with the same keyframes (rate-limited, so wait for it).
+  {
+    view_selection::ViewSelection::ConstPtr latched;
+    const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(10.0);
+    while (ros::WallTime::now() < deadline) {
+      latched = ros::topic::waitForMessage<view_selection::ViewSelection>(node_ + "/selection", nh_,
+                                                                          ros::Duration(2.0));
+      if (latched && latched->keyframes.size() == expected.size()) break;
+      ros::WallDuration(0.05).sleep();
+    }
+    ASSERT_TRUE(latched) << "nothing on " << node_ << "/selection";
+    EXPECT_EQ(latched->keyframes.size(), expected.size());
+    EXPECT_EQ(latched->pairs.size(), want.pairs.size());
+    EXPECT_EQ(latched->header.frame_id, "world");
+  }
+
+  // Markers: one frustum (16 line points) per keyframe, the start view's in its own namespace.
+  const auto markers = ros::topic::waitForMessage<visualization_msgs::MarkerArray>(node_ + "/markers", nh_,
+                                                                                    ros::Duration(10.0));
+  ASSERT_TRUE(markers) << "no markers";
+  size_t frustum_points = 0;
+  for (const auto& m : markers->markers)
+    if (m.ns == "frusta" || m.ns == "start_view") frustum_points += m.points.size();
+  EXPECT_EQ(frustum_points, 16 * expected.size());
+
+  // Export with ~save_keyframe_images: every name in pairs.txt is a written image.
+  view_selection::Export exp;
+  const fs::path dir = fs::temp_directory_path() / ("view_selection_bad_input_" + std::to_string(::getpid()));
+  exp.request.directory = dir.string();
+  ASSERT_TRUE(ros::service::call(node_ + "/export", exp));
+  ASSERT_TRUE(exp.response.success) << exp.response.message;
+  EXPECT_EQ(exp.response.images_written, static_cast<int>(expected.size()));
+  std::ifstream pairs(exp.response.pairs_txt);
+  std::string a, b;
+  size_t lines = 0;
+  while (pairs >> a >> b) {
+    ++lines;
+    EXPECT_TRUE(fs::exists(dir / a)) << a;
+    EXPECT_TRUE(fs::exists(dir / b)) << b;
+  }
+  EXPECT_EQ(lines, want.pairs.size());
+  EXPECT_TRUE(fs::exists(dir / "selection.png"));
+  std::error_code ec;
+  fs::remove_all(dir, ec);
+
+  // After ~reset the node starts over: an earlier stamp is fine again.
+  std_srvs::Trigger reset;
+  ASSERT_TRUE(ros::service::call(node_ + "/reset", reset));
+  EXPECT_TRUE(reset.response.success) << reset.response.message;
+  ASSERT_TRUE(ros::service::call(node_ + "/get_selection", srv));
+  EXPECT_TRUE(srv.response.selection.keyframes.empty());
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(10.0);
+  while (handled() != 0 && ros::WallTime::now() < deadline) ros::WallDuration(0.01).sleep();
+  ASSERT_EQ(handled(), 0u) << "statistics were not reset";
+  publish(makeSend(good[0], ros::Time(t0), "cam_" + std::to_string(camera++)), 1);
+  ASSERT_TRUE(ros::service::call(node_ + "/get_selection", srv));
+  EXPECT_EQ(srv.response.selection.keyframes.size(), 1u);
 }
 
 }  // namespace

@@ -142,7 +142,9 @@ class SyntheticSequence {
 
   /// Writes a TUM RGB-D folder: rgb/ and depth/ PNGs named by stamp, rgb.txt, depth.txt,
   /// groundtruth.txt, camera.yaml and SOURCE.md. The folder is created when missing; files of
-  /// the same names are replaced, other files are left alone. Throws IoError.
+  /// the same names are replaced, other files are left alone. Frames are rendered in parallel
+  /// on OpenCV's threads (cv::setNumThreads); the files do not depend on the thread count, and
+  /// `progress` is called from one thread at a time. Throws IoError.
   void writeTumFolder(const std::string& folder, const SyntheticProgress& progress = {}) const;
 
  private:

@@ -26,7 +26,8 @@ PinholeIntrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& info);
 
 /// Checks an image message's shape before anything reads its pixels: non-zero size, a known
 /// encoding, step >= width * pixel size and data holding step * height bytes. `what` names the
-/// input in the message ("image", "depth"). Throws InvalidInput.
+/// input in the message ("image", "depth"); for "image" the encoding must also be a colour, grey
+/// or Bayer one. Throws InvalidInput.
 void checkImageMessage(const sensor_msgs::Image& msg, const std::string& what);
 
 /// A cv::Mat header over the message's pixels (no copy), in the message's own encoding.

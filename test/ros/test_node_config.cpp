@@ -1,0 +1,156 @@
+// Parameter reading through a real parameter server: defaults, every select_views option, frame
+// normalisation, and a clear InvalidArgument for each kind of bad value.
+#include "view_selection/core/exceptions.h"
+#include "view_selection/ros/node_config.h"
+
+#include <gtest/gtest.h>
+#include <ros/ros.h>
+
+#include <string>
+
+using namespace view_selection;
+using namespace view_selection::ros_node;
+
+namespace {
+
+ros::NodeHandle fresh(const std::string& name) {
+  ros::NodeHandle nh("/" + name);
+  nh.deleteParam("");
+  return nh;
+}
+
+std::string errorOf(const ros::NodeHandle& nh) {
+  try {
+    loadNodeConfig(nh);
+  } catch (const InvalidArgument& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(NodeConfig, DefaultsAreTheCoresAndTheDocumentedOnes) {
+  const NodeConfig c = loadNodeConfig(fresh("defaults"));
+  const ViewSelectorConfig core;
+  EXPECT_EQ(c.world_frame, "world");
+  EXPECT_EQ(c.camera_frame, "");
+  EXPECT_EQ(c.pose_source, PoseSource::kTf);
+  EXPECT_DOUBLE_EQ(c.pose_timeout, 0.1);
+  EXPECT_EQ(c.queue_size, 10);
+  EXPECT_TRUE(c.use_depth);
+  EXPECT_EQ(c.point_source, "depth");
+  EXPECT_DOUBLE_EQ(c.publish_period, 0.5);
+  EXPECT_FALSE(c.save_keyframe_images);
+  EXPECT_EQ(c.selector.keyframes.mode, KeyframeMode::kMotion);
+  EXPECT_EQ(c.selector.keyframes.every_n, core.keyframes.every_n);
+  EXPECT_DOUBLE_EQ(c.selector.keyframes.min_translation, core.keyframes.min_translation);
+  EXPECT_DOUBLE_EQ(c.selector.keyframes.min_rotation_deg, core.keyframes.min_rotation_deg);
+  EXPECT_EQ(c.selector.selection.k, core.selection.k);
+  EXPECT_EQ(c.selector.selection.completion, CompletionMode::kPaper);
+  EXPECT_EQ(c.selector.matrix.min_covisible_points, core.matrix.min_covisible_points);
+  EXPECT_DOUBLE_EQ(c.selector.matrix.min_covisible_ratio, core.matrix.min_covisible_ratio);
+  EXPECT_DOUBLE_EQ(c.selector.matrix.max_view_angle_deg, 0.0);
+  EXPECT_TRUE(c.selector.occlusion_test);
+  EXPECT_EQ(c.selector.depth.grid_cols, core.depth.grid_cols);
+}
+
+TEST(NodeConfig, EveryOptionArrives) {
+  ros::NodeHandle nh = fresh("options");
+  nh.setParam("world_frame", "//map");
+  nh.setParam("camera_frame", "/openni_rgb_optical_frame");
+  nh.setParam("pose_source", "topic");
+  nh.setParam("keyframe_policy", "every_nth");
+  nh.setParam("every_n", 7);
+  nh.setParam("min_translation", 1);  // an integer where a real is expected is fine
+  nh.setParam("min_rotation_deg", 5.5);
+  nh.setParam("k", 4);
+  nh.setParam("completion", "reachable");
+  nh.setParam("min_covisible_points", 20);
+  nh.setParam("min_covisible_ratio", 0.25);
+  nh.setParam("max_view_angle_deg", 60.0);
+  nh.setParam("occlusion_test", false);
+  nh.setParam("grid", 8);
+  nh.setParam("point_source", "depth");
+  const NodeConfig c = loadNodeConfig(nh);
+  EXPECT_EQ(c.world_frame, "map");
+  EXPECT_EQ(c.camera_frame, "openni_rgb_optical_frame");
+  EXPECT_EQ(c.pose_source, PoseSource::kTopic);
+  EXPECT_EQ(c.selector.keyframes.mode, KeyframeMode::kEveryNth);
+  EXPECT_EQ(c.selector.keyframes.every_n, 7);
+  EXPECT_DOUBLE_EQ(c.selector.keyframes.min_translation, 1.0);
+  EXPECT_DOUBLE_EQ(c.selector.keyframes.min_rotation_deg, 5.5);
+  EXPECT_EQ(c.selector.selection.k, 4);
+  EXPECT_EQ(c.selector.selection.completion, CompletionMode::kReachable);
+  EXPECT_EQ(c.selector.matrix.min_covisible_points, 20);
+  EXPECT_DOUBLE_EQ(c.selector.matrix.min_covisible_ratio, 0.25);
+  EXPECT_DOUBLE_EQ(c.selector.matrix.max_view_angle_deg, 60.0);
+  EXPECT_FALSE(c.selector.occlusion_test);
+  EXPECT_EQ(c.selector.depth.grid_cols, 8);
+  EXPECT_EQ(c.selector.depth.grid_rows, 8);
+}
+
+TEST(NodeConfig, BadValuesNameTheParameter) {
+  struct Case {
+    const char* name;
+    XmlRpc::XmlRpcValue value;
+    const char* expect;  // part of the message
+  };
+  const Case cases[] = {
+      {"k", XmlRpc::XmlRpcValue(0), "/bad/k = 0 is out of range [1, 1000]"},
+      {"k", XmlRpc::XmlRpcValue("five"), "/bad/k must be an integer"},
+      {"min_covisible_ratio", XmlRpc::XmlRpcValue(1.5), "/bad/min_covisible_ratio = 1.5 is out of range"},
+      {"pose_timeout", XmlRpc::XmlRpcValue(-1.0), "/bad/pose_timeout"},
+      {"completion", XmlRpc::XmlRpcValue("best"), "is not one of: paper, reachable"},
+      {"keyframe_policy", XmlRpc::XmlRpcValue("sometimes"), "is not one of: every_frame, every_nth, motion"},
+      {"pose_source", XmlRpc::XmlRpcValue("gps"), "is not one of: tf, topic"},
+      {"occlusion_test", XmlRpc::XmlRpcValue("yes"), "must be true or false"},
+      {"world_frame", XmlRpc::XmlRpcValue("/"), "must name a frame"},
+      {"point_source", XmlRpc::XmlRpcValue("lidar"), "is not one of: auto, depth, features, map"},
+      {"features", XmlRpc::XmlRpcValue("surf"), "is not one of: orb, sift"},
+      {"grid", XmlRpc::XmlRpcValue(0), "/bad/grid = 0 is out of range"},
+  };
+  for (const Case& c : cases) {
+    ros::NodeHandle nh = fresh("bad");
+    nh.setParam(c.name, c.value);
+    const std::string message = errorOf(nh);
+    EXPECT_NE(message.find(c.expect), std::string::npos) << c.name << ": '" << message << "'";
+  }
+  ros::NodeHandle nh = fresh("bad");
+  nh.setParam("use_depth", false);
+  nh.setParam("point_source", "depth");
+  EXPECT_NE(errorOf(nh).find("~use_depth is false"), std::string::npos) << errorOf(nh);
+}
+
+TEST(NodeConfig, PointSources) {
+  ros::NodeHandle nh = fresh("sources");
+  EXPECT_EQ(loadNodeConfig(nh).point_source, "depth");  // auto with depth
+  nh.setParam("use_depth", false);
+  EXPECT_EQ(loadNodeConfig(nh).point_source, "features");  // auto without depth, as select_views
+  nh.setParam("point_source", "map");
+  nh.setParam("map_max_points", 500);
+  const NodeConfig map = loadNodeConfig(nh);
+  EXPECT_EQ(map.point_source, "map");
+  EXPECT_EQ(map.point_params.map.max_points, 500);
+  nh.setParam("point_source", "features");
+  nh.setParam("features", "sift");
+  nh.setParam("grid", 12);
+  const NodeConfig features = loadNodeConfig(nh);
+  EXPECT_EQ(features.point_params.features.detector, "sift");
+  EXPECT_EQ(features.point_params.depth.grid_cols, 12);
+}
+
+TEST(NodeConfig, NormaliseFrameId) {
+  EXPECT_EQ(normaliseFrameId("/world"), "world");
+  EXPECT_EQ(normaliseFrameId("//a/b"), "a/b");
+  EXPECT_EQ(normaliseFrameId("camera"), "camera");
+  EXPECT_EQ(normaliseFrameId("/"), "");
+  EXPECT_EQ(normaliseFrameId(""), "");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "test_node_config");
+  ros::NodeHandle nh;
+  return RUN_ALL_TESTS();
+}
