@@ -33,8 +33,10 @@ double median(std::vector<double> values) {
   return values[mid];
 }
 
-// Hamming distance of two ORB descriptors (32 bytes): the hardware popcount when the processor
-// has one (checked at run time; the package is built for the baseline instruction set).
+// Hamming distance of two ORB descriptors (32 bytes): on x86, the hardware popcount when the
+// processor has one (checked at run time; the package is built for the baseline instruction
+// set, where OpenCV's table-driven version measured several times slower); elsewhere OpenCV's.
+#if defined(__x86_64__) || defined(__i386__)
 __attribute__((target("popcnt"))) int hammingPopcnt(const uchar* a, const uchar* b, int bytes) {
   int d = 0;
   int i = 0;
@@ -52,6 +54,9 @@ int hamming(const uchar* a, const uchar* b, int bytes) {
   static const bool has_popcnt = __builtin_cpu_supports("popcnt");
   return has_popcnt ? hammingPopcnt(a, b, bytes) : cv::hal::normHamming(a, b, bytes);
 }
+#else
+int hamming(const uchar* a, const uchar* b, int bytes) { return cv::hal::normHamming(a, b, bytes); }
+#endif
 
 Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
   Eigen::Matrix3d s;

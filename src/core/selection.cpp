@@ -38,26 +38,28 @@ std::pair<ViewId, ViewId> Selection::initialPair() const {
 }
 
 std::vector<NextViewSet> computeNextViewSets(const ErrorResistanceTable& e, int k) {
-  // One pass per row keeping the k best so far, sorted: most entries lose to the current k-th
-  // with a single comparison, so this is O(finite entries) with no copy of the row.
+  // One pass per row keeping the k best so far, sorted. A row is stored by ascending column,
+  // so an entry that ties a kept value has the larger id and loses: plain `<` on the values
+  // implements METHOD.md's (value, id) order. Most entries lose to the current k-th with one
+  // comparison, so this is O(finite entries) with no copy of the row.
   const size_t keep = static_cast<size_t>(std::max(k, 0));
   std::vector<NextViewSet> sets(e.size());
-  std::vector<TableEntry> best;
-  best.reserve(keep + 1);
+  std::vector<TableEntry> best(keep);
   for (size_t i = 0; i < e.size(); ++i) {
-    best.clear();
-    for (const TableEntry& entry : e.row(static_cast<ViewId>(i))) {
-      if (best.size() == keep &&
-          (keep == 0 || !better(entry.value, entry.view, best.back().value, best.back().view)))
-        continue;
-      auto pos = best.end();
-      while (pos != best.begin() && better(entry.value, entry.view, (pos - 1)->value, (pos - 1)->view))
-        --pos;
-      best.insert(pos, entry);
-      if (best.size() > keep) best.pop_back();
+    size_t size = 0;
+    if (keep > 0) {
+      for (const TableEntry& entry : e.row(static_cast<ViewId>(i))) {
+        if (size == keep && !(entry.value < best[keep - 1].value)) continue;
+        size_t pos = size == keep ? keep - 1 : size++;
+        while (pos > 0 && entry.value < best[pos - 1].value) {
+          best[pos] = best[pos - 1];
+          --pos;
+        }
+        best[pos] = entry;
+      }
     }
-    sets[i].reserve(best.size());
-    for (const TableEntry& entry : best) sets[i].push_back(entry.view);
+    sets[i].resize(size);
+    for (size_t q = 0; q < size; ++q) sets[i][q] = best[q].view;
   }
   return sets;
 }

@@ -92,7 +92,11 @@ FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
 
   const auto t_points = std::chrono::steady_clock::now();
   const ViewId id = static_cast<ViewId>(matrix_.size());
-  PointSourceResult points = points_->process(id, frame);
+  // The point source sees the same normalised pose as the matrix, so a caller's quaternion of
+  // norm 1 +- rounding gives bit-identical points whichever path (node, tool) normalised it.
+  Frame normalised = frame;  // cv::Mat members are shared, not copied
+  normalised.pose = pose;
+  PointSourceResult points = points_->process(id, normalised);
   if (!points.points.allFinite()) throw InvalidInput("point source produced non-finite points");
   for (const auto& [view, updated] : points.updated) {
     if (view < 0 || view >= id || !updated.allFinite())

@@ -113,15 +113,20 @@ NodeConfig loadNodeConfig(const ros::NodeHandle& nh) {
   const int grid = readInt(nh, "grid", v.depth.grid_cols, 1, 256);
   v.depth.grid_cols = v.depth.grid_rows = grid;
 
+  // As select_views: auto is depth when there is depth, features otherwise.
   const std::string source = readChoice(nh, "point_source", "auto", {"auto", "depth", "features", "map"});
   c.point_source = source == "auto" ? (c.use_depth ? "depth" : "features") : source;
   if (c.point_source == "depth" && !c.use_depth)
     throw InvalidArgument("parameter " + paramName(nh, "point_source") +
                           " = depth needs depth images, but ~use_depth is false");
-  if (c.point_source != "depth")
-    throw InvalidArgument("point source '" + c.point_source +
-                          "' is not available in this build of view_selection_node yet; use "
-                          "~point_source depth (or auto) with ~use_depth true");
+  PointSourceParams& pp = c.point_params;
+  pp.depth = v.depth;
+  pp.features.detector = readChoice(nh, "features", pp.features.detector, {"orb", "sift"});
+  pp.features.max_features = readInt(nh, "max_features", pp.features.max_features, 1, 1000000);
+  pp.map.max_depth = readReal(nh, "map_max_depth", pp.map.max_depth, 0.0, 1e9);
+  pp.map.max_points = readInt(nh, "map_max_points", pp.map.max_points, 0, 100000000);
+  pp.map.occlusion_test = v.occlusion_test;
+  pp.validate();
   v.validate();
   return c;
 }

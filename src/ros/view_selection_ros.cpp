@@ -6,7 +6,10 @@
 #include "view_selection/ros/conversions.h"
 #include "view_selection/ros/markers.h"
 
+#include "view_selection/core/map_point_source.h"
+
 #include <cv_bridge/cv_bridge.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
 #include <opencv2/imgcodecs.hpp>
 #include <sensor_msgs/image_encodings.h>
 #include <tf2/exceptions.h>
@@ -38,7 +41,8 @@ std::string stampText(const ros::Time& t) {
 
 ViewSelectionRos::ViewSelectionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
     : nh_(nh), pnh_(private_nh), config_(loadNodeConfig(private_nh)), it_(nh) {
-  selector_ = std::make_unique<ViewSelector>(config_.selector);
+  selector_ = std::make_unique<ViewSelector>(config_.selector,
+                                             makePointSource(config_.point_source, config_.point_params));
   selection_ = selector_->select();
   started_ = ros::WallTime::now();
 
@@ -57,6 +61,9 @@ ViewSelectionRos::ViewSelectionRos(ros::NodeHandle nh, ros::NodeHandle private_n
   } else {
     pose_sub_ = nh_.subscribe("pose", 100, &ViewSelectionRos::onPose, this);
   }
+
+  if (config_.point_source == "map")
+    points_sub_ = nh_.subscribe("points", 2, &ViewSelectionRos::onMapPoints, this);
 
   worker_ = std::thread([this] { workerLoop(); });
 
@@ -86,6 +93,8 @@ ViewSelectionRos::ViewSelectionRos(ros::NodeHandle nh, ros::NodeHandle private_n
                           ? "tf (" + config_.world_frame + " <- " +
                                 (config_.camera_frame.empty() ? "image frame_id" : config_.camera_frame) + ")"
                           : "'" + nh_.resolveName("pose") + "'")
+                  << ", points from " << config_.point_source
+                  << (config_.point_source == "map" ? " ('" + nh_.resolveName("points") + "')" : std::string())
                   << ", keyframes " << toString(config_.selector.keyframes.mode) << ", k "
                   << config_.selector.selection.k << ", completion " << toString(config_.selector.selection.completion));
 }
@@ -98,6 +107,7 @@ ViewSelectionRos::~ViewSelectionRos() {
   depth_sub_.unsubscribe();
   info_sub_.unsubscribe();
   pose_sub_.shutdown();
+  points_sub_.shutdown();
   {
     std::lock_guard<std::mutex> lock(queue_mutex_);
     stopping_ = true;
@@ -157,6 +167,53 @@ void ViewSelectionRos::onPose(const geometry_msgs::PoseStampedConstPtr& pose) {
       poses_.pop_front();
   }
   pose_cv_.notify_all();
+}
+
+void ViewSelectionRos::onMapPoints(const sensor_msgs::PointCloud2ConstPtr& cloud) {
+  const std::string frame = normaliseFrameId(cloud->header.frame_id);
+  auto reject = [&](const std::string& why) {
+    ROS_WARN_STREAM_THROTTLE(5.0, "view_selection: ignored the map on '" << nh_.resolveName("points") << "' at "
+                                                                         << stampText(cloud->header.stamp) << ": "
+                                                                         << why);
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    ++stats_.dropped["bad_map"];
+    stats_.last_error = "bad_map: " + why;
+    stats_.last_error_stamp = cloud->header.stamp;
+    ++stats_version_;
+  };
+  if (frame != config_.world_frame)
+    return reject("the cloud is in frame '" + cloud->header.frame_id + "', not ~world_frame '" + config_.world_frame +
+                  "'");
+  const size_t n = static_cast<size_t>(cloud->width) * cloud->height;
+  if (cloud->data.size() < static_cast<size_t>(cloud->row_step) * cloud->height ||
+      static_cast<size_t>(cloud->point_step) * cloud->width > cloud->row_step)
+    return reject("the cloud's data is shorter than its width, height and steps say");
+  Eigen::Matrix3Xd points(3, static_cast<Eigen::Index>(n));
+  Eigen::Index kept = 0;
+  try {
+    sensor_msgs::PointCloud2ConstIterator<float> x(*cloud, "x"), y(*cloud, "y"), z(*cloud, "z");
+    for (size_t i = 0; i < n; ++i, ++x, ++y, ++z) {
+      if (!std::isfinite(*x) || !std::isfinite(*y) || !std::isfinite(*z)) continue;  // organised clouds pad with NaN
+      points.col(kept++) = Eigen::Vector3d(*x, *y, *z);
+    }
+  } catch (const std::exception& e) {
+    return reject(std::string("the cloud has no float32 x, y, z fields (") + e.what() + ")");
+  }
+  points.conservativeResize(3, kept);
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  auto* map = dynamic_cast<MapPointSource*>(&selector_->pointSource());
+  if (!map) return;
+  try {
+    map->setMapPoints(std::move(points));
+    const std::vector<ViewId> rows = selector_->applyPointUpdates();
+    if (!rows.empty()) {
+      selection_ = selector_->select();
+      ++version_;
+    }
+    ROS_DEBUG_STREAM("view_selection: map of " << kept << " points, " << rows.size() << " keyframe rows recomputed");
+  } catch (const InvalidInput& e) {
+    reject(e.what());
+  }
 }
 
 void ViewSelectionRos::workerLoop() {
@@ -340,7 +397,8 @@ void ViewSelectionRos::process(const PendingFrame& frame) {
   } catch (const InvalidInput& e) {
     return drop("bad_image", e.what(), stamp);
   }
-  if (wanted && frame.depth) {
+  // Feature points use the image alone (as select_views --points features reads no depth).
+  if (wanted && frame.depth && config_.point_source != "features") {
     try {
       core.depth_m = depthToMetres(*frame.depth, config_.depth_16u_metres_per_unit);
     } catch (const InvalidInput& e) {

@@ -191,6 +191,7 @@ int run(const Options& o) {
                                         : dataset.frames.size();
   const bool tty = isatty(fileno(stderr));
   double t_read = 0.0, t_points = 0.0, t_matrix = 0.0;
+  size_t rows_updated = 0;  // earlier keyframes' rows recomputed because their points changed
   auto last_report = std::chrono::steady_clock::now();
   for (size_t q = 0; q < total; ++q) {
     const auto t0 = std::chrono::steady_clock::now();
@@ -205,6 +206,7 @@ int run(const Options& o) {
       throw InvalidInput("frame " + std::to_string(q) + " (" + dataset.frames[q].rgb_path + "): " + e.what());
     }
     t_points += r.points_seconds;
+    rows_updated += r.updated_rows.size();
     t_matrix += r.matrix_seconds;
     if (!o.quiet && (seconds(last_report) > 1.0 || q + 1 == total)) {
       last_report = std::chrono::steady_clock::now();
@@ -264,9 +266,9 @@ int run(const Options& o) {
     const FeatureStats& t = fs->totalStats();
     const double kf = std::max<double>(1.0, static_cast<double>(t.keyframes));
     std::printf("features    %s, per keyframe (mean of %zu): extract %.1f ms | match %.1f ms | triangulate %.1f ms (Ceres %.1f)"
-                " | %.0f features, %.1f views matched, %.0f matches, %.0f points\n",
+                " | %.0f features, %.1f views matched, %.0f matches, %.0f points; %zu earlier rows recomputed\n",
                 fs->config().detector.c_str(), t.keyframes, 1e3 * t.extract_seconds / kf, 1e3 * t.match_seconds / kf,
-                1e3 * t.triangulate_seconds / kf, 1e3 * t.refine_seconds / kf, t.features / kf, t.candidates / kf, t.matches / kf, t.points / kf);
+                1e3 * t.triangulate_seconds / kf, 1e3 * t.refine_seconds / kf, t.features / kf, t.candidates / kf, t.matches / kf, t.points / kf, rows_updated);
   }
   std::printf("matrix      %zu x %zu, %zu finite entries of %.0f off-diagonal (%s)\n", n, n,
               matrix.table().finiteCount(), offdiag, percent(static_cast<double>(matrix.table().finiteCount()), offdiag).c_str());

@@ -13,7 +13,10 @@
 #include "view_selection/ros/conversions.h"
 
 #include <cv_bridge/cv_bridge.h>
+#include "view_selection/core/map_point_source.h"
+
 #include <geometry_msgs/PoseStamped.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 #include <sensor_msgs/image_encodings.h>
@@ -98,6 +101,8 @@ class BadInputTest : public ::testing::Test {
     pnh.param<std::string>("node", node_, "/view_selection");
     pnh.param<std::string>("pose_source", pose_source_, "tf");
     pnh.param<int>("k", k_, 5);
+    pnh.param<std::string>("point_source", point_source_, "depth");
+    points_pub_ = nh_.advertise<sensor_msgs::PointCloud2>("camera/points", 2, true);
     image_pub_ = nh_.advertise<sensor_msgs::Image>("camera/image", 50);
     info_pub_ = nh_.advertise<sensor_msgs::CameraInfo>("camera/camera_info", 50);
     depth_pub_ = nh_.advertise<sensor_msgs::Image>("camera/depth", 50);
@@ -126,7 +131,8 @@ class BadInputTest : public ::testing::Test {
     while (ros::WallTime::now() < deadline) {
       const bool poses = pose_source_ == "tf" ? tf_pub_.getNumSubscribers() > 0 : pose_pub_.getNumSubscribers() > 0;
       if (image_pub_.getNumSubscribers() > 0 && info_pub_.getNumSubscribers() > 0 &&
-          depth_pub_.getNumSubscribers() > 0 && poses && stats())
+          depth_pub_.getNumSubscribers() > 0 && poses && stats() &&
+          (point_source_ != "map" || points_pub_.getNumSubscribers() > 0))
         return true;
       ros::WallDuration(0.05).sleep();
     }
@@ -195,15 +201,16 @@ class BadInputTest : public ::testing::Test {
   }
 
   ros::NodeHandle nh_;
-  std::string node_, pose_source_;
+  std::string node_, pose_source_, point_source_;
   int k_ = 5;
-  ros::Publisher image_pub_, info_pub_, depth_pub_, tf_pub_, pose_pub_;
+  ros::Publisher image_pub_, info_pub_, depth_pub_, tf_pub_, pose_pub_, points_pub_;
   ros::Subscriber stats_sub_;
   std::mutex mutex_;
   view_selection::InputStatistics::ConstPtr stats_;
 };
 
 TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames) {
+  if (point_source_ == "map") GTEST_SKIP() << "map_input.test runs MapPointsReplaceAndUpdateRows";
   const fs::path data = fs::path(VIEW_SELECTION_SOURCE_DIR).parent_path() / "shared" / "data" / "redkitchen-0-499";
   bool synthetic = false;  // ~synthetic forces the built-in frames even when the data is there
   ros::NodeHandle("~").param("synthetic", synthetic, false);
@@ -424,6 +431,89 @@ TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames
   publish(makeSend(good[0], ros::Time(t0), "cam_" + std::to_string(camera++)), 1);
   ASSERT_TRUE(ros::service::call(node_ + "/get_selection", srv));
   EXPECT_EQ(srv.response.selection.keyframes.size(), 1u);
+}
+
+// ~point_source map: keyframes have no points until a cloud comes; a cloud in another frame is
+// ignored; a cloud in the world frame gives exactly the rows the core computes from it.
+TEST_F(BadInputTest, MapPointsReplaceAndUpdateRows) {
+  if (point_source_ != "map") GTEST_SKIP() << "only in map_input.test";
+  const std::vector<GoodFrame> good = syntheticFrames(4);
+  ASSERT_TRUE(waitForSubscribers()) << "the node under test did not subscribe within 20 s";
+  std::vector<ros::Time> stamps;
+  for (size_t i = 0; i < good.size(); ++i) {
+    stamps.push_back(ros::Time(2000.0 + 0.1 * static_cast<double>(i)));
+    publish(makeSend(good[i], stamps.back(), "cam"), i + 1);
+  }
+  view_selection::GetSelection srv;
+  ASSERT_TRUE(ros::service::call(node_ + "/get_selection", srv));
+  ASSERT_EQ(srv.response.selection.keyframes.size(), good.size());
+  EXPECT_EQ(srv.response.selection.finite_entries, 0u);
+  for (const auto& kf : srv.response.selection.keyframes) EXPECT_EQ(kf.num_points, 0);
+
+  // The map: points on the surface frame 0 sees, back-projected from its depth.
+  Eigen::Matrix3Xd map = sampleDepthPoints(good[0].depth, good[0].intrinsics, good[0].pose, DepthSamplerConfig{});
+  ASSERT_GT(map.cols(), 50);
+  auto cloud = [&](const std::string& frame) {
+    sensor_msgs::PointCloud2 c;
+    c.header.frame_id = frame;
+    c.header.stamp = ros::Time(2001.0);
+    sensor_msgs::PointCloud2Modifier modifier(c);
+    modifier.setPointCloud2FieldsByString(1, "xyz");
+    modifier.resize(static_cast<size_t>(map.cols()) + 1);
+    sensor_msgs::PointCloud2Iterator<float> x(c, "x"), y(c, "y"), z(c, "z");
+    for (Eigen::Index i = 0; i < map.cols(); ++i, ++x, ++y, ++z) {
+      *x = static_cast<float>(map(0, i));
+      *y = static_cast<float>(map(1, i));
+      *z = static_cast<float>(map(2, i));
+    }
+    *x = *y = *z = std::numeric_limits<float>::quiet_NaN();  // skipped, as organised clouds pad
+    return c;
+  };
+  points_pub_.publish(cloud("mars"));
+  ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(10.0);
+  auto badMaps = [&] {
+    const auto s = stats();
+    for (size_t i = 0; s && i < s->drop_reasons.size(); ++i)
+      if (s->drop_reasons[i] == "bad_map") return s->drop_counts[i];
+    return uint64_t{0};
+  };
+  while (badMaps() < 1 && ros::WallTime::now() < deadline) ros::WallDuration(0.01).sleep();
+  EXPECT_EQ(badMaps(), 1u) << "a cloud outside ~world_frame must be ignored and counted";
+
+  points_pub_.publish(cloud("/world"));
+  deadline = ros::WallTime::now() + ros::WallDuration(10.0);
+  while (ros::WallTime::now() < deadline) {
+    ASSERT_TRUE(ros::service::call(node_ + "/get_selection", srv));
+    if (srv.response.selection.finite_entries > 0) break;
+    ros::WallDuration(0.02).sleep();
+  }
+  const auto& sel = srv.response.selection;
+  ASSERT_GT(sel.finite_entries, 0u) << "the map never reached the keyframes";
+
+  // The core with the same frames and the same (float-rounded) map.
+  ViewSelectorConfig config;
+  config.keyframes.mode = KeyframeMode::kEveryFrame;
+  config.selection.k = k_;
+  ViewSelector selector(config, std::make_unique<MapPointSource>());
+  for (size_t i = 0; i < good.size(); ++i) {
+    Frame f;
+    f.stamp = stamps[i].toSec();
+    f.image_name = ros_node::keyframeImageName(f.stamp);
+    f.intrinsics = good[i].intrinsics;
+    f.pose = good[i].pose;
+    f.pose.orientation.normalize();
+    f.depth_m = good[i].depth;
+    ASSERT_EQ(selector.addFrame(f).outcome, FrameOutcome::kKeyframe);
+  }
+  dynamic_cast<MapPointSource&>(selector.pointSource()).setMapPoints(map.cast<float>().cast<double>());
+  selector.applyPointUpdates();
+  EXPECT_EQ(sel.finite_entries, selector.matrix().table().finiteCount());
+  for (size_t i = 0; i < good.size(); ++i) {
+    EXPECT_EQ(sel.keyframes[i].num_points, selector.matrix().keyframe(static_cast<ViewId>(i)).points.cols()) << i;
+    for (size_t q = 0; q < sel.next_view_sets[i].next_views.size(); ++q)
+      EXPECT_EQ(sel.next_view_sets[i].error_resistance[q],
+                selector.matrix().at(static_cast<ViewId>(i), sel.next_view_sets[i].next_views[q]));
+  }
 }
 
 }  // namespace

@@ -104,7 +104,8 @@ TEST(NodeConfig, BadValuesNameTheParameter) {
       {"pose_source", XmlRpc::XmlRpcValue("gps"), "is not one of: tf, topic"},
       {"occlusion_test", XmlRpc::XmlRpcValue("yes"), "must be true or false"},
       {"world_frame", XmlRpc::XmlRpcValue("/"), "must name a frame"},
-      {"point_source", XmlRpc::XmlRpcValue("map"), "'map' is not available"},
+      {"point_source", XmlRpc::XmlRpcValue("lidar"), "is not one of: auto, depth, features, map"},
+      {"features", XmlRpc::XmlRpcValue("surf"), "is not one of: orb, sift"},
       {"grid", XmlRpc::XmlRpcValue(0), "/bad/grid = 0 is out of range"},
   };
   for (const Case& c : cases) {
@@ -117,6 +118,24 @@ TEST(NodeConfig, BadValuesNameTheParameter) {
   nh.setParam("use_depth", false);
   nh.setParam("point_source", "depth");
   EXPECT_NE(errorOf(nh).find("~use_depth is false"), std::string::npos) << errorOf(nh);
+}
+
+TEST(NodeConfig, PointSources) {
+  ros::NodeHandle nh = fresh("sources");
+  EXPECT_EQ(loadNodeConfig(nh).point_source, "depth");  // auto with depth
+  nh.setParam("use_depth", false);
+  EXPECT_EQ(loadNodeConfig(nh).point_source, "features");  // auto without depth, as select_views
+  nh.setParam("point_source", "map");
+  nh.setParam("map_max_points", 500);
+  const NodeConfig map = loadNodeConfig(nh);
+  EXPECT_EQ(map.point_source, "map");
+  EXPECT_EQ(map.point_params.map.max_points, 500);
+  nh.setParam("point_source", "features");
+  nh.setParam("features", "sift");
+  nh.setParam("grid", 12);
+  const NodeConfig features = loadNodeConfig(nh);
+  EXPECT_EQ(features.point_params.features.detector, "sift");
+  EXPECT_EQ(features.point_params.depth.grid_cols, 12);
 }
 
 TEST(NodeConfig, NormaliseFrameId) {

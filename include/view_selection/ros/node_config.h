@@ -2,6 +2,7 @@
 // place. Defaults live in the structs (here and in the core's ViewSelectorConfig).
 #pragma once
 
+#include "view_selection/core/point_source_factory.h"
 #include "view_selection/core/view_selector.h"
 
 #include <ros/node_handle.h>
@@ -23,7 +24,8 @@ struct NodeConfig {
   int queue_size = 10;                ///< message_filters ApproximateTime queue
   int max_pending_frames = 30;        ///< frames waiting for the worker before the oldest is dropped
   bool use_depth = true;              ///< subscribe to `depth` and synchronise it
-  std::string point_source = "depth"; ///< resolved: depth (auto -> depth when use_depth)
+  std::string point_source = "depth"; ///< resolved: depth | features | map (auto: depth with use_depth, else features)
+  PointSourceParams point_params;     ///< each source's parameters (depth grid, features, map)
   double depth_16u_metres_per_unit = 0.001;  ///< 16UC1 depth scale (millimetres)
   double publish_period = 0.5;        ///< [s, wall] minimum interval between ~selection messages
   bool save_keyframe_images = false;  ///< keep keyframe images for ~export

@@ -18,6 +18,7 @@
 #include <ros/ros.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <sensor_msgs/PointCloud2.h>
 #include <std_srvs/Trigger.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_listener.h>
@@ -69,6 +70,7 @@ class ViewSelectionRos {
                const sensor_msgs::ImageConstPtr& depth);
   void onImageFrame(const sensor_msgs::ImageConstPtr& image, const sensor_msgs::CameraInfoConstPtr& info);
   void onPose(const geometry_msgs::PoseStampedConstPtr& pose);
+  void onMapPoints(const sensor_msgs::PointCloud2ConstPtr& cloud);
   void onRawImage(const sensor_msgs::ImageConstPtr& image);
   void workerLoop();
   void process(const PendingFrame& frame);
@@ -129,7 +131,7 @@ class ViewSelectionRos {
   using SyncImage = message_filters::sync_policies::ApproximateTime<sensor_msgs::Image, sensor_msgs::CameraInfo>;
   std::unique_ptr<message_filters::Synchronizer<SyncDepth>> sync_depth_;
   std::unique_ptr<message_filters::Synchronizer<SyncImage>> sync_image_;
-  ros::Subscriber pose_sub_;
+  ros::Subscriber pose_sub_, points_sub_;
 
   ros::Publisher selection_pub_, markers_pub_, statistics_pub_;
   ros::ServiceServer next_views_srv_, selection_srv_, export_srv_, reset_srv_;

@@ -1,0 +1,399 @@
+#!/usr/bin/env python3
+"""Bag-replay rostest: a TUM folder becomes a bag (tum_to_bag), the bag is played with --clock
+through view_selection_node (one node per ~pose_source), and each node's selection must equal
+select_views's on the same frames with the same parameters.
+
+The data: ~dataset (default ../shared/data/redkitchen-0-499 next to the package), its first
+~max_frames frames; when that folder is absent, the built-in synthetic sequence written by
+generate_sequence; when that tool is not built either, the test is skipped with a message.
+"""
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+import unittest
+
+import rosgraph
+import roslib.packages
+import rospy
+import rostest
+
+from view_selection.srv import Export, ExportRequest, GetSelection
+
+PKG = 'view_selection'
+
+
+def find_tool(name):
+    """Path of an executable of this package as rosrun finds it (devel space or install), or None."""
+    try:
+        found = roslib.packages.find_node(PKG, name)  # a list in Noetic, a path in older releases
+    except Exception:  # a broken workspace: report as not found
+        return None
+    if isinstance(found, (list, tuple)):
+        found = found[0] if found else None
+    return found or None
+
+
+def run(cmd, timeout, what):
+    """Runs a command; fails with its output when it does not exit 0 within timeout seconds."""
+    try:
+        done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, timeout=timeout,
+                              universal_newlines=True)
+    except subprocess.TimeoutExpired as e:
+        raise AssertionError('%s did not finish within %.0f s: %s\n%s' % (what, timeout, ' '.join(cmd),
+                                                                          e.output or ''))
+    if done.returncode != 0:
+        raise AssertionError('%s failed (exit %d): %s\n%s' % (what, done.returncode, ' '.join(cmd), done.stdout))
+    return done.stdout
+
+
+def stamp_ns(seconds):
+    return int(round(seconds * 1e9))
+
+
+def msg_stamp_ns(t):
+    return t.secs * 1000000000 + t.nsecs
+
+
+class Replay(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.nodes = rospy.get_param('~nodes').split()
+        cls.tolerances = [float(t) for t in str(rospy.get_param('~tolerances')).split()]
+        assert len(cls.nodes) == len(cls.tolerances), '~nodes and ~tolerances must pair up'
+        cls.rate = float(rospy.get_param('~rate', 0.5))
+        cls.max_frames = int(rospy.get_param('~max_frames', 150))
+        cls.timeout = float(rospy.get_param('~timeout', 60.0))
+        cls.tmp = tempfile.mkdtemp(prefix='view_selection_replay_')
+        cls.skip_reason = None
+        cls.prepare()
+
+    @classmethod
+    def tearDownClass(cls):
+        if os.environ.get('VIEW_SELECTION_KEEP_TEST_OUTPUT'):
+            rospy.loginfo('replay test output kept in %s', cls.tmp)
+        else:
+            shutil.rmtree(cls.tmp, ignore_errors=True)
+
+    # ------------------------------------------------------------------------------------------
+    @classmethod
+    def prepare(cls):
+        """Finds or makes the TUM folder, writes the bag and runs select_views; plays the bag."""
+        dataset = rospy.get_param('~dataset', '')
+        tum_to_bag, select_views = find_tool('tum_to_bag'), find_tool('select_views')
+        if not tum_to_bag or not select_views:
+            raise AssertionError('tum_to_bag or select_views is not built (build the package first)')
+        if dataset and os.path.isdir(dataset):
+            cls.source = dataset
+        else:
+            generate = find_tool('generate_sequence')
+            if not generate:
+                cls.skip_reason = ('neither %s nor the generate_sequence tool (the built-in synthetic '
+                                   'sequence) is available: nothing to replay' % (dataset or '~dataset'))
+                return
+            cls.source = os.path.join(cls.tmp, 'synthetic')
+            run([generate, '--out', cls.source, '--frames', str(cls.max_frames), '--quiet'], 600,
+                'generate_sequence')
+        rospy.loginfo('replay test: frames from %s', cls.source)
+
+        cls.bag = os.path.join(cls.tmp, 'replay.bag')
+        run([tum_to_bag, '--dataset', cls.source, '--out', cls.bag, '--max-frames', str(cls.max_frames),
+             '--quiet'], 600, 'tum_to_bag')
+
+        # select_views with the parameters of the first node (the .test gives every node the same).
+        cls.offline = os.path.join(cls.tmp, 'offline')
+        run([select_views, '--dataset', cls.source, '--max-frames', str(cls.max_frames), '--out', cls.offline,
+             '--quiet', '--print-sets', '0'] + cls.select_views_options(cls.nodes[0]), 600, 'select_views')
+        with open(os.path.join(cls.offline, 'selection.json')) as f:
+            cls.expected = json.load(f)
+        with open(os.path.join(cls.offline, 'pairs.txt')) as f:
+            cls.expected_pairs_txt = f.read()
+        cls.frames = min(cls.max_frames, cls.count_frames(cls.bag))
+
+        for node in cls.nodes:
+            for name in ('get_selection', 'export'):
+                try:
+                    rospy.wait_for_service(node + '/' + name, timeout=cls.timeout)
+                except rospy.ROSException:
+                    raise AssertionError('%s/%s was not advertised within %.0f s' % (node, name, cls.timeout))
+        cls.wait_for_subscribers()
+
+        play = ['rosbag', 'play', '--clock', '-q', '-r', str(cls.rate), '-d', '1', cls.bag]
+        play_timeout = 30.0 + 2.0 * (cls.frames / 30.0) / cls.rate
+        run(play, play_timeout, 'rosbag play')
+        cls.wait_until_processed()
+
+    @classmethod
+    def count_frames(cls, bag):
+        out = run(['rosbag', 'info', '--yaml', '--key', 'topics', bag], 60, 'rosbag info')
+        # lines like "- topic: /camera/rgb/image_color\n  type: ...\n  messages: 150"
+        topic = None
+        for line in out.splitlines():
+            line = line.strip().lstrip('- ')
+            if line.startswith('topic:'):
+                topic = line.split(':', 1)[1].strip()
+            elif line.startswith('messages:') and topic == '/camera/rgb/image_color':
+                return int(line.split(':', 1)[1])
+        raise AssertionError('the bag %s has no /camera/rgb/image_color:\n%s' % (bag, out))
+
+    @classmethod
+    def select_views_options(cls, node):
+        """The node's private parameters as select_views options; unset ones keep both defaults."""
+        def get(name):
+            return rospy.get_param(node + '/' + name, None)
+        options = []
+        policy = get('keyframe_policy') or 'motion'
+        if policy == 'every_frame':
+            options += ['--every', '1']
+        elif policy == 'every_nth':
+            options += ['--every', str(get('every_n') or 10)]
+        else:
+            for param, option in (('min_translation', '--min-translation'), ('min_rotation_deg', '--min-rotation')):
+                if get(param) is not None:
+                    options += [option, repr(float(get(param)))]
+        for param, option in (('k', '--k'), ('completion', '--completion'),
+                              ('min_covisible_points', '--min-covisible-points'),
+                              ('min_covisible_ratio', '--min-covisible-ratio'),
+                              ('max_view_angle_deg', '--max-view-angle'), ('grid', '--grid')):
+            value = get(param)
+            if value is not None:
+                options += [option, repr(value) if isinstance(value, float) else str(value)]
+        if get('occlusion_test') is False:
+            options.append('--no-occlusion')
+        return options
+
+    @classmethod
+    def wait_for_subscribers(cls):
+        """rosbag play must not start before every node listens, or the first frames are lost."""
+        master = rosgraph.Master(rospy.get_name())
+        deadline = time.time() + cls.timeout
+        wanted = {}
+        for node in cls.nodes:
+            topics = ['/camera/rgb/image_color', '/camera/rgb/camera_info', '/camera/depth/image']
+            topics.append('/tf' if rospy.get_param(node + '/pose_source', 'tf') == 'tf' else '/camera/pose')
+            wanted[node] = topics
+        missing = []
+        while time.time() < deadline:
+            subscribers = {topic: set(names) for topic, names in master.getSystemState()[1]}
+            missing = ['%s on %s' % (node, topic) for node, topics in wanted.items() for topic in topics
+                       if node not in subscribers.get(topic, ())]
+            if not missing:
+                return
+            time.sleep(0.2)
+        raise AssertionError('not subscribed within %.0f s: %s' % (cls.timeout, ', '.join(missing)))
+
+    @classmethod
+    def wait_until_processed(cls):
+        """Waits until every node has as many keyframes as select_views, or stopped changing."""
+        expected = len(cls.expected['keyframes'])
+        deadline = time.time() + cls.timeout
+        for node in cls.nodes:
+            get = rospy.ServiceProxy(node + '/get_selection', GetSelection)
+            last, since = None, time.time()
+            while time.time() < deadline:
+                n = len(get().selection.keyframes)
+                if n >= expected:
+                    break
+                if n != last:
+                    last, since = n, time.time()
+                elif time.time() - since > 10.0:
+                    break  # stuck: the comparison below reports what is missing
+                time.sleep(0.2)
+        time.sleep(0.5)  # a frame still in the worker would show as an extra keyframe below
+
+    # ------------------------------------------------------------------------------------------
+    def setUp(self):
+        if self.skip_reason:
+            rospy.logwarn('replay test skipped: %s', self.skip_reason)
+            self.skipTest(self.skip_reason)
+
+    def assertClose(self, actual, expected, tolerance, what):
+        if tolerance == 0.0:
+            self.assertEqual(actual, expected, what)
+        else:
+            self.assertLessEqual(abs(actual - expected), tolerance * max(1.0, abs(expected)),
+                                 '%s: %r vs %r' % (what, actual, expected))
+
+    def check_selection(self, node, tolerance):
+        answer = rospy.ServiceProxy(node + '/get_selection', GetSelection)()
+        self.assertTrue(answer.success, '%s/get_selection: %s' % (node, answer.message))
+        s, e = answer.selection, self.expected
+        n = len(e['keyframes'])
+        self.assertGreater(n, 2, 'select_views found too few keyframes for a meaningful test')
+        # No keyframe lost, none extra: the same keyframes, by stamp, in the same order.
+        self.assertEqual([msg_stamp_ns(k.stamp) for k in s.keyframes], [stamp_ns(k['stamp']) for k in e['keyframes']],
+                         '%s: keyframe stamps differ from select_views\'s' % node)
+        self.assertEqual(s.k, e['params']['k'])
+        self.assertEqual(s.completion, e['params']['completion'])
+        for i, (k, x) in enumerate(zip(s.keyframes, e['keyframes'])):
+            what = '%s keyframe %d' % (node, i)
+            self.assertEqual(k.id, i, what)
+            self.assertEqual(k.num_points, x['num_points'], what + ' sample points')
+            p, q = k.pose.position, k.pose.orientation
+            for a, b, c in zip((p.x, p.y, p.z), x['position'], 'xyz'):
+                self.assertClose(a, b, tolerance, what + ' position ' + c)
+            for a, b, c in zip((q.x, q.y, q.z, q.w), x['orientation_xyzw'], 'xyzw'):
+                self.assertClose(a, b, tolerance, what + ' orientation ' + c)
+        matrix = e['error_resistance']
+        self.assertEqual(len(s.next_view_sets), n)
+        for i, v in enumerate(s.next_view_sets):
+            what = '%s C_%d' % (node, i)
+            self.assertEqual(v.view, i, what)
+            self.assertEqual(list(v.next_views), e['next_views'][i], what)
+            final = e['final_next_views'][i]
+            self.assertEqual(list(v.next_views) + list(v.completed_views), final, what + ' after completion')
+            values = list(v.error_resistance) + list(v.completed_error_resistance)
+            for j, value in zip(final, values):
+                self.assertIsNotNone(matrix[i][j], what)
+                self.assertClose(value, matrix[i][j], tolerance, '%s E[%d][%d]' % (node, i, j))
+        self.assertEqual(s.start_view, -1 if e['start_view'] is None else e['start_view'], node + ' start view')
+        initial = e.get('initial_pair')
+        self.assertEqual(list(s.initial_pair), list(initial) if initial else [], node + ' initial pair')
+        self.assertEqual(list(s.order), e['order'], node + ' order')
+        self.assertEqual([(c.view, c.added_to) for c in s.completed],
+                         [(c['view'], c['added_to']) for c in e['completed']], node + ' completed')
+        self.assertEqual(list(s.isolated), e['isolated'], node + ' isolated')
+        self.assertEqual([[p.first, p.second] for p in s.pairs], e['pairs'], node + ' pairs')
+        finite = sum(1 for i, row in enumerate(matrix) for j, v in enumerate(row) if i != j and v is not None)
+        self.assertEqual(s.finite_entries, finite, node + ' finite entries')
+
+    def check_statistics(self, node):
+        """Every frame of the bag reached the node and none was dropped."""
+        try:
+            from view_selection.msg import InputStatistics
+        except ImportError:
+            self.fail('view_selection/InputStatistics is not built')
+        stats = rospy.wait_for_message(node + '/statistics', InputStatistics, timeout=self.timeout)
+        reasons = dict(zip(stats.drop_reasons, stats.drop_counts))
+        self.assertEqual(stats.frames_dropped, 0, '%s dropped frames: %s (last: %s)' % (node, reasons, stats.last_error))
+        self.assertEqual(stats.frames_received, self.frames, node + ': frames received')
+        self.assertEqual(stats.frames_offered, self.frames, node + ': frames offered to the keyframe policy')
+        self.assertEqual(stats.keyframes, len(self.expected['keyframes']), node + ': keyframes')
+
+    def check_export(self, node):
+        """~export writes pairs.txt with the same pairs, in the same order, as select_views."""
+        directory = os.path.join(self.tmp, 'export_' + node.strip('/').replace('/', '_'))
+        answer = rospy.ServiceProxy(node + '/export', Export)(ExportRequest(directory=directory))
+        self.assertTrue(answer.success, '%s/export: %s' % (node, answer.message))
+        with open(answer.pairs_txt) as f:
+            pairs_txt = f.read()
+        with open(answer.selection_json) as f:
+            exported = json.load(f)
+        self.assertEqual(exported['pairs'], self.expected['pairs'], node + ' exported selection.json pairs')
+        # Image names: select_views uses the TUM file names, the node names images by stamp; both
+        # name each keyframe once, so the files must say the same once names are mapped to stamps.
+        def by_stamp(text, selection):
+            names = {k['image']: stamp_ns(k['stamp']) for k in selection['keyframes']}
+            self.assertEqual(len(set(names.values())), len(selection['keyframes']), 'image names are not unique')
+            lines = []
+            for line in text.splitlines():
+                a, b = line.split()
+                self.assertIn(a, names, 'pairs.txt names an image that is no keyframe: ' + a)
+                self.assertIn(b, names, 'pairs.txt names an image that is no keyframe: ' + b)
+                lines.append((names[a], names[b]))
+            return lines
+        self.assertEqual(by_stamp(pairs_txt, exported), by_stamp(self.expected_pairs_txt, self.expected),
+                         node + ' pairs.txt differs from select_views\'s')
+        self.assertEqual(len(pairs_txt.splitlines()), len(self.expected['pairs']))
+        if rospy.get_param(node + '/save_keyframe_images', False):
+            self.assertEqual(answer.images_written, len(self.expected['keyframes']), node + ' images written')
+            for k in exported['keyframes']:
+                self.assertTrue(os.path.isfile(os.path.join(directory, exported['params'].get('image_path', ''),
+                                                            k['image'])), node + ' image ' + k['image'])
+
+    def test_2_bag_has_the_tum_layout(self):
+        """tum_to_bag: topics, types, encodings, frame ids, stamps and pixel values of the TUM folder."""
+        import cv2
+        import numpy
+        import rosbag
+
+        def read_list(name):
+            entries = []
+            with open(os.path.join(self.source, name)) as f:
+                for line in f:
+                    if line.strip() and not line.startswith('#'):
+                        stamp, path = line.split()
+                        entries.append((float(stamp), path))
+            return entries
+        rgb, depth = read_list('rgb.txt'), read_list('depth.txt')
+        # The kitchen and the synthetic sequence have one depth image per colour image, same stamps.
+        self.assertEqual([s for s, _ in rgb], [s for s, _ in depth], 'this check assumes aligned lists')
+        frames = list(zip(rgb, depth))[:self.max_frames]
+        expected_types = {'/camera/rgb/image_color': 'sensor_msgs/Image', '/camera/rgb/camera_info': 'sensor_msgs/CameraInfo',
+                          '/camera/depth/image': 'sensor_msgs/Image', '/camera/depth/camera_info': 'sensor_msgs/CameraInfo',
+                          '/tf': 'tf2_msgs/TFMessage', '/camera/pose': 'geometry_msgs/PoseStamped'}
+        with rosbag.Bag(self.bag) as bag:
+            info = bag.get_type_and_topic_info().topics
+            self.assertEqual({t: i.msg_type for t, i in info.items()}, expected_types)
+            for topic in expected_types:
+                self.assertEqual(info[topic].message_count, len(frames), topic)
+            seen = {t: [] for t in expected_types}
+            checked = 0
+            for topic, msg, t in bag.read_messages():
+                header = msg.transforms[0].header if topic == '/tf' else msg.header
+                self.assertEqual(msg_stamp_ns(t), msg_stamp_ns(header.stamp), topic + ': bag time is the stamp')
+                seen[topic].append(msg_stamp_ns(header.stamp))
+                if topic == '/tf':
+                    self.assertEqual((header.frame_id, msg.transforms[0].child_frame_id),
+                                     ('/world', '/openni_rgb_optical_frame'))
+                elif topic == '/camera/pose':
+                    self.assertEqual(header.frame_id, '/world')
+                else:
+                    self.assertEqual(header.frame_id, '/openni_rgb_optical_frame', topic)
+                index = len(seen[topic]) - 1
+                if topic == '/camera/rgb/image_color' and index < 3:
+                    self.assertEqual(msg.encoding, 'rgb8')
+                    image = numpy.frombuffer(msg.data, numpy.uint8).reshape(msg.height, msg.width, 3)
+                    bgr = cv2.imread(os.path.join(self.source, frames[index][0][1]), cv2.IMREAD_COLOR)
+                    self.assertTrue(numpy.array_equal(image, bgr[:, :, ::-1]), 'rgb8 pixels of frame %d' % index)
+                    checked += 1
+                if topic == '/camera/depth/image' and index < 3:
+                    self.assertEqual(msg.encoding, '32FC1')
+                    image = numpy.frombuffer(msg.data, numpy.float32).reshape(msg.height, msg.width)
+                    png = cv2.imread(os.path.join(self.source, frames[index][1][1]), cv2.IMREAD_ANYDEPTH)
+                    valid = png > 0
+                    self.assertTrue(numpy.all(numpy.isnan(image[~valid])), 'missing depth is NaN')
+                    self.assertTrue(numpy.array_equal(image[valid], (png[valid] * (1.0 / 5000.0)).astype(numpy.float32)),
+                                    'depth in metres of frame %d' % index)
+                    checked += 1
+            self.assertEqual(checked, 6)
+        stamps = [stamp_ns(s) for (s, _), _ in frames]
+        for topic in expected_types:
+            self.assertEqual(seen[topic], stamps, topic + ' stamps are the TUM stamps, in order')
+
+    def test_3_tum_to_bag_reports_bad_input(self):
+        tool = find_tool('tum_to_bag')
+        missing = os.path.join(self.tmp, 'no_such_folder')
+        cases = [([], 2, '--dataset DIR is required'),
+                 (['--dataset', self.source], 2, '--out BAG is required'),
+                 (['--dataset', self.source, '--out', os.path.join(self.tmp, 'x.bag'), '--every', '0'], 2, '--every'),
+                 (['--dataset', missing, '--out', os.path.join(self.tmp, 'y.bag')], 1, missing)]
+        for args, code, text in cases:
+            done = subprocess.run([tool] + args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, timeout=60,
+                                  universal_newlines=True)
+            self.assertEqual(done.returncode, code, '%s: %s' % (args, done.stdout))
+            self.assertIn(text, done.stdout, args)
+        self.assertFalse(os.path.exists(os.path.join(self.tmp, 'y.bag')), 'no bag is left after an error')
+
+    # One test method a node, so that a failure names the pose source.
+    def test_0_topic_pose_source(self):
+        self._check_node(0)
+
+    def test_1_tf_pose_source(self):
+        self._check_node(1)
+
+    def _check_node(self, index):
+        if index >= len(self.nodes):
+            self.skipTest('no node %d in ~nodes' % index)
+        node, tolerance = self.nodes[index], self.tolerances[index]
+        self.check_selection(node, tolerance)
+        self.check_statistics(node)
+        self.check_export(node)
+
+
+if __name__ == '__main__':
+    rospy.init_node('replay_tester')
+    rostest.rosrun(PKG, 'replay', Replay, sys.argv)
