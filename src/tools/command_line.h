@@ -1,8 +1,11 @@
 // A small command-line parser for the offline tools: "--name value", "--name=value" and flags,
-// with one clear error message for every mistake. Header-only, no dependency.
+// with one clear error message for every mistake, and runTool, the tools' common main. Header-only.
 #pragma once
 
+#include "view_selection/core/exceptions.h"
+
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <map>
 #include <optional>
@@ -112,5 +115,23 @@ class CommandLine {
   std::map<std::string, std::string> values_;
   std::set<std::string> flags_;
 };
+
+/// A tool's main: runs `body`, and turns what it throws into one line on stderr and the exit
+/// code: 2 for a usage mistake, 1 for an error (view_selection::Error or anything else).
+template <typename Body>
+int runTool(const char* name, Body body) {
+  try {
+    return body();
+  } catch (const UsageError& e) {
+    std::fprintf(stderr, "%s: %s\n", name, e.what());
+    return 2;
+  } catch (const Error& e) {
+    std::fprintf(stderr, "%s: error: %s\n", name, e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: unexpected error: %s\n", name, e.what());
+    return 1;
+  }
+}
 
 }  // namespace view_selection::tools

@@ -171,16 +171,5 @@ int run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return run(argc, argv);
-  } catch (const UsageError& e) {
-    std::fprintf(stderr, "evaluate_trajectory: %s\n", e.what());
-    return 2;
-  } catch (const Error& e) {
-    std::fprintf(stderr, "evaluate_trajectory: error: %s\n", e.what());
-    return 1;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "evaluate_trajectory: unexpected error: %s\n", e.what());
-    return 1;
-  }
+  return view_selection::tools::runTool("evaluate_trajectory", [&] { return run(argc, argv); });
 }

@@ -125,16 +125,5 @@ int run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return run(parse(argc, argv));
-  } catch (const UsageError& e) {
-    std::fprintf(stderr, "generate_sequence: %s\n", e.what());
-    return 2;
-  } catch (const Error& e) {
-    std::fprintf(stderr, "generate_sequence: error: %s\n", e.what());
-    return 1;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "generate_sequence: unexpected error: %s\n", e.what());
-    return 1;
-  }
+  return view_selection::tools::runTool("generate_sequence", [&] { return run(parse(argc, argv)); });
 }

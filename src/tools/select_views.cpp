@@ -299,16 +299,5 @@ int run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return run(parse(argc, argv));
-  } catch (const UsageError& e) {
-    std::fprintf(stderr, "select_views: %s\n", e.what());
-    return 2;
-  } catch (const Error& e) {
-    std::fprintf(stderr, "select_views: error: %s\n", e.what());
-    return 1;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "select_views: unexpected error: %s\n", e.what());
-    return 1;
-  }
+  return view_selection::tools::runTool("select_views", [&] { return run(parse(argc, argv)); });
 }

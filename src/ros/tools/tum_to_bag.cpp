@@ -277,16 +277,5 @@ int run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
-    return run(parse(argc, argv));
-  } catch (const UsageError& e) {
-    std::fprintf(stderr, "tum_to_bag: %s\n", e.what());
-    return 2;
-  } catch (const Error& e) {
-    std::fprintf(stderr, "tum_to_bag: error: %s\n", e.what());
-    return 1;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "tum_to_bag: unexpected error: %s\n", e.what());
-    return 1;
-  }
+  return view_selection::tools::runTool("tum_to_bag", [&] { return run(parse(argc, argv)); });
 }
