@@ -11,6 +11,10 @@ namespace view_selection {
 
 namespace {
 bool byView(const TableEntry& e, ViewId v) { return e.view < v; }
+/// METHOD.md's order of candidates: by value, then by id.
+bool byValue(const TableEntry& a, const TableEntry& b) {
+  return a.value < b.value || (a.value == b.value && a.view < b.view);
+}
 }  // namespace
 
 ErrorResistanceTable ErrorResistanceTable::fromDense(const std::vector<std::vector<double>>& dense) {
@@ -30,11 +34,13 @@ void ErrorResistanceTable::resize(size_t size) {
   if (size < rows_.size()) throw InvalidArgument("ErrorResistanceTable::resize cannot shrink");
   rows_.resize(size);
   cols_.resize(size);
+  top_.resize(size);
 }
 
 void ErrorResistanceTable::clear() {
   rows_.clear();
   cols_.clear();
+  top_.clear();
   finite_count_ = 0;
 }
 
@@ -75,10 +81,54 @@ void ErrorResistanceTable::set(ViewId i, ViewId j, double value) {
     upsert(row, j, value);
     upsert(col, i, value);
     finite_count_ += row.size() - before;
+    updateTop(static_cast<size_t>(i), j, value);
   } else if (erase(row, j)) {
     erase(col, i);
     --finite_count_;
+    updateTop(static_cast<size_t>(i), j, kInfinity);
   }
+}
+
+void ErrorResistanceTable::updateTop(size_t i, ViewId j, double value) {
+  auto& top = top_[i];
+  const size_t row_size = rows_[i].size();
+  const auto it = std::find_if(top.begin(), top.end(), [j](const TableEntry& e) { return e.view == j; });
+  if (it != top.end()) {
+    // An entry of the top changed: if it got better (or as good), it stays; otherwise an entry
+    // outside the top may now belong in it, which only a scan of the row can tell.
+    if (std::isfinite(value) && !byValue({j, it->value}, {j, value})) {
+      it->value = value;
+      std::sort(top.begin(), top.end(), byValue);
+      return;
+    }
+    if (std::isfinite(value) && row_size <= top.size()) {
+      it->value = value;  // the whole row is in the top: just reorder
+      std::sort(top.begin(), top.end(), byValue);
+      return;
+    }
+    rescanTop(i);
+    return;
+  }
+  if (!std::isfinite(value)) return;  // removed an entry outside the top: nothing changes
+  const TableEntry entry{j, value};
+  if (top.size() < kTopCapacity) {
+    // The top held the whole row before this entry arrived.
+    top.insert(std::upper_bound(top.begin(), top.end(), entry, byValue), entry);
+    return;
+  }
+  if (byValue(entry, top.back())) {
+    top.pop_back();
+    top.insert(std::upper_bound(top.begin(), top.end(), entry, byValue), entry);
+  }
+}
+
+void ErrorResistanceTable::rescanTop(size_t i) {
+  auto& top = top_[i];
+  const auto& row = rows_[i];
+  top.assign(row.begin(), row.end());
+  const size_t keep = std::min(kTopCapacity, top.size());
+  std::partial_sort(top.begin(), top.begin() + static_cast<std::ptrdiff_t>(keep), top.end(), byValue);
+  top.resize(keep);
 }
 
 void ErrorResistanceTable::replaceRow(ViewId i, std::vector<TableEntry> entries) {
@@ -94,6 +144,7 @@ void ErrorResistanceTable::replaceRow(ViewId i, std::vector<TableEntry> entries)
     upsert(cols_.at(static_cast<size_t>(e.view)), i, e.value);
   }
   finite_count_ += row.size();
+  rescanTop(static_cast<size_t>(i));
 }
 
 std::vector<std::vector<double>> ErrorResistanceTable::dense() const {

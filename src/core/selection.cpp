@@ -44,6 +44,16 @@ std::vector<NextViewSet> computeNextViewSets(const ErrorResistanceTable& e, int 
   // comparison, so this is O(finite entries) with no copy of the row.
   const size_t keep = static_cast<size_t>(std::max(k, 0));
   std::vector<NextViewSet> sets(e.size());
+  if (keep <= ErrorResistanceTable::kTopCapacity) {
+    // The table keeps each row's best entries current: O(k) a row.
+    for (size_t i = 0; i < e.size(); ++i) {
+      const auto& top = e.top(static_cast<ViewId>(i));
+      const size_t take = std::min(keep, top.size());
+      sets[i].resize(take);
+      for (size_t q = 0; q < take; ++q) sets[i][q] = top[q].view;
+    }
+    return sets;
+  }
   std::vector<TableEntry> best(keep);
   for (size_t i = 0; i < e.size(); ++i) {
     size_t size = 0;

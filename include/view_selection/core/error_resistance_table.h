@@ -42,6 +42,11 @@ class ErrorResistanceTable {
   const std::vector<TableEntry>& column(ViewId j) const { return cols_[static_cast<size_t>(j)]; }
 
   size_t finiteCount() const { return finite_count_; }
+
+  /// The best min(kTopCapacity, |row i|) entries of row i, ascending by (value, view): kept up
+  /// to date on every change, so next view sets with k <= kTopCapacity cost O(k) a row.
+  static constexpr size_t kTopCapacity = 16;
+  const std::vector<TableEntry>& top(ViewId i) const { return top_[static_cast<size_t>(i)]; }
   /// Dense copy, +inf for absent entries.
   std::vector<std::vector<double>> dense() const;
 
@@ -51,9 +56,13 @@ class ErrorResistanceTable {
  private:
   static void upsert(std::vector<TableEntry>& list, ViewId view, double value);
   static bool erase(std::vector<TableEntry>& list, ViewId view);
+  /// Keeps top_[i] right after E[i][j] became `value` (+inf: removed).
+  void updateTop(size_t i, ViewId j, double value);
+  void rescanTop(size_t i);
 
   std::vector<std::vector<TableEntry>> rows_;
   std::vector<std::vector<TableEntry>> cols_;
+  std::vector<std::vector<TableEntry>> top_;
   size_t finite_count_ = 0;
 };
 
