@@ -135,6 +135,18 @@ geometry_msgs::Pose poseToMsg(const CameraPose& pose) {
   return m;
 }
 
+geometry_msgs::Transform transformToMsg(const CameraPose& pose) {
+  geometry_msgs::Transform m;
+  m.translation.x = pose.position.x();
+  m.translation.y = pose.position.y();
+  m.translation.z = pose.position.z();
+  m.rotation.w = pose.orientation.w();
+  m.rotation.x = pose.orientation.x();
+  m.rotation.y = pose.orientation.y();
+  m.rotation.z = pose.orientation.z();
+  return m;
+}
+
 std::string keyframeImageName(double stamp) {
   char buffer[64];
   std::snprintf(buffer, sizeof buffer, "rgb/%.6f.png", stamp);

@@ -174,13 +174,7 @@ class BadInputTest : public ::testing::Test {
         t.header.stamp = s.stamp;
         t.header.frame_id = "world";
         t.child_frame_id = s.camera_frame;
-        t.transform.translation.x = s.pose.position.x();
-        t.transform.translation.y = s.pose.position.y();
-        t.transform.translation.z = s.pose.position.z();
-        t.transform.rotation.w = s.pose.orientation.w();
-        t.transform.rotation.x = s.pose.orientation.x();
-        t.transform.rotation.y = s.pose.orientation.y();
-        t.transform.rotation.z = s.pose.orientation.z();
+        t.transform = ros_node::transformToMsg(s.pose);
         tf2_msgs::TFMessage m;
         m.transforms.push_back(t);
         tf_pub_.publish(m);

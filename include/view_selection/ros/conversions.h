@@ -47,6 +47,8 @@ void checkDepthEncoding(const sensor_msgs::Image& msg);
 CameraPose poseFromMsg(const geometry_msgs::Pose& pose);
 CameraPose poseFromTransform(const geometry_msgs::Transform& transform);
 geometry_msgs::Pose poseToMsg(const CameraPose& pose);
+/// The same pose as a transform (e.g. for /tf: the camera frame in the world frame).
+geometry_msgs::Transform transformToMsg(const CameraPose& pose);
 
 /// The name a keyframe image gets in pairs.txt and under ~export: "rgb/<stamp, 6 decimals>.png",
 /// the TUM layout's naming.

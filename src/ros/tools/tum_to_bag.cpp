@@ -6,6 +6,7 @@
 
 #include "view_selection/core/exceptions.h"
 #include "view_selection/core/tum_frames.h"
+#include "view_selection/ros/conversions.h"
 
 #include <geometry_msgs/PoseStamped.h>
 #include <ros/time.h>
@@ -209,23 +210,14 @@ int run(const Options& o) {
       t.header.stamp = stamp;
       t.header.frame_id = o.world_frame;
       t.child_frame_id = o.camera_frame;
-      t.transform.translation.x = tum.pose.position.x();
-      t.transform.translation.y = tum.pose.position.y();
-      t.transform.translation.z = tum.pose.position.z();
-      t.transform.rotation.x = tum.pose.orientation.x();
-      t.transform.rotation.y = tum.pose.orientation.y();
-      t.transform.rotation.z = tum.pose.orientation.z();
-      t.transform.rotation.w = tum.pose.orientation.w();
+      t.transform = ros_node::transformToMsg(tum.pose);
       tf2_msgs::TFMessage tf;
       tf.transforms.push_back(t);
       bag.write("/tf", stamp, tf);
 
       geometry_msgs::PoseStamped pose;
       pose.header = t.header;
-      pose.pose.position.x = t.transform.translation.x;
-      pose.pose.position.y = t.transform.translation.y;
-      pose.pose.position.z = t.transform.translation.z;
-      pose.pose.orientation = t.transform.rotation;
+      pose.pose = ros_node::poseToMsg(tum.pose);
       bag.write("/camera/pose", stamp, pose);
 
       if (!frame.depth_m.empty()) {
