@@ -9,6 +9,7 @@
 #include "view_selection/core/error_resistance.h"
 #include "view_selection/core/error_resistance_matrix.h"
 #include "view_selection/core/selection.h"
+#include "view_selection/eval/reference_error_resistance.h"
 
 #include <benchmark/benchmark.h>
 
@@ -16,7 +17,7 @@
 #include <memory>
 #include <random>
 
-namespace view_selection {
+namespace view_selection::core {
 namespace {
 
 PinholeIntrinsics vga() {
@@ -151,7 +152,7 @@ void BM_ErrorResistanceBruteForce(benchmark::State& state) {
   const PointSet s = pointSet();
   for (auto _ : state)
     for (const auto& p : s.world)
-      benchmark::DoNotOptimize(pointErrorResistanceByTriangulation(p, s.k, s.pose_i, s.k, s.pose_j));
+      benchmark::DoNotOptimize(eval::pointErrorResistanceByTriangulation(p, s.k, s.pose_i, s.k, s.pose_j));
   state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(s.world.size()));
 }
 BENCHMARK(BM_ErrorResistanceBruteForce);
@@ -207,6 +208,6 @@ void BM_SelectObjectReachable(benchmark::State& state) { selection(state, object
 BENCHMARK(BM_SelectObjectReachable)->Arg(1000)->Arg(2000)->Unit(benchmark::kMillisecond);
 
 }  // namespace
-}  // namespace view_selection
+}  // namespace view_selection::core
 
 BENCHMARK_MAIN();

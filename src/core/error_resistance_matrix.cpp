@@ -7,22 +7,16 @@
 #include <cmath>
 #include <string>
 
-namespace view_selection {
+namespace view_selection::core {
 
-void ErrorResistanceConfig::validate() const {
-  if (min_covisible_points < 1)
-    throw InvalidArgument("min_covisible_points must be >= 1, got " +
-                          std::to_string(min_covisible_points));
-  if (!(min_covisible_ratio >= 0.0 && min_covisible_ratio <= 1.0))
-    throw InvalidArgument("min_covisible_ratio must be in [0, 1], got " +
-                          std::to_string(min_covisible_ratio));
-  if (!std::isfinite(max_view_angle_deg) || max_view_angle_deg > 180.0)
-    throw InvalidArgument("max_view_angle_deg must be <= 180 (<= 0 disables the gate), got " +
-                          std::to_string(max_view_angle_deg));
-  if (!(occlusion_abs_tolerance >= 0.0) || !std::isfinite(occlusion_abs_tolerance))
-    throw InvalidArgument("occlusion_abs_tolerance must be >= 0");
-  if (!(occlusion_rel_tolerance >= 0.0) || !std::isfinite(occlusion_rel_tolerance))
-    throw InvalidArgument("occlusion_rel_tolerance must be >= 0");
+void ErrorResistanceConfig::visitParameters(ParameterVisitor& v) {
+  visitInteger(v, "min_covisible_points", min_covisible_points, 1, 1000000,
+               "E[i][j] = inf when fewer than max(points, ratio * |X_i|) points of X_i are visible in j");
+  visitReal(v, "min_covisible_ratio", min_covisible_ratio, 0.0, 1.0,
+            "the same gate's share of X_i");
+  visitReal(v, "max_view_angle_deg", max_view_angle_deg, 0.0, 180.0,
+            "optional gate on the angle between optical axes [deg]; 0 = off (the paper's mode)");
+  occlusion.visitParameters(v);
 }
 
 void validateKeyframe(const Keyframe& keyframe) {
@@ -166,12 +160,8 @@ double computeErrorResistance(const ErrorResistanceMatrix::View& view_i,
       const double u = k.fx * p.x() * inv_z + k.cx;
       const double v = k.fy * p.y() * inv_z + k.cy;
       if (!(u >= 0.0 && v >= 0.0 && u < width && v < height)) continue;
-      if (depth) {
-        const double d = depth->at(u, v);
-        if (d > 0.0 && std::abs(p.z() - d) > std::max(config.occlusion_abs_tolerance,
-                                                       config.occlusion_rel_tolerance * p.z()))
-          continue;  // occluded (or in front of the surface j saw): not visible
-      }
+      // Occluded (or in front of the surface j saw): not visible.
+      if (depth && occluded(*depth, u, v, p.z(), config.occlusion)) continue;
       scratch.points_cam.push_back(p);
     }
   }
@@ -243,10 +233,25 @@ void ErrorResistanceMatrix::setPoints(ViewId id, Eigen::Matrix3Xd points) {
   table_.replaceRow(id, std::move(row));
 }
 
+void ErrorResistanceMatrix::setConfig(const ErrorResistanceConfig& config) {
+  config.validate();
+  if (config == config_) return;
+  config_ = config;
+  for (size_t i = 0; i < views_.size(); ++i) {
+    std::vector<TableEntry> row;
+    for (size_t j = 0; j < views_.size(); ++j) {
+      if (i == j) continue;
+      const double value = entry(views_[i], views_[j]);
+      if (std::isfinite(value)) row.push_back({static_cast<ViewId>(j), value});
+    }
+    table_.replaceRow(static_cast<ViewId>(i), std::move(row));
+  }
+}
+
 void ErrorResistanceMatrix::clear() {
   views_.clear();
   table_.clear();
   pairs_evaluated_ = 0;
 }
 
-}  // namespace view_selection
+}  // namespace view_selection::core

@@ -7,7 +7,7 @@
 #include <cmath>
 #include <string>
 
-namespace view_selection {
+namespace view_selection::core {
 
 namespace {
 bool byView(const TableEntry& e, ViewId v) { return e.view < v; }
@@ -154,4 +154,4 @@ std::vector<std::vector<double>> ErrorResistanceTable::dense() const {
   return out;
 }
 
-}  // namespace view_selection
+}  // namespace view_selection::core

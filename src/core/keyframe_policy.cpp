@@ -5,31 +5,17 @@
 #include <algorithm>
 #include <cmath>
 
-namespace view_selection {
+namespace view_selection::core {
 
-std::string toString(KeyframeMode mode) {
-  switch (mode) {
-    case KeyframeMode::kEveryFrame: return "every_frame";
-    case KeyframeMode::kEveryNth: return "every_nth";
-    case KeyframeMode::kMotion: return "motion";
-  }
-  return "unknown";
-}
-
-KeyframeMode keyframeModeFromString(const std::string& text) {
-  if (text == "every_frame") return KeyframeMode::kEveryFrame;
-  if (text == "every_nth") return KeyframeMode::kEveryNth;
-  if (text == "motion") return KeyframeMode::kMotion;
-  throw InvalidArgument("keyframe mode must be 'every_frame', 'every_nth' or 'motion', got '" +
-                        text + "'");
-}
-
-void KeyframePolicyConfig::validate() const {
-  if (every_n < 1) throw InvalidArgument("every_n must be >= 1, got " + std::to_string(every_n));
-  if (!(min_translation >= 0.0) || !std::isfinite(min_translation))
-    throw InvalidArgument("min_translation must be >= 0");
-  if (!(min_rotation_deg >= 0.0) || !std::isfinite(min_rotation_deg))
-    throw InvalidArgument("min_rotation_deg must be >= 0");
+void KeyframePolicyConfig::visitParameters(ParameterVisitor& v) {
+  visitChoice(v, "keyframe_policy", mode, kKeyframeModeNames,
+              "which frames become keyframes: every_frame, every_nth, or motion (after enough "
+              "translation or rotation)");
+  visitInteger(v, "every_n", every_n, 1, 1000000, "every_nth: one keyframe every N valid frames");
+  visitReal(v, "min_translation", min_translation, 0.0, 1e9,
+            "motion: a new keyframe after this much translation [m, scene units] ...");
+  visitReal(v, "min_rotation_deg", min_rotation_deg, 0.0, 360.0,
+            "... or this much rotation since the last keyframe [deg]");
 }
 
 KeyframePolicy::KeyframePolicy(KeyframePolicyConfig config) : config_(config) {
@@ -63,4 +49,4 @@ void KeyframePolicy::reset() {
   last_keyframe_.reset();
 }
 
-}  // namespace view_selection
+}  // namespace view_selection::core

@@ -5,7 +5,7 @@
 #include <algorithm>
 #include <set>
 
-namespace view_selection {
+namespace view_selection::core {
 
 namespace {
 
@@ -16,18 +16,11 @@ bool better(double value_a, ViewId id_a, double value_b, ViewId id_b) {
 
 }  // namespace
 
-std::string toString(CompletionMode mode) {
-  return mode == CompletionMode::kPaper ? "paper" : "reachable";
-}
-
-CompletionMode completionModeFromString(const std::string& text) {
-  if (text == "paper") return CompletionMode::kPaper;
-  if (text == "reachable") return CompletionMode::kReachable;
-  throw InvalidArgument("completion must be 'paper' or 'reachable', got '" + text + "'");
-}
-
-void SelectionConfig::validate() const {
-  if (k < 1) throw InvalidArgument("k must be >= 1, got " + std::to_string(k));
+void SelectionConfig::visitParameters(ParameterVisitor& v) {
+  visitInteger(v, "k", k, 1, 1000, "next view set size");
+  visitChoice(v, "completion", completion, kCompletionModeNames,
+              "paper: each unreached view joins its best predecessor's set; reachable: from a "
+              "visited view, and the traversal continues from it");
 }
 
 std::pair<ViewId, ViewId> Selection::initialPair() const {
@@ -224,4 +217,4 @@ Selection selectViews(const ErrorResistanceTable& e, const SelectionConfig& conf
   return out;
 }
 
-}  // namespace view_selection
+}  // namespace view_selection::core

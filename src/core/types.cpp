@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-namespace view_selection {
+namespace view_selection::core {
 
 bool PinholeIntrinsics::isValid() const {
   return std::isfinite(fx) && std::isfinite(fy) && std::isfinite(cx) && std::isfinite(cy) &&
@@ -22,4 +22,4 @@ bool CameraPose::isValid() const {
   return std::abs(orientation.norm() - 1.0) <= 0.05;
 }
 
-}  // namespace view_selection
+}  // namespace view_selection::core

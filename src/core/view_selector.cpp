@@ -6,7 +6,7 @@
 #include <cmath>
 #include <sstream>
 
-namespace view_selection {
+namespace view_selection::core {
 
 namespace {
 double secondsSince(std::chrono::steady_clock::time_point start) {
@@ -14,52 +14,19 @@ double secondsSince(std::chrono::steady_clock::time_point start) {
 }
 }  // namespace
 
-void ViewSelectorConfig::validate() const {
-  keyframes.validate();
-  depth.validate();
-  matrix.validate();
-  selection.validate();
-}
-
-void validateFrame(const Frame& frame) {
-  if (!std::isfinite(frame.stamp)) throw InvalidInput("frame stamp is not finite");
-  const PinholeIntrinsics& k = frame.intrinsics;
-  if (!k.isValid()) {
-    std::ostringstream s;
-    s << "camera intrinsics are unusable (fx=" << k.fx << ", fy=" << k.fy << ", cx=" << k.cx
-      << ", cy=" << k.cy << ", size " << k.width << "x" << k.height
-      << "): focal lengths must be positive and finite, the size non-zero";
-    throw InvalidInput(s.str());
-  }
-  if (!frame.pose.isValid())
-    throw InvalidInput("camera pose is not finite or its quaternion is not of unit length");
-  if (!frame.depth_m.empty() && frame.depth_m.type() != CV_32FC1)
-    throw InvalidInput("depth must be converted to CV_32FC1 metres (see depthToMetres)");
-  if (!frame.depth_m.empty()) {
-    // A depth image may be a scaled copy of the colour image, but with the same aspect ratio.
-    const double ratio_image = static_cast<double>(k.width) / k.height;
-    const double ratio_depth = static_cast<double>(frame.depth_m.cols) / frame.depth_m.rows;
-    if (std::abs(ratio_image - ratio_depth) > 0.01 * ratio_image) {
-      std::ostringstream s;
-      s << "depth image is " << frame.depth_m.cols << "x" << frame.depth_m.rows
-        << " but the camera is " << k.width << "x" << k.height << " (different aspect ratio)";
-      throw InvalidInput(s.str());
-    }
-  }
-  if (!frame.image.empty() && (frame.image.cols != k.width || frame.image.rows != k.height)) {
-    std::ostringstream s;
-    s << "image is " << frame.image.cols << "x" << frame.image.rows << " but camera_info says "
-      << k.width << "x" << k.height;
-    throw InvalidInput(s.str());
-  }
+void ViewSelectorConfig::visitParameters(ParameterVisitor& v) {
+  keyframes.visitParameters(v);
+  matrix.visitParameters(v);
+  selection.visitParameters(v);
 }
 
 ViewSelector::ViewSelector(ViewSelectorConfig config, std::unique_ptr<PointSource> points)
     : config_(std::move(config)),
-      points_(points ? std::move(points) : std::make_unique<DepthPointSource>(config_.depth)),
+      points_(std::move(points)),
       policy_(config_.keyframes),
       matrix_(config_.matrix) {
   config_.validate();
+  if (!points_) throw InvalidArgument("ViewSelector needs a point source");
 }
 
 FrameResult ViewSelector::addFrame(const Frame& frame) {
@@ -94,7 +61,7 @@ FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
   const ViewId id = static_cast<ViewId>(matrix_.size());
   // The point source sees the same normalised pose as the matrix, so a caller's quaternion of
   // norm 1 +- rounding gives bit-identical points whichever path (node, tool) normalised it.
-  Frame normalised = frame;  // cv::Mat members are shared, not copied
+  Frame normalised = frame;  // the images are views: pixels are shared, not copied
   normalised.pose = pose;
   PointSourceResult points = points_->process(id, normalised);
   if (!points.points.allFinite()) throw InvalidInput("point source produced non-finite points");
@@ -110,9 +77,10 @@ FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
   keyframe.intrinsics = frame.intrinsics;
   keyframe.pose = pose;
   keyframe.points = std::move(points.points);
-  if (config_.occlusion_test && !frame.depth_m.empty())
+  const OcclusionConfig& occlusion = config_.matrix.occlusion;
+  if (occlusion.enabled && !frame.depth.empty())
     keyframe.depth = std::make_shared<const DepthMap>(
-        downsampleDepth(frame.depth_m, frame.intrinsics, config_.depth.depth_map_cell));
+        makeOcclusionMap(frame.depth, frame.intrinsics, occlusion.depth_map_cell));
   result.points = static_cast<size_t>(keyframe.points.cols());
 
   // Nothing below throws for inputs validated above: the matrix is never left half-updated.
@@ -149,6 +117,17 @@ std::vector<ViewId> ViewSelector::applyPointUpdates() {
 
 Selection ViewSelector::select() const { return selectViews(matrix_.table(), config_.selection); }
 
+SelectionSnapshot ViewSelector::snapshot() const {
+  return makeSnapshot(matrix_, select(), config_.selection, params());
+}
+
+void ViewSelector::setConfig(const ViewSelectorConfig& config) {
+  config.validate();
+  policy_.setConfig(config.keyframes);
+  matrix_.setConfig(config.matrix);
+  config_ = config;
+}
+
 void ViewSelector::reset() {
   matrix_.clear();
   policy_.reset();
@@ -156,31 +135,11 @@ void ViewSelector::reset() {
   last_stamp_.reset();
 }
 
-nlohmann::json ViewSelector::params() const {
-  const auto& c = config_;
-  return {
-      {"k", c.selection.k},
-      {"completion", toString(c.selection.completion)},
-      {"point_source", points_->name()},
-      {"keyframe_mode", toString(c.keyframes.mode)},
-      {"every_n", c.keyframes.every_n},
-      {"min_translation", c.keyframes.min_translation},
-      {"min_rotation_deg", c.keyframes.min_rotation_deg},
-      {"min_covisible_points", c.matrix.min_covisible_points},
-      {"min_covisible_ratio", c.matrix.min_covisible_ratio},
-      {"max_view_angle_deg", c.matrix.max_view_angle_deg},
-      {"occlusion_test", c.occlusion_test},
-      {"occlusion_abs_tolerance", c.matrix.occlusion_abs_tolerance},
-      {"occlusion_rel_tolerance", c.matrix.occlusion_rel_tolerance},
-      {"depth_grid_cols", c.depth.grid_cols},
-      {"depth_grid_rows", c.depth.grid_rows},
-      {"depth_min", c.depth.min_depth},
-      {"depth_max", c.depth.max_depth},
-      {"depth_min_valid_fraction", c.depth.min_valid_fraction},
-      {"depth_pixel_stride", c.depth.pixel_stride},
-      {"depth_map_cell", c.depth.depth_map_cell},
-      {"point_source_params", points_->params()},
-  };
+Params ViewSelector::params() const {
+  Params out = paramsOf(config_);
+  out.push_back({"point_source", points_->name(), false, {}});
+  out.push_back({"point_source_params", false, true, points_->params()});
+  return out;
 }
 
-}  // namespace view_selection
+}  // namespace view_selection::core

@@ -1,7 +1,7 @@
 #include "view_selection/ros/conversions.h"
 
-#include "view_selection/core/depth_sampler.h"
 #include "view_selection/core/exceptions.h"
+#include "view_selection/points/image_conversion.h"
 
 #include <cv_bridge/cv_bridge.h>
 #include <sensor_msgs/image_encodings.h>
@@ -12,11 +12,10 @@
 
 namespace enc = sensor_msgs::image_encodings;
 
-namespace view_selection {
-namespace ros_node {
+namespace view_selection::ros_node {
 
-PinholeIntrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& info) {
-  PinholeIntrinsics k;
+core::PinholeIntrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& info) {
+  core::PinholeIntrinsics k;
   k.fx = info.K[0];
   k.fy = info.K[4];
   k.cx = info.K[2];
@@ -28,7 +27,7 @@ PinholeIntrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& info) 
     s << "camera_info is unusable (K: fx=" << k.fx << " fy=" << k.fy << " cx=" << k.cx << " cy=" << k.cy
       << ", size " << info.width << "x" << info.height
       << "): focal lengths must be positive and finite and the size non-zero";
-    throw InvalidInput(s.str());
+    throw core::InvalidInput(s.str());
   }
   return k;
 }
@@ -37,37 +36,37 @@ void checkImageMessage(const sensor_msgs::Image& msg, const std::string& what) {
   std::ostringstream s;
   if (msg.width == 0 || msg.height == 0) {
     s << what << " is empty (" << msg.width << "x" << msg.height << ")";
-    throw InvalidInput(s.str());
+    throw core::InvalidInput(s.str());
   }
   int channels = 0, bit_depth = 0;
   try {
     channels = enc::numChannels(msg.encoding);
     bit_depth = enc::bitDepth(msg.encoding);
   } catch (const std::exception&) {
-    throw InvalidInput(what + " has unknown encoding '" + msg.encoding + "'");
+    throw core::InvalidInput(what + " has unknown encoding '" + msg.encoding + "'");
   }
   if (channels <= 0 || bit_depth <= 0)
-    throw InvalidInput(what + " has unusable encoding '" + msg.encoding + "'");
+    throw core::InvalidInput(what + " has unusable encoding '" + msg.encoding + "'");
   const uint64_t row_bytes = static_cast<uint64_t>(msg.width) * channels * (bit_depth / 8);
   if (msg.step < row_bytes) {
     s << what << " step " << msg.step << " is less than width " << msg.width << " x " << channels * (bit_depth / 8)
       << " bytes of '" << msg.encoding << "'";
-    throw InvalidInput(s.str());
+    throw core::InvalidInput(s.str());
   }
   if (msg.data.size() < static_cast<uint64_t>(msg.step) * msg.height) {
     s << what << " holds " << msg.data.size() << " bytes, but step " << msg.step << " x height " << msg.height
       << " needs " << static_cast<uint64_t>(msg.step) * msg.height;
-    throw InvalidInput(s.str());
+    throw core::InvalidInput(s.str());
   }
   if (what == "image" && !enc::isColor(msg.encoding) && !enc::isMono(msg.encoding) && !enc::isBayer(msg.encoding))
-    throw InvalidInput("image encoding '" + msg.encoding +
+    throw core::InvalidInput("image encoding '" + msg.encoding +
                        "' is not a colour or grey image (expected rgb8, bgr8, mono8, ...)");
   const bool little = [] {
     const uint16_t one = 1;
     return *reinterpret_cast<const uint8_t*>(&one) == 1;
   }();
   if (bit_depth > 8 && msg.is_bigendian == little)
-    throw InvalidInput(what + " is " + (msg.is_bigendian ? "big" : "little") +
+    throw core::InvalidInput(what + " is " + (msg.is_bigendian ? "big" : "little") +
                        "-endian, which this machine does not read natively");
 }
 
@@ -76,54 +75,84 @@ cv::Mat imageView(const sensor_msgs::Image& msg) {
   try {
     type = cv_bridge::getCvType(msg.encoding);
   } catch (const std::exception& e) {
-    throw InvalidInput("cannot read encoding '" + msg.encoding + "': " + e.what());
+    throw core::InvalidInput("cannot read encoding '" + msg.encoding + "': " + e.what());
   }
   return cv::Mat(static_cast<int>(msg.height), static_cast<int>(msg.width), type,
                  const_cast<uint8_t*>(msg.data.data()), msg.step);
 }
 
-cv::Mat imageForCore(const sensor_msgs::ImageConstPtr& msg) {
+namespace {
+
+cv_bridge::CvImageConstPtr shareForCore(const sensor_msgs::ImageConstPtr& msg) {
   try {
-    if (msg->encoding == enc::MONO8 || msg->encoding == enc::BGR8) return cv_bridge::toCvShare(msg)->image;
+    if (msg->encoding == enc::MONO8 || msg->encoding == enc::BGR8) return cv_bridge::toCvShare(msg);
     if (enc::isColor(msg->encoding) || enc::isMono(msg->encoding) || enc::isBayer(msg->encoding))
-      return cv_bridge::toCvShare(msg, enc::isMono(msg->encoding) ? enc::MONO8 : enc::BGR8)->image;
+      return cv_bridge::toCvShare(msg, enc::isMono(msg->encoding) ? enc::MONO8 : enc::BGR8);
   } catch (const cv_bridge::Exception& e) {
-    throw InvalidInput("image with encoding '" + msg->encoding + "' cannot be converted: " + e.what());
+    throw core::InvalidInput("image with encoding '" + msg->encoding + "' cannot be converted: " + e.what());
   } catch (const cv::Exception& e) {
-    throw InvalidInput("image with encoding '" + msg->encoding + "' cannot be converted: " + e.what());
+    throw core::InvalidInput("image with encoding '" + msg->encoding + "' cannot be converted: " + e.what());
   }
-  throw InvalidInput("image encoding '" + msg->encoding +
+  throw core::InvalidInput("image encoding '" + msg->encoding +
                      "' is not a colour or grey image (expected rgb8, bgr8, mono8, ...)");
+}
+
+/// A std::shared_ptr that keeps a boost::shared_ptr (ROS messages, cv_bridge images) alive.
+template <typename T>
+std::shared_ptr<const void> keepAlive(const boost::shared_ptr<T>& p) {
+  return std::shared_ptr<const void>(p.get(), [p](const void*) {});
+}
+
+}  // namespace
+
+cv::Mat imageForCore(const sensor_msgs::ImageConstPtr& msg) { return shareForCore(msg)->image; }
+
+core::ColourImage colourImageForCore(const sensor_msgs::ImageConstPtr& msg) {
+  const cv_bridge::CvImageConstPtr shared = shareForCore(msg);
+  core::ColourImage view = points::colourImageOf(shared->image);
+  view.owner = keepAlive(shared);  // keeps the message (or the converted copy) alive with the view
+  return view;
+}
+
+core::ColourImage borrowedImageView(const sensor_msgs::ImageConstPtr& msg) {
+  core::ColourImage view;
+  view.data = msg->data.data();
+  view.width = static_cast<int>(msg->width);
+  view.height = static_cast<int>(msg->height);
+  view.channels = enc::numChannels(msg->encoding);
+  view.step = msg->step;
+  view.owner = keepAlive(msg);
+  return view;
 }
 
 void checkDepthEncoding(const sensor_msgs::Image& msg) {
   if (msg.encoding != enc::TYPE_16UC1 && msg.encoding != enc::MONO16 && msg.encoding != enc::TYPE_32FC1)
-    throw InvalidInput("depth encoding '" + msg.encoding +
+    throw core::InvalidInput("depth encoding '" + msg.encoding +
                        "' is not 16UC1 (millimetres) or 32FC1 (metres)");
 }
 
 cv::Mat depthToMetres(const sensor_msgs::Image& msg, double metres_per_unit_16u) {
   checkDepthEncoding(msg);
   const cv::Mat view = imageView(msg);
-  return view_selection::depthToMetres(view, view.type() == CV_16UC1 ? metres_per_unit_16u : 1.0);
+  return points::depthToMetres(view, view.type() == CV_16UC1 ? metres_per_unit_16u : 1.0);
 }
 
-CameraPose poseFromMsg(const geometry_msgs::Pose& pose) {
-  CameraPose p;
+core::CameraPose poseFromMsg(const geometry_msgs::Pose& pose) {
+  core::CameraPose p;
   p.position = {pose.position.x, pose.position.y, pose.position.z};
   p.orientation = Eigen::Quaterniond(pose.orientation.w, pose.orientation.x, pose.orientation.y,
                                      pose.orientation.z);
   return p;
 }
 
-CameraPose poseFromTransform(const geometry_msgs::Transform& t) {
-  CameraPose p;
+core::CameraPose poseFromTransform(const geometry_msgs::Transform& t) {
+  core::CameraPose p;
   p.position = {t.translation.x, t.translation.y, t.translation.z};
   p.orientation = Eigen::Quaterniond(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z);
   return p;
 }
 
-geometry_msgs::Pose poseToMsg(const CameraPose& pose) {
+geometry_msgs::Pose poseToMsg(const core::CameraPose& pose) {
   geometry_msgs::Pose m;
   m.position.x = pose.position.x();
   m.position.y = pose.position.y();
@@ -135,7 +164,7 @@ geometry_msgs::Pose poseToMsg(const CameraPose& pose) {
   return m;
 }
 
-geometry_msgs::Transform transformToMsg(const CameraPose& pose) {
+geometry_msgs::Transform transformToMsg(const core::CameraPose& pose) {
   geometry_msgs::Transform m;
   m.translation.x = pose.position.x();
   m.translation.y = pose.position.y();
@@ -153,37 +182,39 @@ std::string keyframeImageName(double stamp) {
   return buffer;
 }
 
-view_selection::ViewSelection selectionToMsg(const ErrorResistanceMatrix& matrix, const Selection& selection,
-                                             const SelectionConfig& config, const std::string& world_frame) {
+view_selection::ViewSelection selectionToMsg(const core::SelectionSnapshot& snapshot,
+                                             const std::string& world_frame) {
+  const core::Selection& selection = snapshot.selection;
+  const core::ErrorResistanceTable& e = snapshot.table;
   view_selection::ViewSelection m;
   m.header.frame_id = world_frame;
-  m.completion = toString(config.completion);
-  m.k = config.k;
-  const size_t n = matrix.size();
+  m.completion = core::toString(snapshot.config.completion);
+  m.k = snapshot.config.k;
+  const size_t n = snapshot.size();
   m.keyframes.resize(n);
   for (size_t i = 0; i < n; ++i) {
-    const Keyframe& kf = matrix.keyframe(static_cast<ViewId>(i));
+    const core::KeyframeSummary& kf = snapshot.keyframes[i];
     auto& info = m.keyframes[i];
     info.id = static_cast<int32_t>(i);
     info.stamp = ros::Time(kf.stamp);
     info.image_name = kf.image_name;
     info.pose = poseToMsg(kf.pose);
-    info.num_points = static_cast<int32_t>(kf.points.cols());
+    info.num_points = static_cast<int32_t>(kf.num_points);
     if (i + 1 == n) m.header.stamp = info.stamp;
   }
   m.next_view_sets.resize(selection.next_views.size());
   for (size_t i = 0; i < selection.next_views.size(); ++i) {
     auto& set = m.next_view_sets[i];
-    const ViewId view = static_cast<ViewId>(i);
+    const auto view = static_cast<core::ViewId>(i);
     set.view = view;
-    for (const ViewId j : selection.next_views[i]) {
+    for (const core::ViewId j : selection.next_views[i]) {
       set.next_views.push_back(j);
-      set.error_resistance.push_back(matrix.at(view, j));
+      set.error_resistance.push_back(e.at(view, j));
     }
     const auto& fin = selection.final_next_views[i];
     for (size_t q = selection.next_views[i].size(); q < fin.size(); ++q) {
       set.completed_views.push_back(fin[q]);
-      set.completed_error_resistance.push_back(matrix.at(view, fin[q]));
+      set.completed_error_resistance.push_back(e.at(view, fin[q]));
     }
   }
   m.start_view = selection.start_view;
@@ -191,7 +222,7 @@ view_selection::ViewSelection selectionToMsg(const ErrorResistanceMatrix& matrix
   if (s >= 0 && s_first >= 0) m.initial_pair = {s, s_first};
   m.order.assign(selection.order.begin(), selection.order.end());
   for (const auto& c : selection.completed) {
-    view_selection::CompletedViewMsg cv;
+    view_selection::CompletedView cv;
     cv.view = c.view;
     cv.added_to = c.added_to;
     m.completed.push_back(cv);
@@ -203,9 +234,8 @@ view_selection::ViewSelection selectionToMsg(const ErrorResistanceMatrix& matrix
     p.second = b;
     m.pairs.push_back(p);
   }
-  m.finite_entries = static_cast<uint32_t>(matrix.table().finiteCount());
+  m.finite_entries = static_cast<uint32_t>(e.finiteCount());
   return m;
 }
 
-}  // namespace ros_node
-}  // namespace view_selection
+}  // namespace view_selection::ros_node

@@ -2,8 +2,7 @@
 
 #include <geometry_msgs/Point.h>
 
-namespace view_selection {
-namespace ros_node {
+namespace view_selection::ros_node {
 
 namespace {
 
@@ -32,8 +31,8 @@ visualization_msgs::Marker lineList(const std::string& ns, const std::string& fr
   return m;
 }
 
-void addFrustum(visualization_msgs::Marker& m, const Keyframe& kf, double scale) {
-  const PinholeIntrinsics& k = kf.intrinsics;
+void addFrustum(visualization_msgs::Marker& m, const core::KeyframeSummary& kf, double scale) {
+  const core::PinholeIntrinsics& k = kf.intrinsics;
   const Eigen::Matrix3d R = kf.pose.rotation();
   const Eigen::Vector3d o = kf.pose.position;
   const Eigen::Vector2d px[4] = {{0.0, 0.0}, {double(k.width), 0.0}, {double(k.width), double(k.height)},
@@ -50,8 +49,9 @@ void addFrustum(visualization_msgs::Marker& m, const Keyframe& kf, double scale)
 
 }  // namespace
 
-visualization_msgs::MarkerArray selectionMarkers(const ErrorResistanceMatrix& matrix, const Selection& selection,
+visualization_msgs::MarkerArray selectionMarkers(const core::SelectionSnapshot& snapshot,
                                                  const std::string& world_frame, double scale) {
+  const core::Selection& selection = snapshot.selection;
   visualization_msgs::MarkerArray array;
   visualization_msgs::Marker clear;
   clear.header.frame_id = world_frame;
@@ -63,19 +63,18 @@ visualization_msgs::MarkerArray selectionMarkers(const ErrorResistanceMatrix& ma
   auto start = lineList("start_view", world_frame, 2.0 * width, 1.0f, 0.1f, 0.1f, 1.0f);
   auto edges = lineList("next_views", world_frame, width, 0.1f, 0.5f, 1.0f, 0.8f);
   auto completion = lineList("completion", world_frame, 1.5 * width, 1.0f, 0.6f, 0.0f, 0.9f);
-  const size_t n = matrix.size();
-  for (size_t i = 0; i < n; ++i) {
-    const Keyframe& kf = matrix.keyframe(static_cast<ViewId>(i));
-    addFrustum(static_cast<ViewId>(i) == selection.start_view ? start : frusta, kf, scale);
-  }
+  const size_t n = snapshot.size();
+  for (size_t i = 0; i < n; ++i)
+    addFrustum(static_cast<core::ViewId>(i) == selection.start_view ? start : frusta,
+               snapshot.keyframes[i], scale);
   for (size_t i = 0; i < selection.final_next_views.size() && i < n; ++i) {
-    const Eigen::Vector3d from = matrix.keyframe(static_cast<ViewId>(i)).pose.position;
+    const Eigen::Vector3d from = snapshot.keyframes[i].pose.position;
     const auto& fin = selection.final_next_views[i];
     const size_t selected = i < selection.next_views.size() ? selection.next_views[i].size() : 0;
     for (size_t q = 0; q < fin.size(); ++q) {
       auto& target = q < selected ? edges : completion;
       target.points.push_back(point(from));
-      target.points.push_back(point(matrix.keyframe(fin[q]).pose.position));
+      target.points.push_back(point(snapshot.keyframes[static_cast<size_t>(fin[q])].pose.position));
     }
   }
   for (auto* m : {&frusta, &start, &edges, &completion})
@@ -83,5 +82,4 @@ visualization_msgs::MarkerArray selectionMarkers(const ErrorResistanceMatrix& ma
   return array;
 }
 
-}  // namespace ros_node
-}  // namespace view_selection
+}  // namespace view_selection::ros_node

@@ -2,65 +2,97 @@
 
 #include "view_selection/core/exceptions.h"
 
-#include <cmath>
-#include <sstream>
-#include <vector>
+#include <ros/param.h>
 
-namespace view_selection {
-namespace ros_node {
+#include <algorithm>
+#include <cmath>
+#include <set>
+#include <sstream>
+
+namespace view_selection::ros_node {
+
+void NodeConfig::visitParameters(core::ParameterVisitor& v) {
+  core::visitText(v, "world_frame", world_frame, {},
+                  "frame of every pose, marker and selection (a leading '/' is removed)");
+  core::visitText(v, "camera_frame", camera_frame, {},
+                  "optical frame (z forward) of the camera; \"\" = the image's frame_id");
+  core::visitChoice(v, "pose_source", pose_source, kPoseSourceNames,
+                    "tf: look up world_frame <- camera frame at the image stamp; topic: "
+                    "geometry_msgs/PoseStamped on `pose`");
+  core::visitReal(v, "pose_timeout", pose_timeout, 0.0, 60.0,
+                  "how long a frame waits for its pose before it is dropped [s, wall]");
+  core::visitReal(v, "pose_max_time_difference", pose_max_time_difference, 0.0, 10.0,
+                  "topic: the nearest pose must be this close to the image stamp [s]");
+  core::visitInteger(v, "queue_size", queue_size, 1, 10000,
+                     "message_filters ApproximateTime queue (image, camera_info, depth)");
+  core::visitInteger(v, "max_pending_frames", max_pending_frames, 1, 100000,
+                     "frames waiting for the worker; beyond, the oldest is dropped (worker_behind)");
+  core::visitFlag(v, "use_depth", use_depth,
+                  "synchronise `depth` (16UC1 millimetres or 32FC1 metres) with the image");
+  core::visitText(v, "point_source", point_source, {"auto", "depth", "features", "map"},
+                  "where sample points come from; auto = depth with use_depth, else features");
+  core::visitReal(v, "depth_16u_metres_per_unit", depth_16u_metres_per_unit, 1e-9, 1e3,
+                  "scale of 16UC1 depth (0.001: millimetres)");
+  core::visitReal(v, "publish_period", publish_period, 0.0, 3600.0,
+                  "~selection and ~markers at most this often, when changed [s, wall]");
+  core::visitFlag(v, "save_keyframe_images", save_keyframe_images,
+                  "keep keyframe images so that ~export writes them for COLMAP");
+  core::visitReal(v, "marker_scale", marker_scale, 1e-6, 1e6,
+                  "frustum depth in RViz [m, scene units]");
+  selector.visitParameters(v);
+  point_params.visitParameters(v);
+}
 
 namespace {
 
-std::string paramName(const ros::NodeHandle& nh, const std::string& key) {
-  return nh.resolveName(key);
-}
+/// Reads each listed parameter that is set, with the messages a user sees in the log.
+class RosParamReader : public core::ParameterVisitor {
+ public:
+  explicit RosParamReader(const ros::NodeHandle& nh) : nh_(nh) {}
 
-template <typename T>
-bool readParam(const ros::NodeHandle& nh, const std::string& key, T& value, const char* type) {
-  if (!nh.hasParam(key)) return false;
-  if (!nh.getParam(key, value))
-    throw InvalidArgument("parameter " + paramName(nh, key) + " must be " + type);
-  return true;
-}
-
-double readReal(const ros::NodeHandle& nh, const std::string& key, double def, double lo, double hi) {
-  double v = def;
-  readParam(nh, key, v, "a number");
-  if (!std::isfinite(v) || v < lo || v > hi) {
-    std::ostringstream s;
-    s << "parameter " << paramName(nh, key) << " = " << v << " is out of range [" << lo << ", " << hi << "]";
-    throw InvalidArgument(s.str());
+  void visit(const core::ParameterInfo& i, int& value) override {
+    read(i, value, "an integer");
+    if (value < i.min || value > i.max) outOfRange(i, value);
   }
-  return v;
-}
-
-int readInt(const ros::NodeHandle& nh, const std::string& key, int def, int lo, int hi) {
-  int v = def;
-  readParam(nh, key, v, "an integer");
-  if (v < lo || v > hi) {
-    std::ostringstream s;
-    s << "parameter " << paramName(nh, key) << " = " << v << " is out of range [" << lo << ", " << hi << "]";
-    throw InvalidArgument(s.str());
+  void visit(const core::ParameterInfo& i, double& value) override {
+    read(i, value, "a number");
+    if (!std::isfinite(value) || value < i.min || value > i.max) outOfRange(i, value);
   }
-  return v;
-}
+  void visit(const core::ParameterInfo& i, bool& value) override { read(i, value, "true or false"); }
+  void visit(const core::ParameterInfo& i, std::string& value) override {
+    read(i, value, "a string");
+    if (i.choices.empty() ||
+        std::find(i.choices.begin(), i.choices.end(), value) != i.choices.end())
+      return;
+    std::string list;
+    for (const auto& c : i.choices) list += (list.empty() ? "" : ", ") + c;
+    throw core::InvalidArgument("parameter " + nh_.resolveName(i.name) + " = '" + value +
+                                "' is not one of: " + list);
+  }
 
-bool readBool(const ros::NodeHandle& nh, const std::string& key, bool def) {
-  bool v = def;
-  readParam(nh, key, v, "true or false");
-  return v;
-}
+ private:
+  template <typename T>
+  void read(const core::ParameterInfo& i, T& value, const char* type) {
+    if (nh_.hasParam(i.name) && !nh_.getParam(i.name, value))
+      throw core::InvalidArgument("parameter " + nh_.resolveName(i.name) + " must be " + type);
+  }
+  [[noreturn]] void outOfRange(const core::ParameterInfo& i, double value) {
+    std::ostringstream s;
+    s << "parameter " << nh_.resolveName(i.name) << " = " << value << " is out of range ["
+      << i.min << ", " << i.max << "]";
+    throw core::InvalidArgument(s.str());
+  }
 
-std::string readChoice(const ros::NodeHandle& nh, const std::string& key, const std::string& def,
-                       const std::vector<std::string>& choices) {
-  std::string v = def;
-  readParam(nh, key, v, "a string");
-  for (const auto& c : choices)
-    if (c == v) return v;
-  std::string list;
-  for (const auto& c : choices) list += (list.empty() ? "" : ", ") + c;
-  throw InvalidArgument("parameter " + paramName(nh, key) + " = '" + v + "' is not one of: " + list);
-}
+  const ros::NodeHandle& nh_;
+};
+
+struct NameCollector : core::ParameterVisitor {
+  std::set<std::string> names;
+  void visit(const core::ParameterInfo& i, int&) override { names.insert(i.name); }
+  void visit(const core::ParameterInfo& i, double&) override { names.insert(i.name); }
+  void visit(const core::ParameterInfo& i, bool&) override { names.insert(i.name); }
+  void visit(const core::ParameterInfo& i, std::string&) override { names.insert(i.name); }
+};
 
 }  // namespace
 
@@ -71,65 +103,36 @@ std::string normaliseFrameId(const std::string& frame_id) {
 
 NodeConfig loadNodeConfig(const ros::NodeHandle& nh) {
   NodeConfig c;
-  std::string text;
-  text = c.world_frame;
-  readParam(nh, "world_frame", text, "a string");
-  c.world_frame = normaliseFrameId(text);
+  RosParamReader reader(nh);
+  c.visitParameters(reader);
+  c.world_frame = normaliseFrameId(c.world_frame);
   if (c.world_frame.empty())
-    throw InvalidArgument("parameter " + paramName(nh, "world_frame") + " must name a frame");
-  text = c.camera_frame;
-  readParam(nh, "camera_frame", text, "a string");
-  c.camera_frame = normaliseFrameId(text);
-  c.pose_source = readChoice(nh, "pose_source", "tf", {"tf", "topic"}) == "tf" ? PoseSource::kTf
-                                                                               : PoseSource::kTopic;
-  c.pose_timeout = readReal(nh, "pose_timeout", c.pose_timeout, 0.0, 60.0);
-  c.pose_max_time_difference =
-      readReal(nh, "pose_max_time_difference", c.pose_max_time_difference, 0.0, 10.0);
-  c.queue_size = readInt(nh, "queue_size", c.queue_size, 1, 10000);
-  c.max_pending_frames = readInt(nh, "max_pending_frames", c.max_pending_frames, 1, 100000);
-  c.use_depth = readBool(nh, "use_depth", c.use_depth);
-  c.depth_16u_metres_per_unit =
-      readReal(nh, "depth_16u_metres_per_unit", c.depth_16u_metres_per_unit, 1e-9, 1e3);
-  c.publish_period = readReal(nh, "publish_period", c.publish_period, 0.0, 3600.0);
-  c.save_keyframe_images = readBool(nh, "save_keyframe_images", c.save_keyframe_images);
-  c.marker_scale = readReal(nh, "marker_scale", c.marker_scale, 1e-6, 1e6);
-
-  // The core's parameters, named as select_views' options (METHOD.md defaults in the structs).
-  ViewSelectorConfig& v = c.selector;
-  auto& kf = v.keyframes;
-  kf.mode = keyframeModeFromString(
-      readChoice(nh, "keyframe_policy", "motion", {"every_frame", "every_nth", "motion"}));
-  kf.every_n = readInt(nh, "every_n", kf.every_n, 1, 1000000);
-  kf.min_translation = readReal(nh, "min_translation", kf.min_translation, 0.0, 1e9);
-  kf.min_rotation_deg = readReal(nh, "min_rotation_deg", kf.min_rotation_deg, 0.0, 360.0);
-  v.selection.k = readInt(nh, "k", v.selection.k, 1, 1000);
-  v.selection.completion =
-      completionModeFromString(readChoice(nh, "completion", "paper", {"paper", "reachable"}));
-  auto& m = v.matrix;
-  m.min_covisible_points = readInt(nh, "min_covisible_points", m.min_covisible_points, 1, 1000000);
-  m.min_covisible_ratio = readReal(nh, "min_covisible_ratio", m.min_covisible_ratio, 0.0, 1.0);
-  m.max_view_angle_deg = readReal(nh, "max_view_angle_deg", m.max_view_angle_deg, 0.0, 180.0);
-  v.occlusion_test = readBool(nh, "occlusion_test", v.occlusion_test);
-  const int grid = readInt(nh, "grid", v.depth.grid_cols, 1, 256);
-  v.depth.grid_cols = v.depth.grid_rows = grid;
-
+    throw core::InvalidArgument("parameter " + nh.resolveName("world_frame") + " must name a frame");
+  c.camera_frame = normaliseFrameId(c.camera_frame);
   // As select_views: auto is depth when there is depth, features otherwise.
-  const std::string source = readChoice(nh, "point_source", "auto", {"auto", "depth", "features", "map"});
-  c.point_source = source == "auto" ? (c.use_depth ? "depth" : "features") : source;
+  if (c.point_source == "auto") c.point_source = c.use_depth ? "depth" : "features";
   if (c.point_source == "depth" && !c.use_depth)
-    throw InvalidArgument("parameter " + paramName(nh, "point_source") +
-                          " = depth needs depth images, but ~use_depth is false");
-  PointSourceParams& pp = c.point_params;
-  pp.depth = v.depth;
-  pp.features.detector = readChoice(nh, "features", pp.features.detector, {"orb", "sift"});
-  pp.features.max_features = readInt(nh, "max_features", pp.features.max_features, 1, 1000000);
-  pp.map.max_depth = readReal(nh, "map_max_depth", pp.map.max_depth, 0.0, 1e9);
-  pp.map.max_points = readInt(nh, "map_max_points", pp.map.max_points, 0, 100000000);
-  pp.map.occlusion_test = v.occlusion_test;
-  pp.validate();
-  v.validate();
+    throw core::InvalidArgument("parameter " + nh.resolveName("point_source") +
+                                " = depth needs depth images, but ~use_depth is false");
+  c.point_params.validate();
+  c.selector.validate();
   return c;
 }
 
-}  // namespace ros_node
-}  // namespace view_selection
+std::vector<std::string> unknownParameters(const ros::NodeHandle& nh) {
+  NameCollector known;
+  NodeConfig().visitParameters(known);
+  std::vector<std::string> all, unknown;
+  if (!ros::param::getParamNames(all)) return unknown;
+  const std::string prefix = nh.getNamespace() + "/";
+  for (const std::string& name : all) {
+    if (name.rfind(prefix, 0) != 0) continue;
+    const std::string local = name.substr(prefix.size());
+    if (local.empty() || local.find('/') != std::string::npos) continue;
+    if (!known.names.count(local)) unknown.push_back(local);
+  }
+  std::sort(unknown.begin(), unknown.end());
+  return unknown;
+}
+
+}  // namespace view_selection::ros_node

@@ -7,8 +7,7 @@
 
 #include <memory>
 
-namespace view_selection {
-namespace ros_node {
+namespace view_selection::ros_node {
 
 class ViewSelectionNodelet : public nodelet::Nodelet {
  private:
@@ -23,7 +22,6 @@ class ViewSelectionNodelet : public nodelet::Nodelet {
   std::unique_ptr<ViewSelectionRos> impl_;
 };
 
-}  // namespace ros_node
-}  // namespace view_selection
+}  // namespace view_selection::ros_node
 
 PLUGINLIB_EXPORT_CLASS(view_selection::ros_node::ViewSelectionNodelet, nodelet::Nodelet)

@@ -3,6 +3,7 @@
 #pragma once
 
 #include "view_selection/core/exceptions.h"
+#include "view_selection/core/parameters.h"
 
 #include <cmath>
 #include <cstdio>
@@ -116,6 +117,85 @@ class CommandLine {
   std::set<std::string> flags_;
 };
 
+/// Option name of a parameter: "min_covisible_ratio" -> "min-covisible-ratio".
+inline std::string optionName(const std::string& parameter) {
+  std::string name = parameter;
+  for (char& c : name)
+    if (c == '_') c = '-';
+  return name;
+}
+
+/// The option names of every parameter a config lists (core/parameters.h).
+template <typename Config>
+std::set<std::string> parameterOptions(Config config) {
+  struct Names : core::ParameterVisitor {
+    std::set<std::string> names;
+    void add(const core::ParameterInfo& i) { names.insert(optionName(i.name)); }
+    void visit(const core::ParameterInfo& i, int&) override { add(i); }
+    void visit(const core::ParameterInfo& i, double&) override { add(i); }
+    void visit(const core::ParameterInfo& i, bool&) override { add(i); }
+    void visit(const core::ParameterInfo& i, std::string&) override { add(i); }
+  } names;
+  config.visitParameters(names);
+  return names.names;
+}
+
+/// Sets every parameter of `config` given on the command line as --option-name VALUE (booleans
+/// as true/false), with the documented range; the rest keep their defaults. Throws UsageError.
+template <typename Config>
+void readParameters(const CommandLine& cli, Config& config) {
+  struct Reader : core::ParameterVisitor {
+    const CommandLine& cli;
+    explicit Reader(const CommandLine& c) : cli(c) {}
+    void visit(const core::ParameterInfo& i, int& v) override {
+      v = static_cast<int>(cli.integer(optionName(i.name), v, static_cast<long>(i.min),
+                                       static_cast<long>(i.max)));
+    }
+    void visit(const core::ParameterInfo& i, double& v) override {
+      v = cli.real(optionName(i.name), v, i.min, i.max);
+    }
+    void visit(const core::ParameterInfo& i, bool& v) override {
+      const std::string name = optionName(i.name);
+      const std::string text = cli.choice(name, v ? "true" : "false", {"true", "false"});
+      v = text == "true";
+    }
+    void visit(const core::ParameterInfo& i, std::string& v) override {
+      v = i.choices.empty() ? cli.text(optionName(i.name), v) : cli.choice(optionName(i.name), v, i.choices);
+    }
+  } reader(cli);
+  config.visitParameters(reader);
+}
+
+/// "  --option VALUE   meaning (default: x; range or choices)" for every parameter of `config`.
+template <typename Config>
+std::string parameterHelp(Config config) {
+  struct Help : core::ParameterVisitor {
+    std::string text;
+    void line(const core::ParameterInfo& i, const std::string& value, const std::string& range) {
+      std::string head = "  --" + optionName(i.name) + " " +
+                         (i.choices.empty() ? std::string("X") : "{" + join(i.choices, "|") + "}");
+      if (head.size() < 34) head.resize(34, ' ');
+      text += head + " " + i.doc + " (default " + value + (range.empty() ? "" : "; " + range) + ")\n";
+    }
+    static std::string join(const std::vector<std::string>& list, const char* sep) {
+      std::string out;
+      for (const auto& s : list) out += (out.empty() ? "" : sep) + s;
+      return out;
+    }
+    static std::string range(const core::ParameterInfo& i) {
+      return core::formatNumber(i.min) + ".." + core::formatNumber(i.max);
+    }
+    void visit(const core::ParameterInfo& i, int& v) override { line(i, std::to_string(v), range(i)); }
+    void visit(const core::ParameterInfo& i, double& v) override {
+      line(i, core::formatNumber(v), range(i));
+    }
+    void visit(const core::ParameterInfo& i, bool& v) override { line(i, v ? "true" : "false", ""); }
+    void visit(const core::ParameterInfo& i, std::string& v) override { line(i, v, ""); }
+  } help;
+  config.visitParameters(help);
+  return help.text;
+}
+
 /// A tool's main: runs `body`, and turns what it throws into one line on stderr and the exit
 /// code: 2 for a usage mistake, 1 for an error (view_selection::Error or anything else).
 template <typename Body>
@@ -125,7 +205,7 @@ int runTool(const char* name, Body body) {
   } catch (const UsageError& e) {
     std::fprintf(stderr, "%s: %s\n", name, e.what());
     return 2;
-  } catch (const Error& e) {
+  } catch (const core::Error& e) {
     std::fprintf(stderr, "%s: error: %s\n", name, e.what());
     return 1;
   } catch (const std::exception& e) {

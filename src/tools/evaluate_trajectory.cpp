@@ -5,8 +5,8 @@
 #include "command_line.h"
 
 #include "view_selection/core/exceptions.h"
-#include "view_selection/core/trajectory_alignment.h"
-#include "view_selection/core/tum_dataset.h"
+#include "view_selection/eval/trajectory_alignment.h"
+#include "view_selection/io/tum_dataset.h"
 
 #include <nlohmann/json.hpp>
 
@@ -18,9 +18,11 @@
 #include <map>
 
 namespace fs = std::filesystem;
-using namespace view_selection;
-using tools::CommandLine;
-using tools::UsageError;
+using namespace view_selection::core;
+using namespace view_selection::eval;
+using namespace view_selection::io;
+using view_selection::tools::CommandLine;
+using view_selection::tools::UsageError;
 
 namespace {
 

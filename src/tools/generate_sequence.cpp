@@ -3,7 +3,7 @@
 #include "command_line.h"
 
 #include "view_selection/core/exceptions.h"
-#include "view_selection/core/synthetic_sequence.h"
+#include "view_selection/sim/synthetic_sequence.h"
 
 #include <opencv2/core/utility.hpp>
 
@@ -15,9 +15,11 @@
 #include <iostream>
 
 namespace fs = std::filesystem;
-using namespace view_selection;
-using tools::CommandLine;
-using tools::UsageError;
+using namespace view_selection::core;
+using namespace view_selection::io;
+using namespace view_selection::sim;
+using view_selection::tools::CommandLine;
+using view_selection::tools::UsageError;
 
 namespace {
 

@@ -2,13 +2,15 @@
 // and the +inf cases of METHOD.md.
 #include "view_selection/core/error_resistance.h"
 
-#include "test_support.h"
+#include "support/test_support.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <random>
 #include <vector>
+#include "view_selection/eval/reference_error_resistance.h"
+#include "support/layers.h"
 
 namespace view_selection {
 namespace {

@@ -5,13 +5,14 @@
 #include "view_selection/core/error_resistance.h"
 #include "view_selection/core/exceptions.h"
 
-#include "test_support.h"
+#include "support/test_support.h"
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <numeric>
 #include <random>
+#include "support/layers.h"
 
 namespace view_selection {
 namespace {
@@ -36,8 +37,8 @@ double naiveEntry(const Keyframe& i, const Keyframe& j, const ErrorResistanceCon
     if (!j.intrinsics.inImage(px)) continue;
     if (j.depth) {
       const double d = j.depth->at(px.x(), px.y());
-      if (d > 0.0 && std::abs(pc.z() - d) > std::max(config.occlusion_abs_tolerance,
-                                                     config.occlusion_rel_tolerance * pc.z()))
+      if (d > 0.0 && std::abs(pc.z() - d) > std::max(config.occlusion.abs_tolerance,
+                                                     config.occlusion.rel_tolerance * pc.z()))
         continue;
     }
     values.push_back(pointErrorResistance(p, i.pose.position, j.intrinsics, j.pose));
@@ -291,7 +292,9 @@ TEST(ErrorResistanceMatrix, RejectsUnusableKeyframesAndKeepsState) {
   EXPECT_THROW(matrix.addKeyframe(bad), InvalidInput);
   EXPECT_EQ(matrix.size(), 1u);
   EXPECT_EQ(matrix.addKeyframe(b), 1);
-  EXPECT_THROW(ErrorResistanceMatrix({0, 0.1}), InvalidArgument);
+  ErrorResistanceConfig no_points;
+  no_points.min_covisible_points = 0;
+  EXPECT_THROW(ErrorResistanceMatrix{no_points}, InvalidArgument);
 }
 
 }  // namespace

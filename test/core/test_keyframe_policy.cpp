@@ -3,6 +3,7 @@
 #include "view_selection/core/exceptions.h"
 
 #include <gtest/gtest.h>
+#include "support/layers.h"
 
 namespace view_selection {
 namespace {

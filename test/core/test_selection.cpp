@@ -10,6 +10,7 @@
 #include <queue>
 #include <random>
 #include <set>
+#include "support/layers.h"
 
 namespace view_selection {
 namespace {

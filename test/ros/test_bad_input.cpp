@@ -4,16 +4,22 @@
 //
 // Good frames come from ../shared/data/redkitchen-0-499 (relative to the source folder) when it
 // is there, otherwise from a synthetic tilted wall seen by a camera moving sideways.
-#include "view_selection/ros/messages.h"  // first: see there why
+#include <view_selection/GetNextViews.h>
+#include <view_selection/GetSelection.h>
+#include <view_selection/Export.h>
+#include <view_selection/InputStatistics.h>
+#include <view_selection/ViewSelection.h>
 
-#include "view_selection/core/depth_sampler.h"
-#include "view_selection/core/tum_dataset.h"
-#include "view_selection/core/tum_frames.h"
+#include "view_selection/points/depth_sampler.h"
+#include "view_selection/io/tum_dataset.h"
+#include "view_selection/io/tum_frames.h"
 #include "view_selection/core/view_selector.h"
 #include "view_selection/ros/conversions.h"
 
 #include <cv_bridge/cv_bridge.h>
-#include "view_selection/core/map_point_source.h"
+#include "view_selection/points/image_conversion.h"
+#include "view_selection/points/map_point_source.h"
+#include "view_selection/points/point_source_factory.h"
 
 #include <geometry_msgs/PoseStamped.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
@@ -37,13 +43,15 @@
 
 namespace fs = std::filesystem;
 using namespace view_selection;
+using namespace view_selection::io;
+using namespace view_selection::points;
 
 namespace {
 
 struct GoodFrame {
   ros::Time stamp;
-  PinholeIntrinsics intrinsics;
-  CameraPose pose;
+  core::PinholeIntrinsics intrinsics;
+  core::CameraPose pose;
   cv::Mat image;    // BGR
   cv::Mat depth;    // as published: CV_32FC1 metres or CV_16UC1 millimetres
 };
@@ -52,12 +60,12 @@ std::vector<GoodFrame> realFrames(const std::string& folder, size_t count, size_
   const TumDataset dataset = loadTumDataset(folder);
   std::vector<GoodFrame> frames;
   for (size_t q = 0; q < count && q * step < dataset.frames.size(); ++q) {
-    const Frame f = loadTumFrame(dataset, dataset.frames[q * step], {true, true});
+    const core::Frame f = loadTumFrame(dataset, dataset.frames[q * step], {true, true});
     GoodFrame g;
     g.intrinsics = f.intrinsics;
     g.pose = f.pose;
-    g.image = f.image;
-    g.depth = f.depth_m;
+    g.image = matOf(f.image).clone();
+    g.depth = matOf(f.depth).clone();
     frames.push_back(g);
   }
   return frames;
@@ -66,7 +74,7 @@ std::vector<GoodFrame> realFrames(const std::string& folder, size_t count, size_
 // A wall z = 2 + 0.3 x (world) with a bump, seen by a camera moving along x, looking along +z.
 std::vector<GoodFrame> syntheticFrames(size_t count) {
   std::vector<GoodFrame> frames;
-  PinholeIntrinsics k;
+  core::PinholeIntrinsics k;
   k.fx = k.fy = 150.0;
   k.cx = 80.0;
   k.cy = 60.0;
@@ -145,7 +153,7 @@ class BadInputTest : public ::testing::Test {
     sensor_msgs::ImagePtr image, depth;
     sensor_msgs::CameraInfo info;
     std::string camera_frame;       // "" = no pose published at all
-    CameraPose pose;
+    core::CameraPose pose;
     std::string pose_frame = "world";
   };
   Send makeSend(const GoodFrame& g, const ros::Time& stamp, const std::string& camera) {
@@ -326,27 +334,27 @@ TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames
   for (size_t i = 0; i < expected.size(); ++i) EXPECT_EQ(sel.keyframes[i].stamp, expected_stamps[i]) << i;
 
   // The same frames through the core directly: the node's selection must equal it exactly.
-  ViewSelectorConfig config;
-  config.keyframes.mode = KeyframeMode::kEveryFrame;
+  core::ViewSelectorConfig config;
+  config.keyframes.mode = core::KeyframeMode::kEveryFrame;
   config.selection.k = k_;
-  ViewSelector selector(config);
+  core::ViewSelector selector(config, makePointSource("depth"));
   for (size_t i = 0; i < expected.size(); ++i) {
-    Frame f;
+    core::Frame f;
     f.stamp = expected_stamps[i].toSec();
     f.image_name = ros_node::keyframeImageName(f.stamp);
     f.intrinsics = expected[i].intrinsics;
     f.pose = expected[i].pose;
-    f.depth_m = depthToMetres(expected[i].depth, expected[i].depth.type() == CV_16UC1 ? 0.001 : 1.0);
-    ASSERT_EQ(selector.addFrame(f).outcome, FrameOutcome::kKeyframe);
+    f.depth = depthImageOf(points::depthToMetres(expected[i].depth, expected[i].depth.type() == CV_16UC1 ? 0.001 : 1.0));
+    ASSERT_EQ(selector.addFrame(f).outcome, core::FrameOutcome::kKeyframe);
   }
-  const Selection want = selector.select();
+  const core::Selection want = selector.select();
   ASSERT_EQ(sel.next_view_sets.size(), want.next_views.size());
   size_t finite = 0;
   for (size_t i = 0; i < want.next_views.size(); ++i) {
     const auto& got = sel.next_view_sets[i];
     EXPECT_EQ(std::vector<int>(got.next_views.begin(), got.next_views.end()), want.next_views[i]) << "view " << i;
     for (size_t q = 0; q < got.next_views.size(); ++q) {
-      EXPECT_EQ(got.error_resistance[q], selector.matrix().at(static_cast<ViewId>(i), got.next_views[q]));
+      EXPECT_EQ(got.error_resistance[q], selector.matrix().at(static_cast<core::ViewId>(i), got.next_views[q]));
       ++finite;
     }
   }
@@ -445,7 +453,7 @@ TEST_F(BadInputTest, MapPointsReplaceAndUpdateRows) {
   for (const auto& kf : srv.response.selection.keyframes) EXPECT_EQ(kf.num_points, 0);
 
   // The map: points on the surface frame 0 sees, back-projected from its depth.
-  Eigen::Matrix3Xd map = sampleDepthPoints(good[0].depth, good[0].intrinsics, good[0].pose, DepthSamplerConfig{});
+  Eigen::Matrix3Xd map = sampleDepthPoints(depthImageOf(good[0].depth), good[0].intrinsics, good[0].pose, DepthSamplerConfig{});
   ASSERT_GT(map.cols(), 50);
   auto cloud = [&](const std::string& frame) {
     sensor_msgs::PointCloud2 c;
@@ -485,28 +493,28 @@ TEST_F(BadInputTest, MapPointsReplaceAndUpdateRows) {
   ASSERT_GT(sel.finite_entries, 0u) << "the map never reached the keyframes";
 
   // The core with the same frames and the same (float-rounded) map.
-  ViewSelectorConfig config;
-  config.keyframes.mode = KeyframeMode::kEveryFrame;
+  core::ViewSelectorConfig config;
+  config.keyframes.mode = core::KeyframeMode::kEveryFrame;
   config.selection.k = k_;
-  ViewSelector selector(config, std::make_unique<MapPointSource>());
+  core::ViewSelector selector(config, std::make_unique<MapPointSource>());
   for (size_t i = 0; i < good.size(); ++i) {
-    Frame f;
+    core::Frame f;
     f.stamp = stamps[i].toSec();
     f.image_name = ros_node::keyframeImageName(f.stamp);
     f.intrinsics = good[i].intrinsics;
     f.pose = good[i].pose;
     f.pose.orientation.normalize();
-    f.depth_m = good[i].depth;
-    ASSERT_EQ(selector.addFrame(f).outcome, FrameOutcome::kKeyframe);
+    f.depth = depthImageOf(good[i].depth);
+    ASSERT_EQ(selector.addFrame(f).outcome, core::FrameOutcome::kKeyframe);
   }
   dynamic_cast<MapPointSource&>(selector.pointSource()).setMapPoints(map.cast<float>().cast<double>());
   selector.applyPointUpdates();
   EXPECT_EQ(sel.finite_entries, selector.matrix().table().finiteCount());
   for (size_t i = 0; i < good.size(); ++i) {
-    EXPECT_EQ(sel.keyframes[i].num_points, selector.matrix().keyframe(static_cast<ViewId>(i)).points.cols()) << i;
+    EXPECT_EQ(sel.keyframes[i].num_points, selector.matrix().keyframe(static_cast<core::ViewId>(i)).points.cols()) << i;
     for (size_t q = 0; q < sel.next_view_sets[i].next_views.size(); ++q)
       EXPECT_EQ(sel.next_view_sets[i].error_resistance[q],
-                selector.matrix().at(static_cast<ViewId>(i), sel.next_view_sets[i].next_views[q]));
+                selector.matrix().at(static_cast<core::ViewId>(i), sel.next_view_sets[i].next_views[q]));
   }
 }
 

@@ -1,6 +1,10 @@
 // Interface rostest: the node (or nodelet) named by ~node advertises its topics and services,
 // subscribes to its inputs, and an empty node answers every service sensibly.
-#include "view_selection/ros/messages.h"
+#include <view_selection/Export.h>
+#include <view_selection/GetNextViews.h>
+#include <view_selection/GetSelection.h>
+#include <view_selection/InputStatistics.h>
+#include <view_selection/ViewSelection.h>
 
 #include <gtest/gtest.h>
 #include <ros/ros.h>

@@ -22,7 +22,7 @@ ros::NodeHandle fresh(const std::string& name) {
 std::string errorOf(const ros::NodeHandle& nh) {
   try {
     loadNodeConfig(nh);
-  } catch (const InvalidArgument& e) {
+  } catch (const core::InvalidArgument& e) {
     return e.what();
   }
   return "";
@@ -30,7 +30,7 @@ std::string errorOf(const ros::NodeHandle& nh) {
 
 TEST(NodeConfig, DefaultsAreTheCoresAndTheDocumentedOnes) {
   const NodeConfig c = loadNodeConfig(fresh("defaults"));
-  const ViewSelectorConfig core;
+  const core::ViewSelectorConfig defaults;
   EXPECT_EQ(c.world_frame, "world");
   EXPECT_EQ(c.camera_frame, "");
   EXPECT_EQ(c.pose_source, PoseSource::kTf);
@@ -40,17 +40,17 @@ TEST(NodeConfig, DefaultsAreTheCoresAndTheDocumentedOnes) {
   EXPECT_EQ(c.point_source, "depth");
   EXPECT_DOUBLE_EQ(c.publish_period, 0.5);
   EXPECT_FALSE(c.save_keyframe_images);
-  EXPECT_EQ(c.selector.keyframes.mode, KeyframeMode::kMotion);
-  EXPECT_EQ(c.selector.keyframes.every_n, core.keyframes.every_n);
-  EXPECT_DOUBLE_EQ(c.selector.keyframes.min_translation, core.keyframes.min_translation);
-  EXPECT_DOUBLE_EQ(c.selector.keyframes.min_rotation_deg, core.keyframes.min_rotation_deg);
-  EXPECT_EQ(c.selector.selection.k, core.selection.k);
-  EXPECT_EQ(c.selector.selection.completion, CompletionMode::kPaper);
-  EXPECT_EQ(c.selector.matrix.min_covisible_points, core.matrix.min_covisible_points);
-  EXPECT_DOUBLE_EQ(c.selector.matrix.min_covisible_ratio, core.matrix.min_covisible_ratio);
+  EXPECT_EQ(c.selector.keyframes.mode, core::KeyframeMode::kMotion);
+  EXPECT_EQ(c.selector.keyframes.every_n, defaults.keyframes.every_n);
+  EXPECT_DOUBLE_EQ(c.selector.keyframes.min_translation, defaults.keyframes.min_translation);
+  EXPECT_DOUBLE_EQ(c.selector.keyframes.min_rotation_deg, defaults.keyframes.min_rotation_deg);
+  EXPECT_EQ(c.selector.selection.k, defaults.selection.k);
+  EXPECT_EQ(c.selector.selection.completion, core::CompletionMode::kPaper);
+  EXPECT_EQ(c.selector.matrix.min_covisible_points, defaults.matrix.min_covisible_points);
+  EXPECT_DOUBLE_EQ(c.selector.matrix.min_covisible_ratio, defaults.matrix.min_covisible_ratio);
   EXPECT_DOUBLE_EQ(c.selector.matrix.max_view_angle_deg, 0.0);
-  EXPECT_TRUE(c.selector.occlusion_test);
-  EXPECT_EQ(c.selector.depth.grid_cols, core.depth.grid_cols);
+  EXPECT_TRUE(c.selector.matrix.occlusion.enabled);
+  EXPECT_EQ(c.point_params.depth.grid, points::DepthSamplerConfig{}.grid);
 }
 
 TEST(NodeConfig, EveryOptionArrives) {
@@ -74,18 +74,17 @@ TEST(NodeConfig, EveryOptionArrives) {
   EXPECT_EQ(c.world_frame, "map");
   EXPECT_EQ(c.camera_frame, "openni_rgb_optical_frame");
   EXPECT_EQ(c.pose_source, PoseSource::kTopic);
-  EXPECT_EQ(c.selector.keyframes.mode, KeyframeMode::kEveryNth);
+  EXPECT_EQ(c.selector.keyframes.mode, core::KeyframeMode::kEveryNth);
   EXPECT_EQ(c.selector.keyframes.every_n, 7);
   EXPECT_DOUBLE_EQ(c.selector.keyframes.min_translation, 1.0);
   EXPECT_DOUBLE_EQ(c.selector.keyframes.min_rotation_deg, 5.5);
   EXPECT_EQ(c.selector.selection.k, 4);
-  EXPECT_EQ(c.selector.selection.completion, CompletionMode::kReachable);
+  EXPECT_EQ(c.selector.selection.completion, core::CompletionMode::kReachable);
   EXPECT_EQ(c.selector.matrix.min_covisible_points, 20);
   EXPECT_DOUBLE_EQ(c.selector.matrix.min_covisible_ratio, 0.25);
   EXPECT_DOUBLE_EQ(c.selector.matrix.max_view_angle_deg, 60.0);
-  EXPECT_FALSE(c.selector.occlusion_test);
-  EXPECT_EQ(c.selector.depth.grid_cols, 8);
-  EXPECT_EQ(c.selector.depth.grid_rows, 8);
+  EXPECT_FALSE(c.selector.matrix.occlusion.enabled);
+  EXPECT_EQ(c.point_params.depth.grid, 8);  // one value: grid x grid cells
 }
 
 TEST(NodeConfig, BadValuesNameTheParameter) {
@@ -135,7 +134,7 @@ TEST(NodeConfig, PointSources) {
   nh.setParam("grid", 12);
   const NodeConfig features = loadNodeConfig(nh);
   EXPECT_EQ(features.point_params.features.detector, "sift");
-  EXPECT_EQ(features.point_params.depth.grid_cols, 12);
+  EXPECT_EQ(features.point_params.depth.grid, 12);
 }
 
 TEST(NodeConfig, NormaliseFrameId) {

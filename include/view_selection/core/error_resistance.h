@@ -10,7 +10,7 @@
 #include <limits>
 #include <optional>
 
-namespace view_selection {
+namespace view_selection::core {
 
 constexpr double kInfinity = std::numeric_limits<double>::infinity();
 
@@ -62,13 +62,4 @@ double pointErrorResistance(const Eigen::Vector3d& point, const Eigen::Vector3d&
 double pointErrorResistanceSineLaw(const Eigen::Vector3d& point, const Eigen::Vector3d& origin_i,
                                    const PinholeIntrinsics& intrinsics_j, const CameraPose& pose_j);
 
-/// The same quantity by brute force: project P into i, move its projection in j by one pixel
-/// along the epipolar line each way, re-triangulate with cv::triangulatePoints (DLT) and take the
-/// larger displacement. Slow; the reference the closed form is tested and benchmarked against.
-double pointErrorResistanceByTriangulation(const Eigen::Vector3d& point,
-                                           const PinholeIntrinsics& intrinsics_i,
-                                           const CameraPose& pose_i,
-                                           const PinholeIntrinsics& intrinsics_j,
-                                           const CameraPose& pose_j);
-
-}  // namespace view_selection
+}  // namespace view_selection::core

@@ -4,29 +4,33 @@
 #pragma once
 
 #include "view_selection/core/error_resistance_table.h"
+#include "view_selection/core/occlusion_map.h"
+#include "view_selection/core/parameters.h"
 #include "view_selection/core/types.h"
 
 #include <Eigen/Core>
 
 #include <vector>
 
-namespace view_selection {
+namespace view_selection::core {
 
-/// Parameters of E. Defaults are METHOD.md's; every field is documented in config/*.yaml.
+/// Parameters of E (METHOD.md "The matrix E"); the defaults are the values in force by default.
 struct ErrorResistanceConfig {
   /// E[i][j] is +inf when fewer than max(min_covisible_points, min_covisible_ratio * |X_i|)
   /// points of X_i are visible in j.
   int min_covisible_points = 10;
   double min_covisible_ratio = 0.1;
-  /// Optional gate: +inf when the optical axes differ by more than this [deg]; <= 0 disables
-  /// it (the paper's mode).
+  /// Optional gate: +inf when the optical axes differ by more than this [deg]; 0 disables it
+  /// (the paper's mode).
   double max_view_angle_deg = 0.0;
-  /// Occlusion test against j's depth map: visible when |z_j - D_j(p)| <= max(abs, rel * z_j).
-  double occlusion_abs_tolerance = 0.05;  ///< [m, scene units]
-  double occlusion_rel_tolerance = 0.03;  ///< [fraction of z_j]
+  OcclusionConfig occlusion;  ///< visibility against j's depth map
 
+  bool operator==(const ErrorResistanceConfig& o) const {
+    return paramsOf(*this) == paramsOf(o);
+  }
+  void visitParameters(ParameterVisitor& v);
   /// Throws InvalidArgument naming the first field out of range.
-  void validate() const;
+  void validate() const { checkRanges(*this); }
 };
 
 /// E[i][j] computed from scratch for one ordered pair: the median of r(X; i -> j) over the
@@ -45,6 +49,9 @@ class ErrorResistanceMatrix {
   void setPoints(ViewId id, Eigen::Matrix3Xd points);
   /// Forgets every keyframe.
   void clear();
+  /// New parameters (throws InvalidArgument; nothing changes then); when they differ from the
+  /// current ones, every entry is recomputed with them.
+  void setConfig(const ErrorResistanceConfig& config);
 
   size_t size() const { return views_.size(); }
   const Keyframe& keyframe(ViewId id) const { return views_.at(static_cast<size_t>(id)).keyframe; }
@@ -101,4 +108,4 @@ double computeErrorResistance(const ErrorResistanceMatrix::View& view_i,
 /// Throws InvalidInput when a keyframe cannot enter the matrix (bad intrinsics, pose or points).
 void validateKeyframe(const Keyframe& keyframe);
 
-}  // namespace view_selection
+}  // namespace view_selection::core

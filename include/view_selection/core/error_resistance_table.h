@@ -8,7 +8,7 @@
 #include <cstddef>
 #include <vector>
 
-namespace view_selection {
+namespace view_selection::core {
 
 /// One finite entry of a row (view = column index) or of a column (view = row index).
 struct TableEntry {
@@ -66,4 +66,4 @@ class ErrorResistanceTable {
   size_t finite_count_ = 0;
 };
 
-}  // namespace view_selection
+}  // namespace view_selection::core

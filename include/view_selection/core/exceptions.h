@@ -5,7 +5,7 @@
 #include <stdexcept>
 #include <string>
 
-namespace view_selection {
+namespace view_selection::core {
 
 /// Base of every error the core throws on purpose.
 class Error : public std::runtime_error {
@@ -31,4 +31,4 @@ class InvalidInput : public Error {
   using Error::Error;
 };
 
-}  // namespace view_selection
+}  // namespace view_selection::core

@@ -1,12 +1,13 @@
 // Which frames become keyframes: every frame, every Nth frame, or after enough motion.
 #pragma once
 
+#include "view_selection/core/parameters.h"
 #include "view_selection/core/types.h"
 
 #include <optional>
 #include <string>
 
-namespace view_selection {
+namespace view_selection::core {
 
 enum class KeyframeMode {
   kEveryFrame,  ///< every frame offered
@@ -14,9 +15,16 @@ enum class KeyframeMode {
   kMotion,      ///< the first frame, then one after min_translation OR min_rotation_deg of motion
 };
 
-std::string toString(KeyframeMode mode);
+inline constexpr EnumNames<KeyframeMode, 3> kKeyframeModeNames{
+    {{KeyframeMode::kEveryFrame, "every_frame"},
+     {KeyframeMode::kEveryNth, "every_nth"},
+     {KeyframeMode::kMotion, "motion"}}};
+
+inline std::string toString(KeyframeMode mode) { return nameOf(mode, kKeyframeModeNames); }
 /// "every_frame", "every_nth" or "motion"; throws InvalidArgument otherwise.
-KeyframeMode keyframeModeFromString(const std::string& text);
+inline KeyframeMode keyframeModeFromString(const std::string& text) {
+  return valueOf(text, kKeyframeModeNames, "keyframe_policy");
+}
 
 struct KeyframePolicyConfig {
   KeyframeMode mode = KeyframeMode::kMotion;
@@ -24,7 +32,9 @@ struct KeyframePolicyConfig {
   double min_translation = 0.10;    ///< kMotion: [m, scene units] since the last keyframe
   double min_rotation_deg = 10.0;   ///< kMotion: [deg] since the last keyframe
 
-  void validate() const;
+  void visitParameters(ParameterVisitor& v);
+  /// Throws InvalidArgument naming the first field out of range.
+  void validate() const { checkRanges(*this); }
 };
 
 class KeyframePolicy {
@@ -38,6 +48,11 @@ class KeyframePolicy {
   /// The frame offered last did become a keyframe at `pose`.
   void keyframeAccepted(const CameraPose& pose);
   void reset();
+  /// New thresholds from the next frame on; the last keyframe and the frame count stay.
+  void setConfig(const KeyframePolicyConfig& config) {
+    config.validate();
+    config_ = config;
+  }
   const KeyframePolicyConfig& config() const { return config_; }
 
  private:
@@ -46,4 +61,4 @@ class KeyframePolicy {
   std::optional<CameraPose> last_keyframe_;
 };
 
-}  // namespace view_selection
+}  // namespace view_selection::core

@@ -1,30 +1,18 @@
-// Where a keyframe's sample points X_i come from: depth back-projection here; feature
-// triangulation and external map points implement the same interface.
+// Where a keyframe's sample points X_i come from: the interface. Depth back-projection, feature
+// triangulation and external map points implement it in points/.
 #pragma once
 
-#include "view_selection/core/depth_sampler.h"
+#include "view_selection/core/frame.h"
+#include "view_selection/core/parameters.h"
 #include "view_selection/core/types.h"
 
 #include <Eigen/Core>
-#include <nlohmann/json.hpp>
-#include <opencv2/core.hpp>
 
-#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
 
-namespace view_selection {
-
-/// One incoming frame, already converted from files or messages.
-struct Frame {
-  double stamp = 0.0;             ///< [s]
-  std::string image_name;         ///< name used in pairs.txt
-  PinholeIntrinsics intrinsics;
-  CameraPose pose;                ///< camera-to-world, optical frame
-  cv::Mat depth_m;                ///< CV_32FC1 metres (0 = invalid), or empty when no depth
-  cv::Mat image;                  ///< colour (BGR) or grey; may be empty for depth-only sources
-};
+namespace view_selection::core {
 
 struct PointSourceResult {
   Eigen::Matrix3Xd points;  ///< X_n of the new keyframe, world coordinates
@@ -36,7 +24,7 @@ struct PointSourceResult {
 class PointSource {
  public:
   virtual ~PointSource() = default;
-  /// "depth", "features", "map".
+  /// "depth", "features", "map", "auto".
   virtual std::string name() const = 0;
   /// Called once for each new keyframe, which will get id `id`, before it enters the matrix.
   /// Throws InvalidInput when the frame lacks what the source needs (e.g. depth).
@@ -48,20 +36,7 @@ class PointSource {
   /// (ViewSelector::applyPointUpdates). Sources whose sets change only in process(): none.
   virtual std::vector<std::pair<ViewId, Eigen::Matrix3Xd>> takeUpdates() { return {}; }
   /// The parameters that shape the points, for selection.json's "point_source_params".
-  virtual nlohmann::json params() const { return nlohmann::json::object(); }
+  virtual Params params() const { return {}; }
 };
 
-/// Points back-projected from the frame's depth image (one per grid cell).
-class DepthPointSource : public PointSource {
- public:
-  explicit DepthPointSource(DepthSamplerConfig config = {});
-  std::string name() const override { return "depth"; }
-  PointSourceResult process(ViewId id, const Frame& frame) override;
-  void reset() override {}
-  nlohmann::json params() const override;
-
- private:
-  DepthSamplerConfig config_;
-};
-
-}  // namespace view_selection
+}  // namespace view_selection::core

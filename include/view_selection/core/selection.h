@@ -3,27 +3,36 @@
 #pragma once
 
 #include "view_selection/core/error_resistance_table.h"
+#include "view_selection/core/parameters.h"
 #include "view_selection/core/types.h"
 
 #include <string>
 #include <utility>
 #include <vector>
 
-namespace view_selection {
+namespace view_selection::core {
 
 enum class CompletionMode {
   kPaper,      ///< each unvisited view joins the set of its best predecessor; order unchanged
   kReachable,  ///< each added view joins from a visited view and the traversal continues from it
 };
 
-std::string toString(CompletionMode mode);
+inline constexpr EnumNames<CompletionMode, 2> kCompletionModeNames{
+    {{CompletionMode::kPaper, "paper"}, {CompletionMode::kReachable, "reachable"}}};
+
+inline std::string toString(CompletionMode mode) { return nameOf(mode, kCompletionModeNames); }
 /// "paper" or "reachable"; throws InvalidArgument otherwise.
-CompletionMode completionModeFromString(const std::string& text);
+inline CompletionMode completionModeFromString(const std::string& text) {
+  return valueOf(text, kCompletionModeNames, "completion");
+}
 
 struct SelectionConfig {
   int k = 5;                                      ///< size of each next view set
   CompletionMode completion = CompletionMode::kPaper;
-  void validate() const;
+
+  void visitParameters(ParameterVisitor& v);
+  /// Throws InvalidArgument naming the first field out of range.
+  void validate() const { checkRanges(*this); }
 };
 
 /// The next view set C_i: up to k views, best (lowest E[i][j], then lowest j) first.
@@ -65,4 +74,4 @@ std::vector<std::pair<ViewId, ViewId>> pairsFromSets(const std::vector<NextViewS
 /// Everything of METHOD.md's "Outputs" for one matrix.
 Selection selectViews(const ErrorResistanceTable& e, const SelectionConfig& config);
 
-}  // namespace view_selection
+}  // namespace view_selection::core

@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-namespace view_selection {
+namespace view_selection::core {
 
 /// Keyframe index: 0-based, in arrival order.
 using ViewId = int;
@@ -90,4 +90,4 @@ struct Keyframe {
   std::shared_ptr<const DepthMap> depth;  ///< optional, for the occlusion test in this view
 };
 
-}  // namespace view_selection
+}  // namespace view_selection::core

@@ -3,29 +3,29 @@
 // drive this class, which is why they give the same answer for the same frames.
 #pragma once
 
-#include "view_selection/core/depth_sampler.h"
 #include "view_selection/core/error_resistance_matrix.h"
+#include "view_selection/core/frame.h"
 #include "view_selection/core/keyframe_policy.h"
 #include "view_selection/core/point_source.h"
+#include "view_selection/core/parameters.h"
 #include "view_selection/core/selection.h"
-
-#include <nlohmann/json.hpp>
+#include "view_selection/core/selection_snapshot.h"
 
 #include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
-namespace view_selection {
+namespace view_selection::core {
 
+/// Every parameter of the method (the point sources have their own, in points/).
 struct ViewSelectorConfig {
   KeyframePolicyConfig keyframes;
-  DepthSamplerConfig depth;          ///< sampling grid and the occlusion depth map
-  ErrorResistanceConfig matrix;
+  ErrorResistanceConfig matrix;      ///< gates; matrix.occlusion: the depth map kept per keyframe
   SelectionConfig selection;
-  bool occlusion_test = true;        ///< keep a downsampled depth map per keyframe when depth exists
 
-  void validate() const;
+  void visitParameters(ParameterVisitor& v);
+  void validate() const { checkRanges(*this); }
 };
 
 enum class FrameOutcome {
@@ -44,8 +44,9 @@ struct FrameResult {
 
 class ViewSelector {
  public:
-  /// Takes ownership of the point source; a DepthPointSource when null.
-  explicit ViewSelector(ViewSelectorConfig config, std::unique_ptr<PointSource> points = nullptr);
+  /// Takes ownership of the point source (points::makePointSource makes one by name). Throws
+  /// InvalidArgument for a null source or a parameter out of range.
+  ViewSelector(ViewSelectorConfig config, std::unique_ptr<PointSource> points);
 
   /// Validates the frame (throws InvalidInput with a reason; nothing changes then), rejects a
   /// stamp not after the previous frame's (duplicate or out of order), applies the keyframe
@@ -57,7 +58,13 @@ class ViewSelector {
   bool wantsFrame(const CameraPose& pose) const;
   /// The selection for the keyframes so far.
   Selection select() const;
+  /// The keyframes, E, select() and params() together, for outputs.
+  SelectionSnapshot snapshot() const;
   void reset();
+  /// New parameters for what comes next (throws InvalidArgument; nothing changes then): the
+  /// keyframe policy keeps its place, the matrix is recomputed only when its parameters differ,
+  /// the selection follows. Keyframes and their points stay.
+  void setConfig(const ViewSelectorConfig& config);
 
   const ErrorResistanceMatrix& matrix() const { return matrix_; }
   const ViewSelectorConfig& config() const { return config_; }
@@ -68,8 +75,9 @@ class ViewSelector {
   /// recomputes exactly those rows and returns their ids. Throws InvalidInput for an update of
   /// an unknown keyframe or with non-finite points; nothing changes then.
   std::vector<ViewId> applyPointUpdates();
-  /// Every parameter that shapes the result, as written to selection.json's "params".
-  nlohmann::json params() const;
+  /// Every parameter that shapes the result, as written to selection.json's "params": the
+  /// method's, then "point_source" and the group "point_source_params".
+  Params params() const;
 
  private:
   FrameResult insert(const Frame& frame, const CameraPose& pose);
@@ -81,7 +89,4 @@ class ViewSelector {
   std::optional<double> last_stamp_;  // of the last valid frame offered
 };
 
-/// Throws InvalidInput when a frame cannot be used (intrinsics, pose, depth type or size).
-void validateFrame(const Frame& frame);
-
-}  // namespace view_selection
+}  // namespace view_selection::core

@@ -3,11 +3,11 @@
 // unless it has to.
 #pragma once
 
-#include "view_selection/ros/messages.h"  // first: see there why
-
-#include "view_selection/core/error_resistance_matrix.h"
-#include "view_selection/core/selection.h"
+#include "view_selection/core/image.h"
+#include "view_selection/core/selection_snapshot.h"
 #include "view_selection/core/types.h"
+
+#include <view_selection/ViewSelection.h>
 
 #include <geometry_msgs/Pose.h>
 #include <geometry_msgs/Transform.h>
@@ -17,12 +17,11 @@
 
 #include <string>
 
-namespace view_selection {
-namespace ros_node {
+namespace view_selection::ros_node {
 
 /// Intrinsics from camera_info's K (fx = K[0], fy = K[4], cx = K[2], cy = K[5]) and its size.
 /// Throws InvalidInput for a zero, negative or non-finite focal length or a zero size.
-PinholeIntrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& info);
+core::PinholeIntrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& info);
 
 /// Checks an image message's shape before anything reads its pixels: non-zero size, a known
 /// encoding, step >= width * pixel size and data holding step * height bytes. `what` names the
@@ -37,6 +36,11 @@ cv::Mat imageView(const sensor_msgs::Image& msg);
 /// The image as the core wants it: BGR (8 bit) for colour encodings, grey for mono8.
 /// Copies only when the encoding needs converting. Throws InvalidInput.
 cv::Mat imageForCore(const sensor_msgs::ImageConstPtr& msg);
+/// The same as a core image view that keeps the message (or the converted copy) alive.
+core::ColourImage colourImageForCore(const sensor_msgs::ImageConstPtr& msg);
+/// The message's own pixels as a view, whatever the encoding (for frames the keyframe policy will
+/// skip: nothing reads their pixels). Call checkImageMessage first.
+core::ColourImage borrowedImageView(const sensor_msgs::ImageConstPtr& msg);
 
 /// Depth in metres (CV_32FC1, 0 = invalid) from a 16UC1/mono16 (times `metres_per_unit_16u`) or
 /// 32FC1 (metres) message. Throws InvalidInput for other encodings.
@@ -44,11 +48,11 @@ cv::Mat depthToMetres(const sensor_msgs::Image& msg, double metres_per_unit_16u)
 /// Throws InvalidInput unless the depth encoding is one depthToMetres accepts.
 void checkDepthEncoding(const sensor_msgs::Image& msg);
 
-CameraPose poseFromMsg(const geometry_msgs::Pose& pose);
-CameraPose poseFromTransform(const geometry_msgs::Transform& transform);
-geometry_msgs::Pose poseToMsg(const CameraPose& pose);
+core::CameraPose poseFromMsg(const geometry_msgs::Pose& pose);
+core::CameraPose poseFromTransform(const geometry_msgs::Transform& transform);
+geometry_msgs::Pose poseToMsg(const core::CameraPose& pose);
 /// The same pose as a transform (e.g. for /tf: the camera frame in the world frame).
-geometry_msgs::Transform transformToMsg(const CameraPose& pose);
+geometry_msgs::Transform transformToMsg(const core::CameraPose& pose);
 
 /// The name a keyframe image gets in pairs.txt and under ~export: "rgb/<stamp, 6 decimals>.png",
 /// the TUM layout's naming.
@@ -56,10 +60,7 @@ std::string keyframeImageName(double stamp);
 
 /// The whole selection as a message. `world_frame` goes into the header; its stamp is the newest
 /// keyframe's.
-view_selection::ViewSelection selectionToMsg(const ErrorResistanceMatrix& matrix,
-                                             const Selection& selection,
-                                             const SelectionConfig& config,
+view_selection::ViewSelection selectionToMsg(const core::SelectionSnapshot& snapshot,
                                              const std::string& world_frame);
 
-}  // namespace ros_node
-}  // namespace view_selection
+}  // namespace view_selection::ros_node

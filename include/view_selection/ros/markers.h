@@ -2,22 +2,18 @@
 // another colour, the start view highlighted.
 #pragma once
 
-#include "view_selection/core/error_resistance_matrix.h"
-#include "view_selection/core/selection.h"
+#include "view_selection/core/selection_snapshot.h"
 
 #include <visualization_msgs/MarkerArray.h>
 
 #include <string>
 
-namespace view_selection {
-namespace ros_node {
+namespace view_selection::ros_node {
 
 /// Namespaces: "frusta", "start_view", "next_views", "completion". Each is one marker that is
 /// replaced on every call (a DELETEALL first clears markers of a larger earlier selection).
 /// `scale` is the frustum depth [m, scene units].
-visualization_msgs::MarkerArray selectionMarkers(const ErrorResistanceMatrix& matrix,
-                                                 const Selection& selection,
+visualization_msgs::MarkerArray selectionMarkers(const core::SelectionSnapshot& snapshot,
                                                  const std::string& world_frame, double scale);
 
-}  // namespace ros_node
-}  // namespace view_selection
+}  // namespace view_selection::ros_node

@@ -5,7 +5,8 @@
 #include "../../tools/command_line.h"
 
 #include "view_selection/core/exceptions.h"
-#include "view_selection/core/tum_frames.h"
+#include "view_selection/io/tum_frames.h"
+#include "view_selection/points/image_conversion.h"
 #include "view_selection/ros/conversions.h"
 
 #include <geometry_msgs/PoseStamped.h>
@@ -28,9 +29,12 @@
 #include <limits>
 
 namespace fs = std::filesystem;
-using namespace view_selection;
-using tools::CommandLine;
-using tools::UsageError;
+using namespace view_selection::io;
+namespace points = view_selection::points;
+namespace ros_node = view_selection::ros_node;
+namespace core = view_selection::core;
+using view_selection::tools::CommandLine;
+using view_selection::tools::UsageError;
 
 namespace {
 
@@ -103,7 +107,7 @@ Options parse(int argc, char** argv) {
 ros::Time toRosTime(double stamp, const std::string& what) {
   // ros::Time holds unsigned 32-bit seconds; TUM stamps are Unix seconds.
   if (!std::isfinite(stamp) || stamp < 0.0 || stamp >= 4294967295.0)
-    throw InvalidInput(what + ": stamp " + std::to_string(stamp) + " cannot be a ROS time");
+    throw core::InvalidInput(what + ": stamp " + std::to_string(stamp) + " cannot be a ROS time");
   // Round to the nanosecond (the TUM lists have 6 decimals), not ros::Time(double)'s truncation.
   const double whole = std::floor(stamp);
   long long nsec = std::llround((stamp - whole) * 1e9);
@@ -115,7 +119,7 @@ ros::Time toRosTime(double stamp, const std::string& what) {
   return ros::Time(sec, static_cast<uint32_t>(nsec));
 }
 
-sensor_msgs::CameraInfo cameraInfo(const PinholeIntrinsics& k, const std_msgs::Header& header) {
+sensor_msgs::CameraInfo cameraInfo(const core::PinholeIntrinsics& k, const std_msgs::Header& header) {
   sensor_msgs::CameraInfo info;
   info.header = header;
   info.width = static_cast<uint32_t>(k.width);
@@ -169,13 +173,13 @@ int run(const Options& o) {
     std::error_code ec;
     fs::create_directories(out.parent_path(), ec);
     if (ec)
-      throw IoError("cannot create folder '" + out.parent_path().string() + "': " + ec.message());
+      throw core::IoError("cannot create folder '" + out.parent_path().string() + "': " + ec.message());
   }
   rosbag::Bag bag;
   try {
     bag.open(o.out, rosbag::bagmode::Write);
   } catch (const rosbag::BagException& e) {
-    throw IoError("cannot write bag '" + o.out + "': " + e.what());
+    throw core::IoError("cannot write bag '" + o.out + "': " + e.what());
   }
   bag.setCompression(o.compression == "lz4"   ? rosbag::compression::LZ4
                      : o.compression == "bz2" ? rosbag::compression::BZ2
@@ -189,12 +193,13 @@ int run(const Options& o) {
   try {
     for (size_t q = 0; q < total; q += static_cast<size_t>(o.every)) {
       const TumFrame& tum = dataset.frames[q];
-      const Frame frame = loadTumFrame(dataset, tum, {true, true});
+      const core::Frame frame = loadTumFrame(dataset, tum, {true, true});
+      const cv::Mat image = points::matOf(frame.image), depth_m = points::matOf(frame.depth);
       const std::string what = "frame " + std::to_string(q) + " (" + tum.rgb_path + ")";
-      if (frame.image.cols != dataset.intrinsics.width ||
-          frame.image.rows != dataset.intrinsics.height)
-        throw InvalidInput(what + ": image is " + std::to_string(frame.image.cols) + "x" +
-                           std::to_string(frame.image.rows) + " but the intrinsics say " +
+      if (image.cols != dataset.intrinsics.width ||
+          image.rows != dataset.intrinsics.height)
+        throw core::InvalidInput(what + ": image is " + std::to_string(image.cols) + "x" +
+                           std::to_string(image.rows) + " but the intrinsics say " +
                            std::to_string(dataset.intrinsics.width) + "x" +
                            std::to_string(dataset.intrinsics.height));
       const ros::Time stamp = toRosTime(tum.stamp, what);
@@ -220,10 +225,10 @@ int run(const Options& o) {
       pose.pose = ros_node::poseToMsg(tum.pose);
       bag.write("/camera/pose", stamp, pose);
 
-      if (!frame.depth_m.empty()) {
+      if (!depth_m.empty()) {
         std_msgs::Header depth_header = header;
         depth_header.stamp = toRosTime(tum.depth_stamp, what + " depth");
-        cv::Mat depth = frame.depth_m.clone();
+        cv::Mat depth = depth_m.clone();
         depth.setTo(nan, depth == 0.0f);  // TUM's 32FC1 bags mark missing depth with NaN
         bag.write("/camera/depth/camera_info", depth_header.stamp,
                   cameraInfo(dataset.intrinsics, depth_header));
@@ -232,11 +237,11 @@ int run(const Options& o) {
       }
 
       cv::Mat rgb;
-      if (frame.image.channels() == 3) {
-        cv::cvtColor(frame.image, rgb, cv::COLOR_BGR2RGB);
+      if (image.channels() == 3) {
+        cv::cvtColor(image, rgb, cv::COLOR_BGR2RGB);
       } else {
-        throw InvalidInput(what + ": expected a colour image, got " +
-                           std::to_string(frame.image.channels()) + " channel(s)");
+        throw core::InvalidInput(what + ": expected a colour image, got " +
+                           std::to_string(image.channels()) + " channel(s)");
       }
       bag.write("/camera/rgb/camera_info", stamp, cameraInfo(dataset.intrinsics, header));
       bag.write("/camera/rgb/image_color", stamp,
@@ -252,7 +257,7 @@ int run(const Options& o) {
     }
   } catch (const rosbag::BagException& e) {
     discard(bag, out);
-    throw IoError("writing bag '" + o.out + "': " + e.what());
+    throw core::IoError("writing bag '" + o.out + "': " + e.what());
   } catch (...) {
     discard(bag, out);  // no half-written bag left behind that looks like a result
     throw;

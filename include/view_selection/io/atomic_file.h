@@ -1,0 +1,15 @@
+// Writing a file so that a crash or a full disk leaves either the old complete file or the new
+// complete one, never a torn one: write a temporary file beside it, flush it to disk, rename it.
+#pragma once
+
+#include <functional>
+#include <string>
+
+namespace view_selection::io {
+
+/// Calls `write(temporary_path)`, which must create and fill that file (throwing on failure),
+/// then syncs it and renames it to `path`. On any failure the temporary file is removed, `path`
+/// is untouched, and core::IoError says why (the writer's own exception is rethrown as is).
+void writeAtomically(const std::string& path, const std::function<void(const std::string&)>& write);
+
+}  // namespace view_selection::io

@@ -1,0 +1,22 @@
+// A picture of the selection like the paper's Figure 6a: cameras seen from above, next-view
+// edges, completion edges in another colour, the start view and isolated views marked.
+#pragma once
+
+#include "view_selection/core/selection_snapshot.h"
+
+#include <opencv2/core.hpp>
+
+#include <string>
+
+namespace view_selection::io {
+
+/// Renders onto the plane of the two main directions of the camera centres (PCA), so any
+/// trajectory lies flat. `size` is the image side in pixels.
+cv::Mat renderSelectionPlot(const core::SelectionSnapshot& snapshot, int size = 1000,
+                            const std::string& title = "");
+
+/// renderSelectionPlot(...) written as a PNG; throws IoError when it cannot be written.
+void writeSelectionPlot(const std::string& path, const core::SelectionSnapshot& snapshot,
+                        const std::string& title = "");
+
+}  // namespace view_selection::io

@@ -1,0 +1,133 @@
+// Sample points without depth: image features matched between keyframes whose frusta overlap,
+// checked against the epipolar geometry of the known poses, joined into tracks, triangulated
+// with the known poses and refined with Ceres. A point belongs to every keyframe that observes
+// it, so a new keyframe can change the point sets of earlier ones (reported as updates).
+#pragma once
+
+#include "view_selection/core/point_source.h"
+#include "view_selection/points/triangulation.h"
+
+#include <opencv2/core.hpp>
+#include <opencv2/features2d.hpp>
+
+#include <map>
+#include <string>
+#include <vector>
+
+namespace view_selection::points {
+
+/// Defaults and their reasons are in docs/design.md ("Feature point source").
+struct FeaturePointSourceConfig {
+  std::string detector = "orb";      ///< "orb" (default, fast) or "sift"
+  int max_features = 2000;           ///< per keyframe
+  int max_match_views = 6;           ///< earlier keyframes matched against each new one
+  double min_overlap = 0.05;         ///< estimated frustum overlap for a candidate, [0, 1]
+  double ratio = 0.8;                ///< Lowe's ratio test: best < ratio * second best
+  double max_sampson_px = 4.0;       ///< epipolar check from the known poses [px]
+  double max_reprojection_px = 3.0;  ///< after refinement, per observation [px]
+  double min_parallax_deg = 2.0;     ///< largest angle between a point's observing rays [deg]
+  double huber_px = 1.0;             ///< robust loss scale of the refinement [px]
+  int max_refine_iterations = 20;
+
+  void visitParameters(core::ParameterVisitor& v);
+  /// Throws InvalidArgument naming the first field out of range.
+  void validate() const { core::checkRanges(*this); }
+};
+
+/// Per-keyframe work of the last process() call, and running totals. Times are CPU seconds of
+/// the process (all threads), i.e. one core's work, not wall time.
+struct FeatureStats {
+  double extract_seconds = 0.0;      ///< detection and description
+  double match_seconds = 0.0;        ///< candidate choice, matching, ratio and epipolar checks
+  double triangulate_seconds = 0.0;  ///< tracks, DLT, Ceres, acceptance, point sets
+  double refine_seconds = 0.0;       ///< the Ceres part of triangulate_seconds
+  size_t features = 0;
+  size_t candidates = 0;  ///< earlier keyframes matched against
+  size_t matches = 0;     ///< after ratio and epipolar checks
+  size_t points = 0;      ///< of the new keyframe
+  size_t keyframes = 0;   ///< in totals: keyframes summed over
+};
+
+class FeaturePointSource : public core::PointSource {
+ public:
+  explicit FeaturePointSource(FeaturePointSourceConfig config = {});
+  std::string name() const override { return "features"; }
+  /// Needs frame.image (8-bit grey, BGR or BGRA; InvalidInput otherwise). Ids must increase.
+  core::PointSourceResult process(core::ViewId id, const core::Frame& frame) override;
+  void reset() override;
+  core::Params params() const override { return core::paramsOf(config_); }
+
+  const FeaturePointSourceConfig& config() const { return config_; }
+  const FeatureStats& lastStats() const { return last_; }
+  const FeatureStats& totalStats() const { return total_; }
+  /// Current points of a keyframe (its valid tracks); empty for an unknown id.
+  Eigen::Matrix3Xd pointsOf(core::ViewId id) const;
+  /// Earlier keyframes the last keyframe was matched against, best overlap first.
+  const std::vector<core::ViewId>& lastCandidates() const { return last_candidates_; }
+  /// Tracks with an accepted point.
+  size_t validTracks() const;
+
+  /// Estimated share of the two frusta that see the same scene, in [0, 1]: grids of pixels of
+  /// each view, back-projected to `depths`, counted where the other view sees them.
+  static double frustumOverlap(const TriangulationCamera& a, const TriangulationCamera& b,
+                               const std::vector<double>& depths);
+  /// Sampson distance [px] of a correspondence (pixel in a, pixel in b) under the fundamental
+  /// matrix of the two known cameras.
+  static Eigen::Matrix3d fundamental(const TriangulationCamera& from,
+                                     const TriangulationCamera& to);
+  static double sampsonDistance(const Eigen::Matrix3d& f, const Eigen::Vector2d& from,
+                                const Eigen::Vector2d& to);
+
+ private:
+  /// Keypoints bucketed in strips for epipolar-band look-ups: strips across x (each sorted by
+  /// y) for lines closer to horizontal, strips across y (sorted by x) for the others.
+  struct StripIndex {
+    static constexpr int kStrip = 16;  // [px]
+    std::vector<std::vector<std::pair<float, int>>> by_x, by_y;
+    void build(const std::vector<cv::KeyPoint>& keypoints, int width, int height);
+    /// Features within `band` px of the line a x + b y + c = 0, appended to `out`.
+    void near(const Eigen::Vector3d& line, double band, const std::vector<cv::KeyPoint>& keypoints,
+              std::vector<int>& out) const;
+  };
+  struct View {
+    core::ViewId id = -1;
+    StripIndex index;
+    std::vector<cv::KeyPoint> keypoints;
+    cv::Mat descriptors;
+    std::vector<int> track_of;  ///< per feature, -1 when in no track
+    double median_depth = 0.0;  ///< of its points, 0 while it has none
+    Eigen::Matrix3Xd emitted;   ///< the point set last reported for it
+  };
+  struct Track {
+    std::vector<std::pair<int, int>> obs;  ///< (view index, feature)
+    Eigen::Vector3d point = Eigen::Vector3d::Zero();
+    bool valid = false;
+    bool alive = true;
+  };
+
+  /// Features of the other view within kBandFactor * max_sampson_px of the epipolar line are a
+  /// new feature's candidates (and the ratio test's competitors); the best must then pass the
+  /// Sampson check. The wider band admits correspondences whose Sampson distance is small but
+  /// whose distance to the line in one image is larger (different scales of the two views).
+  static constexpr double kBandFactor = 2.0;
+
+  std::vector<int> chooseCandidates(const TriangulationCamera& camera) const;
+  std::vector<cv::DMatch> match(const View& next, int candidate) const;
+  bool trackHasView(int track, int view) const;
+  void triangulateTracks(const std::vector<int>& tracks);
+  Eigen::Matrix3Xd pointsOfIndex(int view) const;
+  void updateMedianDepth(int view);
+
+  FeaturePointSourceConfig config_;
+  cv::Ptr<cv::Feature2D> detector_;
+  int norm_ = cv::NORM_HAMMING;
+  std::vector<View> views_;                   // arrival order
+  std::vector<TriangulationCamera> cameras_;  // same index as views_
+  std::map<core::ViewId, int> index_of_;
+  std::vector<Track> tracks_;
+  std::vector<core::ViewId> last_candidates_;
+  FeatureStats last_, total_;
+  double refine_seconds_ = 0.0;
+};
+
+}  // namespace view_selection::points

@@ -1,0 +1,68 @@
+// Sample points from outside: world points (e.g. a SLAM system's map points) assigned to each
+// keyframe by visibility. New map points change the sets of earlier keyframes; those changes are
+// reported through takeUpdates() (and with the next keyframe) so only their rows are recomputed.
+#pragma once
+
+#include "view_selection/core/occlusion_map.h"
+#include "view_selection/core/point_source.h"
+
+#include <vector>
+
+namespace view_selection::points {
+
+struct MapPointSourceConfig {
+  /// Points farther along the optical axis are not assigned; 0: no limit [scene units].
+  double max_depth = 0.0;
+  int max_points = 2000;  ///< per keyframe, evenly thinned by index beyond this; 0: all
+  /// Drops points the keyframe's depth (when it has one) contradicts. Not a parameter of its
+  /// own: makePointSource copies the matrix's occlusion settings, so both tests agree.
+  core::OcclusionConfig occlusion;
+
+  void visitParameters(core::ParameterVisitor& v);
+  /// Throws InvalidArgument naming the first field out of range.
+  void validate() const {
+    core::checkRanges(*this);
+    occlusion.validate();
+  }
+};
+
+/// The points of `points` that a camera sees: in front (z > 0, and z <= max_depth when set),
+/// projecting inside the image, and (with a depth map) not contradicted by it. Then thinned to
+/// config.max_points. Column order follows `points`.
+Eigen::Matrix3Xd visibleMapPoints(const Eigen::Matrix3Xd& points,
+                                  const core::PinholeIntrinsics& intrinsics, const core::CameraPose& pose,
+                                  const core::DepthMap* depth, const MapPointSourceConfig& config);
+
+class MapPointSource : public core::PointSource {
+ public:
+  explicit MapPointSource(MapPointSourceConfig config = {});
+  std::string name() const override { return "map"; }
+  /// Assigns the current map points visible to the keyframe (none before the first map), and
+  /// carries the pending updates of earlier keyframes.
+  core::PointSourceResult process(core::ViewId id, const core::Frame& frame) override;
+  void reset() override;
+  std::vector<std::pair<core::ViewId, Eigen::Matrix3Xd>> takeUpdates() override;
+  core::Params params() const override { return core::paramsOf(config_); }
+
+  /// Replaces the map (throws InvalidInput for non-finite points; nothing changes then) and
+  /// reassigns every keyframe; keyframes whose set changed become pending updates.
+  void setMapPoints(Eigen::Matrix3Xd points);
+  const Eigen::Matrix3Xd& mapPoints() const { return map_; }
+  /// Keyframes whose updates are pending (ascending).
+  std::vector<core::ViewId> pendingUpdates() const;
+
+ private:
+  struct View {
+    core::ViewId id = -1;
+    core::PinholeIntrinsics intrinsics;
+    core::CameraPose pose;
+    std::shared_ptr<const core::DepthMap> depth;
+    Eigen::Matrix3Xd assigned;
+    bool pending = false;
+  };
+  MapPointSourceConfig config_;
+  Eigen::Matrix3Xd map_ = Eigen::Matrix3Xd(3, 0);
+  std::vector<View> views_;
+};
+
+}  // namespace view_selection::points

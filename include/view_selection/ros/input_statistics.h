@@ -1,0 +1,61 @@
+// What the node did with its input: frames received, offered, dropped by reason, insertion
+// times. Thread-safe; every drop is counted and logged, throttled per reason.
+#pragma once
+
+#include <ros/time.h>
+#include <view_selection/InputStatistics.h>
+
+#include <cstdint>
+#include <map>
+#include <mutex>
+#include <string>
+
+namespace view_selection::ros_node {
+
+class InputStatistics {
+ public:
+  struct Counts {
+    uint64_t frames_received = 0;
+    uint64_t frames_offered = 0;
+    std::map<std::string, uint64_t> dropped;
+    std::string last_error;
+    ros::Time last_error_stamp;
+    double last_insertion_seconds = 0.0;
+    double max_insertion_seconds = 0.0;
+    ros::WallTime last_insertion;   ///< when the last keyframe was inserted (zero: none yet)
+    uint64_t dropped_total() const;
+  };
+
+  /// A synchronised frame reached the node.
+  void frameReceived();
+  /// A valid frame was offered to the keyframe policy; `insertion_seconds` >= 0 when it became a
+  /// keyframe (points + matrix time).
+  void frameOffered(double insertion_seconds);
+  /// A frame (or a map) was dropped: counted under `reason`, logged as a warning at most once per
+  /// `kLogPeriod` per reason (with the number not logged since).
+  void drop(const std::string& reason, const std::string& message, const ros::Time& stamp);
+  void reset();
+
+  Counts counts() const;
+  /// Bumps on every change.
+  uint64_t version() const;
+  /// The ~statistics message, stamped with ROS time (simulated during replays).
+  view_selection::InputStatistics toMsg(uint32_t keyframes) const;
+
+  static constexpr double kLogPeriod = 5.0;  ///< [s, wall] between warnings of one reason
+
+ private:
+  struct Throttle {
+    ros::WallTime last;
+    uint64_t suppressed = 0;
+  };
+  mutable std::mutex mutex_;
+  Counts counts_;
+  uint64_t version_ = 0;
+  std::map<std::string, Throttle> throttle_;
+};
+
+/// A stamp as "1305031102.175304" (6 decimals), for log lines and messages.
+std::string stampText(const ros::Time& stamp);
+
+}  // namespace view_selection::ros_node

@@ -1,0 +1,102 @@
+// The worker: frames from the inputs wait in a bounded queue; one thread looks up each frame's
+// pose, converts it and hands it to the core's ViewSelector, which keeps the keyframes and the
+// matrix. After every change it publishes an immutable snapshot, which services and outputs read
+// without waiting for an insertion.
+#pragma once
+
+#include "view_selection/core/selection_snapshot.h"
+#include "view_selection/core/view_selector.h"
+#include "view_selection/ros/input_statistics.h"
+#include "view_selection/ros/node_config.h"
+#include "view_selection/ros/pose_provider.h"
+
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+namespace view_selection::ros_node {
+
+/// One synchronised frame as it arrived.
+struct PendingFrame {
+  sensor_msgs::ImageConstPtr image;
+  sensor_msgs::CameraInfoConstPtr info;
+  sensor_msgs::ImageConstPtr depth;  ///< null without depth
+};
+
+/// What readers see: the selection and, with ~save_keyframe_images, the keyframe images.
+struct NodeSnapshot {
+  uint64_t version = 0;  ///< bumps with every change
+  core::SelectionSnapshot selection;
+  std::vector<sensor_msgs::ImageConstPtr> images;  ///< by keyframe id
+};
+
+class KeyframeWorker {
+ public:
+  /// Makes the selector (throws core::InvalidArgument for bad parameters) and starts the thread.
+  KeyframeWorker(const NodeConfig& config, PoseProvider& poses, InputStatistics& statistics);
+  /// Stops the thread (a frame in flight is abandoned) and joins it.
+  ~KeyframeWorker();
+  KeyframeWorker(const KeyframeWorker&) = delete;
+  KeyframeWorker& operator=(const KeyframeWorker&) = delete;
+
+  /// Queues a frame; when ~max_pending_frames wait already, the oldest is dropped ("worker_behind").
+  void push(PendingFrame frame);
+  /// Forgets every keyframe and waiting frame; a frame in flight is discarded, not inserted.
+  /// Returns the number of keyframes forgotten.
+  size_t reset();
+  /// Replaces the map of the "map" point source and recomputes the rows of the keyframes whose
+  /// points changed. Throws core::InvalidInput for bad points (nothing changes then).
+  void setMapPoints(Eigen::Matrix3Xd points);
+  /// New method parameters, live: the selection is redone; the matrix is recomputed when its
+  /// gates changed; the keyframe policy keeps its place.
+  void reconfigure(const core::ViewSelectorConfig& config);
+
+  /// The last snapshot; never null.
+  std::shared_ptr<const NodeSnapshot> snapshot() const;
+  /// Frames waiting, and how long the oldest has waited [s, wall].
+  size_t pending(double* oldest_age = nullptr) const;
+
+ private:
+  struct Queued {
+    PendingFrame frame;
+    uint64_t generation = 0;  ///< reset() count when it was queued
+    ros::WallTime queued;
+  };
+
+  void loop();
+  void process(const Queued& queued);
+  /// Checks and converts a frame; false (after counting the drop) when it is unusable.
+  bool convert(const PendingFrame& frame, core::PinholeIntrinsics& intrinsics);
+  /// Under state_mutex_: a new snapshot of the selector's state.
+  void publishSnapshotLocked();
+
+  const NodeConfig& config_;
+  PoseProvider& poses_;
+  InputStatistics& statistics_;
+
+  // The method's state, guarded by state_mutex_.
+  mutable std::mutex state_mutex_;
+  std::unique_ptr<core::ViewSelector> selector_;
+  std::vector<sensor_msgs::ImageConstPtr> images_;  // by keyframe id, with ~save_keyframe_images
+  std::optional<double> last_stamp_;               // of the last frame offered to the core
+  uint64_t generation_ = 0;                        // bumps on reset(); frames of older ones are discarded
+  uint64_t version_ = 0;
+
+  mutable std::mutex snapshot_mutex_;
+  std::shared_ptr<const NodeSnapshot> snapshot_;
+
+  mutable std::mutex queue_mutex_;
+  std::condition_variable queue_cv_;
+  std::deque<Queued> queue_;
+  bool stopping_ = false;
+  std::thread thread_;  // last: started when everything above exists
+};
+
+}  // namespace view_selection::ros_node

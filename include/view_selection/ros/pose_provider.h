@@ -1,0 +1,95 @@
+// Where a frame's camera pose comes from: tf (world_frame <- camera frame at the image stamp) or
+// a geometry_msgs/PoseStamped topic. Each receives poses on a thread of its own, so poses keep
+// arriving while the worker waits for one.
+#pragma once
+
+#include "view_selection/core/types.h"
+#include "view_selection/ros/node_config.h"
+
+#include <geometry_msgs/PoseStamped.h>
+#include <ros/callback_queue.h>
+#include <ros/ros.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_listener.h>
+
+#include <atomic>
+#include <condition_variable>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+
+namespace view_selection::ros_node {
+
+/// The answer to one lookup: a pose, or the drop reason ("no_pose", "bad_pose") and why.
+struct PoseLookup {
+  std::optional<core::CameraPose> pose;
+  std::string reason;
+  std::string message;
+};
+
+class PoseProvider {
+ public:
+  virtual ~PoseProvider() = default;
+  /// The optical frame's pose at `stamp`; `image_frame` is the image's (normalised) frame_id.
+  /// Waits at most ~pose_timeout (wall) for it, less once stop() was called.
+  virtual PoseLookup lookup(const std::string& image_frame, const ros::Time& stamp) = 0;
+  /// Forgets poses received so far (~reset).
+  virtual void reset() {}
+  /// Wakes every waiting lookup and makes later ones return at once (shutdown).
+  virtual void stop() = 0;
+  /// For the start-up log line, e.g. "tf (world <- image frame_id)".
+  virtual std::string describe() const = 0;
+};
+
+/// tf2: lookupTransform(world_frame, camera frame, stamp), camera frame = ~camera_frame or the
+/// image's frame_id.
+class TfPoseProvider : public PoseProvider {
+ public:
+  TfPoseProvider(const NodeConfig& config, ros::NodeHandle nh);
+  PoseLookup lookup(const std::string& image_frame, const ros::Time& stamp) override;
+  void stop() override { stopping_ = true; }
+  std::string describe() const override;
+
+ private:
+  static constexpr double kPollPeriod = 0.002;  ///< [s, wall] between canTransform checks
+  static constexpr double kCacheSeconds = 30.0;  ///< tf history kept
+
+  const NodeConfig& config_;
+  std::atomic<bool> stopping_{false};
+  tf2_ros::Buffer buffer_;
+  tf2_ros::TransformListener listener_;  // spins a thread of its own
+};
+
+/// geometry_msgs/PoseStamped on `pose` (camera-to-world of the optical frame, in world_frame):
+/// the nearest pose within ~pose_max_time_difference of the stamp.
+class TopicPoseProvider : public PoseProvider {
+ public:
+  TopicPoseProvider(const NodeConfig& config, ros::NodeHandle nh);
+  ~TopicPoseProvider() override;
+  PoseLookup lookup(const std::string& image_frame, const ros::Time& stamp) override;
+  void reset() override;
+  void stop() override;
+  std::string describe() const override;
+
+ private:
+  static constexpr size_t kMaxPoses = 10000;     ///< poses kept at most ...
+  static constexpr double kHistorySeconds = 30.0;  ///< ... and for at most this long [s]
+
+  void onPose(const geometry_msgs::PoseStampedConstPtr& pose);
+
+  const NodeConfig& config_;
+  ros::NodeHandle nh_;
+  std::mutex mutex_;
+  std::condition_variable arrived_;
+  std::deque<geometry_msgs::PoseStampedConstPtr> poses_;  // ascending stamp
+  bool stopping_ = false;
+  ros::CallbackQueue queue_;
+  ros::Subscriber subscriber_;
+  ros::AsyncSpinner spinner_;
+};
+
+std::unique_ptr<PoseProvider> makePoseProvider(const NodeConfig& config, ros::NodeHandle nh);
+
+}  // namespace view_selection::ros_node

@@ -1,0 +1,52 @@
+// The node's services: ~get_next_views, ~get_selection, ~export and ~reset. They answer from the
+// worker's last snapshot on a callback queue and thread of their own, so an export never holds up
+// the inputs and an insertion never holds up an answer.
+#pragma once
+
+#include "view_selection/ros/input_statistics.h"
+#include "view_selection/ros/keyframe_worker.h"
+#include "view_selection/ros/node_config.h"
+#include "view_selection/ros/pose_provider.h"
+
+#include <ros/callback_queue.h>
+#include <ros/ros.h>
+#include <std_srvs/Trigger.h>
+#include <view_selection/Export.h>
+#include <view_selection/GetNextViews.h>
+#include <view_selection/GetSelection.h>
+
+#include <functional>
+
+namespace view_selection::ros_node {
+
+class SelectionServices {
+ public:
+  /// `on_reset` runs after a reset (e.g. to publish the empty selection at once).
+  SelectionServices(const NodeConfig& config, ros::NodeHandle private_nh, KeyframeWorker& worker,
+                    InputStatistics& statistics, PoseProvider& poses, std::function<void()> on_reset);
+  ~SelectionServices();
+
+  /// The callback queue the services run on (shared with dynamic_reconfigure's).
+  ros::CallbackQueue& queue() { return queue_; }
+
+ private:
+  bool getNextViews(view_selection::GetNextViews::Request& req, view_selection::GetNextViews::Response& res);
+  bool getSelection(view_selection::GetSelection::Request& req, view_selection::GetSelection::Response& res);
+  bool exportSelection(view_selection::Export::Request& req, view_selection::Export::Response& res);
+  bool reset(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
+
+  const NodeConfig& config_;
+  KeyframeWorker& worker_;
+  InputStatistics& statistics_;
+  PoseProvider& poses_;
+  std::function<void()> on_reset_;
+  ros::CallbackQueue queue_;
+  ros::ServiceServer next_views_, selection_, export_, reset_;
+  ros::AsyncSpinner spinner_;
+};
+
+/// Writes the snapshot's keyframe images under the names pairs.txt uses, into `directory`.
+/// Returns how many; throws core::IoError naming the image that could not be written.
+int writeKeyframeImages(const std::string& directory, const NodeSnapshot& snapshot);
+
+}  // namespace view_selection::ros_node

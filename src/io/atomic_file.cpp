@@ -1,0 +1,60 @@
+#include "view_selection/io/atomic_file.h"
+
+#include "view_selection/core/exceptions.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+
+namespace view_selection::io {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+/// fsync of a file or folder by path; false with errno set on failure.
+bool syncPath(const std::string& path, int flags) {
+  const int fd = ::open(path.c_str(), flags);
+  if (fd < 0) return false;
+  const bool ok = ::fsync(fd) == 0;
+  const int saved = errno;
+  ::close(fd);
+  errno = saved;
+  return ok;
+}
+
+/// A hidden name beside `path` that keeps its extension (writers such as cv::imwrite choose the
+/// format by it): "dir/.name.tmp-<pid>-<n>.png".
+std::string temporaryPath(const fs::path& path) {
+  static std::atomic<unsigned> counter{0};
+  const std::string name = "." + path.stem().string() + ".tmp-" + std::to_string(::getpid()) +
+                           "-" + std::to_string(counter++) + path.extension().string();
+  return (path.parent_path() / name).string();
+}
+
+}  // namespace
+
+void writeAtomically(const std::string& path, const std::function<void(const std::string&)>& write) {
+  const fs::path target(path);
+  const std::string tmp = temporaryPath(target);
+  try {
+    write(tmp);
+    if (!syncPath(tmp, O_RDONLY))
+      throw core::IoError("cannot flush '" + tmp + "' to disk: " + std::strerror(errno));
+    if (::rename(tmp.c_str(), path.c_str()) != 0)
+      throw core::IoError("cannot rename '" + tmp + "' to '" + path + "': " + std::strerror(errno));
+  } catch (...) {
+    std::error_code ignored;
+    fs::remove(tmp, ignored);
+    throw;
+  }
+  // The rename is durable once the folder's entry is on disk; a failure here loses nothing.
+  const fs::path folder = target.parent_path().empty() ? fs::path(".") : target.parent_path();
+  syncPath(folder.string(), O_RDONLY | O_DIRECTORY);
+}
+
+}  // namespace view_selection::io

@@ -1,0 +1,139 @@
+#include "view_selection/ros/selection_services.h"
+
+#include "view_selection/core/exceptions.h"
+#include "view_selection/io/atomic_file.h"
+#include "view_selection/io/export.h"
+#include "view_selection/io/params_json.h"
+#include "view_selection/ros/conversions.h"
+
+#include <opencv2/imgcodecs.hpp>
+
+#include <filesystem>
+
+namespace view_selection::ros_node {
+
+namespace fs = std::filesystem;
+
+SelectionServices::SelectionServices(const NodeConfig& config, ros::NodeHandle private_nh, KeyframeWorker& worker,
+                                     InputStatistics& statistics, PoseProvider& poses,
+                                     std::function<void()> on_reset)
+    : config_(config),
+      worker_(worker),
+      statistics_(statistics),
+      poses_(poses),
+      on_reset_(std::move(on_reset)),
+      spinner_(1, &queue_) {
+  ros::NodeHandle nh(private_nh);
+  nh.setCallbackQueue(&queue_);
+  next_views_ = nh.advertiseService("get_next_views", &SelectionServices::getNextViews, this);
+  selection_ = nh.advertiseService("get_selection", &SelectionServices::getSelection, this);
+  export_ = nh.advertiseService("export", &SelectionServices::exportSelection, this);
+  reset_ = nh.advertiseService("reset", &SelectionServices::reset, this);
+  spinner_.start();
+}
+
+SelectionServices::~SelectionServices() {
+  spinner_.stop();
+  for (auto* s : {&next_views_, &selection_, &export_, &reset_}) s->shutdown();
+}
+
+bool SelectionServices::getNextViews(view_selection::GetNextViews::Request& req,
+                                     view_selection::GetNextViews::Response& res) {
+  const std::shared_ptr<const NodeSnapshot> snapshot = worker_.snapshot();
+  const core::SelectionSnapshot& s = snapshot->selection;
+  const size_t n = s.size();
+  if (req.view < 0 || static_cast<size_t>(req.view) >= n) {
+    res.success = false;
+    res.message = "view " + std::to_string(req.view) + " is unknown: " +
+                  (n == 0 ? std::string("there are no keyframes yet")
+                          : "keyframe ids are 0.." + std::to_string(n - 1));
+    return true;
+  }
+  const auto& sets = req.after_completion ? s.selection.final_next_views : s.selection.next_views;
+  for (const core::ViewId j : sets[static_cast<size_t>(req.view)]) {
+    res.next_views.push_back(j);
+    res.error_resistance.push_back(s.table.at(req.view, j));
+  }
+  res.success = true;
+  res.message = std::to_string(res.next_views.size()) + " next views of view " + std::to_string(req.view) +
+                (req.after_completion ? " after completion" : "") + " (" + std::to_string(n) + " keyframes)";
+  return true;
+}
+
+bool SelectionServices::getSelection(view_selection::GetSelection::Request&,
+                                     view_selection::GetSelection::Response& res) {
+  const std::shared_ptr<const NodeSnapshot> snapshot = worker_.snapshot();
+  res.selection = selectionToMsg(snapshot->selection, config_.world_frame);
+  res.success = true;
+  res.message = std::to_string(res.selection.keyframes.size()) + " keyframes, " +
+                std::to_string(res.selection.pairs.size()) + " pairs" +
+                (res.selection.keyframes.empty() ? " (no keyframes yet)" : "");
+  return true;
+}
+
+int writeKeyframeImages(const std::string& directory, const NodeSnapshot& snapshot) {
+  const std::vector<std::string> names = snapshot.selection.imageNames();
+  int written = 0;
+  for (size_t i = 0; i < snapshot.images.size() && i < names.size(); ++i) {
+    const fs::path path = fs::path(directory) / names[i];
+    std::error_code ec;
+    fs::create_directories(path.parent_path(), ec);
+    if (ec) throw core::IoError("cannot create folder '" + path.parent_path().string() + "': " + ec.message());
+    cv::Mat bgr;
+    try {
+      bgr = imageForCore(snapshot.images[i]);
+    } catch (const core::InvalidInput& e) {
+      throw core::IoError("keyframe " + std::to_string(i) + " image: " + e.what());
+    }
+    io::writeAtomically(path.string(), [&](const std::string& tmp) {
+      if (!cv::imwrite(tmp, bgr)) throw core::IoError("cannot write '" + path.string() + "'");
+    });
+    ++written;
+  }
+  return written;
+}
+
+bool SelectionServices::exportSelection(view_selection::Export::Request& req, view_selection::Export::Response& res) {
+  res.success = false;
+  if (req.directory.empty()) {
+    res.message = "directory is empty: give the folder to write selection.json and pairs.txt into";
+    return true;
+  }
+  const std::shared_ptr<const NodeSnapshot> snapshot = worker_.snapshot();
+  const core::SelectionSnapshot& s = snapshot->selection;
+  try {
+    nlohmann::json params = io::toJson(s.params);
+    params["source"] = "view_selection_node";
+    params["world_frame"] = config_.world_frame;
+    params["image_path"] = config_.save_keyframe_images ? "." : "";
+    io::ExportOptions options;
+    options.title = "view_selection_node, k = " + std::to_string(s.config.k) +
+                    ", completion: " + core::toString(s.config.completion);
+    const io::ExportResult written = io::exportSelection(req.directory, s, params, options);
+    res.selection_json = written.selection_json;
+    res.pairs_txt = written.pairs_txt;
+    res.images_written = writeKeyframeImages(req.directory, *snapshot);
+    res.success = true;
+    res.message = "wrote " + std::to_string(s.size()) + " keyframes, " + std::to_string(s.selection.pairs.size()) +
+                  " pairs" +
+                  (config_.save_keyframe_images ? ", " + std::to_string(res.images_written) + " images"
+                                                : " (no images: ~save_keyframe_images is false)") +
+                  " to " + req.directory;
+  } catch (const std::exception& e) {
+    res.success = false;
+    res.message = std::string("export failed: ") + e.what();
+  }
+  return true;
+}
+
+bool SelectionServices::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
+  const size_t forgotten = worker_.reset();
+  poses_.reset();
+  statistics_.reset();
+  if (on_reset_) on_reset_();
+  res.success = true;
+  res.message = "forgot " + std::to_string(forgotten) + " keyframes and the input statistics";
+  return true;
+}
+
+}  // namespace view_selection::ros_node

@@ -1,0 +1,128 @@
+// selection.json and pairs.txt exactly as METHOD.md "File formats" specifies.
+#include "view_selection/io/selection_io.h"
+
+#include "view_selection/core/exceptions.h"
+
+#include "support/test_support.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include "support/layers.h"
+
+namespace view_selection {
+namespace {
+
+namespace fs = std::filesystem;
+using test::lookAt;
+using test::vgaIntrinsics;
+
+fs::path freshDir(const std::string& name) {
+  const fs::path dir = fs::temp_directory_path() / ("view_selection_test_" + name + "_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+ErrorResistanceMatrix threeViews() {
+  ErrorResistanceMatrix m;
+  for (int v = 0; v < 3; ++v) {
+    Keyframe kf;
+    kf.stamp = 1000.0 + v / 30.0;
+    kf.image_name = "img" + std::to_string(v) + ".jpg";
+    kf.intrinsics = vgaIntrinsics();
+    kf.pose = lookAt({0.3 * v, 0, 0}, {0.3, 0, 3});
+    kf.points.resize(3, 20);
+    for (int q = 0; q < 20; ++q) kf.points.col(q) = Eigen::Vector3d(0.1 * (q % 5), 0.1 * (q / 5), 3.0);
+    m.addKeyframe(kf);
+  }
+  return m;
+}
+
+TEST(SelectionIo, JsonFollowsTheFormat) {
+  const ErrorResistanceMatrix m = threeViews();
+  const Selection s = selectViews(m.table(), {1, CompletionMode::kPaper});
+  const fs::path dir = freshDir("json");
+  const nlohmann::json params = {{"k", 1}, {"completion", "paper"}};
+  writeSelectionJson((dir / "selection.json").string(), m, s, params, false);
+  const nlohmann::json doc = readSelectionJson((dir / "selection.json").string());
+
+  EXPECT_EQ(doc["format"], "view_selection/1");
+  EXPECT_EQ(doc["params"], params);
+  ASSERT_EQ(doc["keyframes"].size(), 3u);
+  const auto& k1 = doc["keyframes"][1];
+  EXPECT_EQ(k1["id"], 1);
+  EXPECT_EQ(k1["stamp"].get<double>(), 1000.0 + 1 / 30.0);  // full precision round trip
+  EXPECT_EQ(k1["image"], "img1.jpg");
+  EXPECT_EQ(k1["position"][0].get<double>(), 0.3);
+  EXPECT_EQ(k1["orientation_xyzw"].size(), 4u);
+  EXPECT_EQ(k1["intrinsics"], nlohmann::json({525.0, 525.0, 319.5, 239.5, 640, 480}));
+  EXPECT_FALSE(k1.contains("points"));
+
+  const auto e = errorResistanceFromJson(doc);
+  ASSERT_EQ(e.size(), 3u);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_TRUE(doc["error_resistance"][i][i].is_null());  // +inf diagonal as null
+    for (int j = 0; j < 3; ++j) EXPECT_EQ(e[i][j], m.at(i, j));  // exact doubles
+  }
+  EXPECT_EQ(doc["next_views"].get<std::vector<NextViewSet>>(), s.next_views);
+  EXPECT_EQ(doc["start_view"], s.start_view);
+  EXPECT_EQ(doc["order"].get<std::vector<ViewId>>(), s.order);
+  EXPECT_EQ(doc["final_next_views"].get<std::vector<NextViewSet>>(), s.final_next_views);
+  EXPECT_EQ(doc["isolated"].get<std::vector<ViewId>>(), s.isolated);
+  ASSERT_EQ(doc["pairs"].size(), s.pairs.size());
+  for (size_t q = 0; q < s.pairs.size(); ++q)
+    EXPECT_EQ(doc["pairs"][q], nlohmann::json({s.pairs[q].first, s.pairs[q].second}));
+  // Keys in METHOD.md's order.
+  const std::string text = slurp(dir / "selection.json");
+  size_t last = 0;
+  for (const char* key : {"\"format\"", "\"params\"", "\"keyframes\"", "\"error_resistance\"",
+                          "\"next_views\"", "\"start_view\"", "\"order\"", "\"completed\"",
+                          "\"isolated\"", "\"final_next_views\"", "\"pairs\""}) {
+    const size_t at = text.find(key);
+    ASSERT_NE(at, std::string::npos) << key;
+    EXPECT_GT(at, last) << key;
+    last = at;
+  }
+
+  writeSelectionJson((dir / "points.json").string(), m, s, params, true);
+  const auto with_points = readSelectionJson((dir / "points.json").string());
+  ASSERT_EQ(with_points["keyframes"][2]["points"].size(), 20u);
+  EXPECT_EQ(with_points["keyframes"][2]["points"][7], nlohmann::json({0.2, 0.1, 3.0}));
+  fs::remove_all(dir);
+}
+
+TEST(SelectionIo, CompletionAndNullStartAreWritten) {
+  ErrorResistanceMatrix empty;
+  const fs::path dir = freshDir("null");
+  writeSelectionJson((dir / "s.json").string(), empty, selectViews(empty.table(), {}), {}, false);
+  const auto doc = readSelectionJson((dir / "s.json").string());
+  EXPECT_TRUE(doc["start_view"].is_null());
+  EXPECT_TRUE(doc["keyframes"].empty());
+  fs::remove_all(dir);
+}
+
+TEST(SelectionIo, PairsTxtForColmap) {
+  const fs::path dir = freshDir("pairs");
+  writePairsTxt((dir / "pairs.txt").string(), {"a.jpg", "b.jpg", "sub/c.jpg"}, {{0, 1}, {0, 2}, {1, 2}});
+  EXPECT_EQ(slurp(dir / "pairs.txt"), "a.jpg b.jpg\na.jpg sub/c.jpg\nb.jpg sub/c.jpg\n");
+  EXPECT_THROW(writePairsTxt((dir / "x.txt").string(), {"a b.jpg", "c.jpg"}, {{0, 1}}), IoError);
+  EXPECT_THROW(writePairsTxt((dir / "x.txt").string(), {"a.jpg"}, {{0, 1}}), IoError);
+  EXPECT_THROW(writePairsTxt((dir / "no" / "such" / "dir.txt").string(), {"a", "b"}, {{0, 1}}), IoError);
+  EXPECT_THROW(readSelectionJson((dir / "missing.json").string()), IoError);
+  std::ofstream(dir / "bad.json") << "{ not json";
+  EXPECT_THROW(readSelectionJson((dir / "bad.json").string()), IoError);
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace view_selection

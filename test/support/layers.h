@@ -1,0 +1,17 @@
+// The offline tests name every layer's types unqualified (TumDataset, ViewSelector, ...): the
+// layers' namespaces are opened into view_selection here. Tests only; the ROS tests, which see
+// the generated messages of the same names, qualify instead.
+#pragma once
+
+namespace view_selection {
+namespace core {}
+namespace points {}
+namespace io {}
+namespace sim {}
+namespace eval {}
+using namespace core;
+using namespace points;
+using namespace io;
+using namespace sim;
+using namespace eval;
+}  // namespace view_selection
