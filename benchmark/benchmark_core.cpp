@@ -32,7 +32,8 @@ PinholeIntrinsics vga() {
 
 CameraPose lookAt(const Eigen::Vector3d& eye, const Eigen::Vector3d& target) {
   const Eigen::Vector3d z = (target - eye).normalized();
-  const Eigen::Vector3d helper = std::abs(z.y()) < 0.9 ? Eigen::Vector3d::UnitY() : Eigen::Vector3d::UnitX();
+  const Eigen::Vector3d helper =
+      std::abs(z.y()) < 0.9 ? Eigen::Vector3d::UnitY() : Eigen::Vector3d::UnitX();
   const Eigen::Vector3d x = helper.cross(z).normalized();
   Eigen::Matrix3d r;
   r << x, z.cross(x), z;
@@ -60,7 +61,8 @@ Keyframe corridorKeyframe(int index, std::mt19937& rng) {
     double t = 1e9;
     for (int axis = 0; axis < 2; ++axis) {
       const double half = axis == 0 ? 2.0 : 1.5;
-      if (std::abs(ray[axis]) > 1e-9) t = std::min(t, ((ray[axis] > 0 ? half : -half) - eye[axis]) / ray[axis]);
+      if (std::abs(ray[axis]) > 1e-9)
+        t = std::min(t, ((ray[axis] > 0 ? half : -half) - eye[axis]) / ray[axis]);
     }
     return std::min(t, 25.0);  // the corridor's far end is a wall 25 m ahead
   };
@@ -75,7 +77,9 @@ Keyframe corridorKeyframe(int index, std::mt19937& rng) {
   map->cell_width = map->cell_height = 8.0;
   map->depth.resize(80 * 60);
   for (int row = 0; row < 60; ++row)
-    for (int col = 0; col < 80; ++col) map->depth[static_cast<size_t>(row * 80 + col)] = static_cast<float>(cast(col * 8 + 4, row * 8 + 4));
+    for (int col = 0; col < 80; ++col)
+      map->depth[static_cast<size_t>(row * 80 + col)] =
+          static_cast<float>(cast(col * 8 + 4, row * 8 + 4));
   kf.depth = map;
   return kf;
 }
@@ -84,7 +88,8 @@ Keyframe corridorKeyframe(int index, std::mt19937& rng) {
 Keyframe objectKeyframe(int index, std::mt19937& rng) {
   std::uniform_real_distribution<double> uni(0.0, 1.0);
   const double az = 2.4 * index, el = 0.3 + 0.5 * uni(rng);
-  const Eigen::Vector3d eye = 3.0 * Eigen::Vector3d(std::cos(el) * std::cos(az), -std::sin(el), std::cos(el) * std::sin(az));
+  const Eigen::Vector3d eye = 3.0 * Eigen::Vector3d(std::cos(el) * std::cos(az), -std::sin(el),
+                                                    std::cos(el) * std::sin(az));
   Keyframe kf;
   kf.stamp = index;
   kf.intrinsics = vga();
@@ -143,7 +148,8 @@ void BM_ErrorResistanceClosedFormPerCall(benchmark::State& state) {
   // Including the per-pair set-up and the world-to-camera transform on every call.
   const PointSet s = pointSet();
   for (auto _ : state)
-    for (const auto& p : s.world) benchmark::DoNotOptimize(pointErrorResistance(p, s.pose_i.position, s.k, s.pose_j));
+    for (const auto& p : s.world)
+      benchmark::DoNotOptimize(pointErrorResistance(p, s.pose_i.position, s.k, s.pose_j));
   state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(s.world.size()));
 }
 BENCHMARK(BM_ErrorResistanceClosedFormPerCall);
@@ -152,7 +158,8 @@ void BM_ErrorResistanceBruteForce(benchmark::State& state) {
   const PointSet s = pointSet();
   for (auto _ : state)
     for (const auto& p : s.world)
-      benchmark::DoNotOptimize(eval::pointErrorResistanceByTriangulation(p, s.k, s.pose_i, s.k, s.pose_j));
+      benchmark::DoNotOptimize(
+          eval::pointErrorResistanceByTriangulation(p, s.k, s.pose_i, s.k, s.pose_j));
   state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(s.world.size()));
 }
 BENCHMARK(BM_ErrorResistanceBruteForce);
@@ -200,11 +207,21 @@ void selection(benchmark::State& state, Maker make, CompletionMode mode) {
   state.counters["finite_entries"] = static_cast<double>(m.table().finiteCount());
 }
 
-void BM_SelectCorridorPaper(benchmark::State& state) { selection(state, corridorKeyframe, CompletionMode::kPaper); }
+void BM_SelectCorridorPaper(benchmark::State& state) {
+  selection(state, corridorKeyframe, CompletionMode::kPaper);
+}
 BENCHMARK(BM_SelectCorridorPaper)->Arg(1000)->Arg(2000)->Arg(5000)->Unit(benchmark::kMillisecond);
-void BM_SelectCorridorReachable(benchmark::State& state) { selection(state, corridorKeyframe, CompletionMode::kReachable); }
-BENCHMARK(BM_SelectCorridorReachable)->Arg(1000)->Arg(2000)->Arg(5000)->Unit(benchmark::kMillisecond);
-void BM_SelectObjectReachable(benchmark::State& state) { selection(state, objectKeyframe, CompletionMode::kReachable); }
+void BM_SelectCorridorReachable(benchmark::State& state) {
+  selection(state, corridorKeyframe, CompletionMode::kReachable);
+}
+BENCHMARK(BM_SelectCorridorReachable)
+    ->Arg(1000)
+    ->Arg(2000)
+    ->Arg(5000)
+    ->Unit(benchmark::kMillisecond);
+void BM_SelectObjectReachable(benchmark::State& state) {
+  selection(state, objectKeyframe, CompletionMode::kReachable);
+}
 BENCHMARK(BM_SelectObjectReachable)->Arg(1000)->Arg(2000)->Unit(benchmark::kMillisecond);
 
 }  // namespace

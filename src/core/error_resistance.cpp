@@ -26,9 +26,9 @@ double PairErrorResistance::operator()(const Eigen::Vector3d& p_cam) const {
   const std::optional<Eigen::Vector2d> u = epipolarDirection(epipole_h_, p_j);
   if (!u) return kInfinity;  // P on the baseline: no parallax
 
-  const Eigen::Vector3d& b = o_i_cam_;   // O_i
-  const Eigen::Vector3d a = p_cam - b;   // O_i -> P
-  double worst_t = 0.0;                  // largest |t - 1|
+  const Eigen::Vector3d& b = o_i_cam_;  // O_i
+  const Eigen::Vector3d a = p_cam - b;  // O_i -> P
+  double worst_t = 0.0;                 // largest |t - 1|
   for (const double s : {1.0, -1.0}) {
     const Eigen::Vector3d d((p_j.x() + s * u->x() - k_.cx) * inv_fx_,
                             (p_j.y() + s * u->y() - k_.cy) * inv_fy_, 1.0);  // ray through p'_j
@@ -36,8 +36,8 @@ double PairErrorResistance::operator()(const Eigen::Vector3d& p_cam) const {
     const double nn = n.squaredNorm();
     if (!(nn > 1e-300)) return kInfinity;  // parallel rays
     const double t = -b.cross(d).dot(n) / nn;
-    if (!(t > 0.0)) return kInfinity;                    // behind O_i
-    if (!(b.z() + t * a.z() > 0.0)) return kInfinity;    // behind camera j (l = depth of P')
+    if (!(t > 0.0)) return kInfinity;                  // behind O_i
+    if (!(b.z() + t * a.z() > 0.0)) return kInfinity;  // behind camera j (l = depth of P')
     worst_t = std::max(worst_t, std::abs(t - 1.0));
   }
   const double r = worst_t * a.norm();

@@ -10,8 +10,10 @@
 namespace view_selection::core {
 
 void ErrorResistanceConfig::visitParameters(ParameterVisitor& v) {
-  visitInteger(v, "min_covisible_points", min_covisible_points, 1, 1000000,
-               "E[i][j] = inf when fewer than max(points, ratio * |X_i|) points of X_i are visible in j");
+  v.section("The error-resistance matrix: gates");
+  visitInteger(
+      v, "min_covisible_points", min_covisible_points, 1, 1000000,
+      "E[i][j] = inf when fewer than max(points, ratio * |X_i|) points of X_i are visible in j");
   visitReal(v, "min_covisible_ratio", min_covisible_ratio, 0.0, 1.0,
             "the same gate's share of X_i");
   visitReal(v, "max_view_angle_deg", max_view_angle_deg, 0.0, 180.0,
@@ -23,8 +25,8 @@ void validateKeyframe(const Keyframe& keyframe) {
   const PinholeIntrinsics& k = keyframe.intrinsics;
   if (!k.isValid())
     throw InvalidInput("keyframe intrinsics are invalid (fx=" + std::to_string(k.fx) +
-                       ", fy=" + std::to_string(k.fy) + ", size " + std::to_string(k.width) +
-                       "x" + std::to_string(k.height) + ")");
+                       ", fy=" + std::to_string(k.fy) + ", size " + std::to_string(k.width) + "x" +
+                       std::to_string(k.height) + ")");
   if (!keyframe.pose.isValid())
     throw InvalidInput("keyframe pose is not finite or its quaternion is not of unit length");
   if (!keyframe.points.allFinite()) throw InvalidInput("keyframe has non-finite sample points");
@@ -67,7 +69,8 @@ void buildGroups(Eigen::Matrix3Xd& points, Eigen::Index begin, Eigen::Index end,
     return points(axis, a) < points(axis, b) || (points(axis, a) == points(axis, b) && a < b);
   });
   Eigen::Matrix3Xd sorted(3, end - begin);
-  for (size_t q = 0; q < order.size(); ++q) sorted.col(static_cast<Eigen::Index>(q)) = points.col(order[q]);
+  for (size_t q = 0; q < order.size(); ++q)
+    sorted.col(static_cast<Eigen::Index>(q)) = points.col(order[q]);
   points.middleCols(begin, end - begin) = sorted;
   const Eigen::Index split = begin + static_cast<Eigen::Index>(order.size() / 2);
   buildGroups(points, begin, split, groups);
@@ -120,15 +123,16 @@ double computeErrorResistance(const ErrorResistanceMatrix::View& view_i,
   if (static_cast<double>(n_points) < needed) return kInfinity;
 
   if (config.max_view_angle_deg > 0.0) {
-    const double c = std::clamp(
-        view_i.world_to_camera.row(2).dot(view_j.world_to_camera.row(2)), -1.0, 1.0);
+    const double c =
+        std::clamp(view_i.world_to_camera.row(2).dot(view_j.world_to_camera.row(2)), -1.0, 1.0);
     if (std::acos(c) * 180.0 / M_PI > config.max_view_angle_deg) return kInfinity;
   }
 
   const Eigen::Matrix3d& r_cw = view_j.world_to_camera;
   const Eigen::Vector3d& o_j = kf_j.pose.position;
   // Pair-level cull: no point can be visible when X_i's bounding sphere is outside j's frustum.
-  if (outsideFrustum(view_j.frustum_normals, r_cw * (view_i.sphere_centre - o_j), view_i.sphere_radius))
+  if (outsideFrustum(view_j.frustum_normals, r_cw * (view_i.sphere_centre - o_j),
+                     view_i.sphere_radius))
     return kInfinity;
   // Group-level cull: keep the groups that may be visible; stop early when they cannot hold
   // enough points to pass the co-visibility gate.
@@ -178,7 +182,8 @@ double computeErrorResistance(const ErrorResistanceMatrix::View& view_i,
   std::nth_element(vals.begin(), vals.begin() + static_cast<std::ptrdiff_t>(mid), vals.end());
   double median = vals[mid];
   if (vals.size() % 2 == 0) {
-    const double lower = *std::max_element(vals.begin(), vals.begin() + static_cast<std::ptrdiff_t>(mid));
+    const double lower =
+        *std::max_element(vals.begin(), vals.begin() + static_cast<std::ptrdiff_t>(mid));
     median = std::isfinite(median) ? 0.5 * (lower + median) : kInfinity;
   }
   return std::isfinite(median) ? median : kInfinity;

@@ -17,7 +17,8 @@ bool byValue(const TableEntry& a, const TableEntry& b) {
 }
 }  // namespace
 
-ErrorResistanceTable ErrorResistanceTable::fromDense(const std::vector<std::vector<double>>& dense) {
+ErrorResistanceTable ErrorResistanceTable::fromDense(
+    const std::vector<std::vector<double>>& dense) {
   ErrorResistanceTable table(dense.size());
   for (size_t i = 0; i < dense.size(); ++i) {
     if (dense[i].size() != dense.size())
@@ -92,7 +93,8 @@ void ErrorResistanceTable::set(ViewId i, ViewId j, double value) {
 void ErrorResistanceTable::updateTop(size_t i, ViewId j, double value) {
   auto& top = top_[i];
   const size_t row_size = rows_[i].size();
-  const auto it = std::find_if(top.begin(), top.end(), [j](const TableEntry& e) { return e.view == j; });
+  const auto it =
+      std::find_if(top.begin(), top.end(), [j](const TableEntry& e) { return e.view == j; });
   if (it != top.end()) {
     // An entry of the top changed: if it got better (or as good), it stays; otherwise an entry
     // outside the top may now belong in it, which only a scan of the row can tell.
@@ -127,7 +129,8 @@ void ErrorResistanceTable::rescanTop(size_t i) {
   const auto& row = rows_[i];
   top.assign(row.begin(), row.end());
   const size_t keep = std::min(kTopCapacity, top.size());
-  std::partial_sort(top.begin(), top.begin() + static_cast<std::ptrdiff_t>(keep), top.end(), byValue);
+  std::partial_sort(top.begin(), top.begin() + static_cast<std::ptrdiff_t>(keep), top.end(),
+                    byValue);
   top.resize(keep);
 }
 

@@ -39,8 +39,8 @@ void validateFrame(const Frame& frame) {
                          std::to_string(frame.image.channels) + " channels");
     if (frame.image.width != k.width || frame.image.height != k.height) {
       std::ostringstream s;
-      s << "image is " << frame.image.width << "x" << frame.image.height
-        << " but camera_info says " << k.width << "x" << k.height;
+      s << "image is " << frame.image.width << "x" << frame.image.height << " but camera_info says "
+        << k.width << "x" << k.height;
       throw InvalidInput(s.str());
     }
   }

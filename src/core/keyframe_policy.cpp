@@ -8,6 +8,7 @@
 namespace view_selection::core {
 
 void KeyframePolicyConfig::visitParameters(ParameterVisitor& v) {
+  v.section("Keyframes (select_views: --every, --min-translation, --min-rotation)");
   visitChoice(v, "keyframe_policy", mode, kKeyframeModeNames,
               "which frames become keyframes: every_frame, every_nth, or motion (after enough "
               "translation or rotation)");
@@ -34,8 +35,7 @@ bool KeyframePolicy::offer(const CameraPose& pose) {
       const double moved = (pose.position - last_keyframe_->position).norm();
       const Eigen::Quaterniond a = last_keyframe_->orientation.normalized();
       const Eigen::Quaterniond b = pose.orientation.normalized();
-      const double turned_deg =
-          2.0 * std::acos(std::min(1.0, std::abs(a.dot(b)))) * 180.0 / M_PI;
+      const double turned_deg = 2.0 * std::acos(std::min(1.0, std::abs(a.dot(b)))) * 180.0 / M_PI;
       return moved >= config_.min_translation || turned_deg >= config_.min_rotation_deg;
     }
   }

@@ -7,6 +7,7 @@
 namespace view_selection::core {
 
 void OcclusionConfig::visitParameters(ParameterVisitor& v) {
+  v.section("Occlusion test");
   visitFlag(v, "occlusion_test", enabled,
             "test visibility against each keyframe's downsampled depth map (keyframes with depth)");
   visitReal(v, "occlusion_abs_tolerance", abs_tolerance, 0.0, 1e9,
@@ -17,7 +18,8 @@ void OcclusionConfig::visitParameters(ParameterVisitor& v) {
                "occlusion depth map: one median depth per n x n image pixels");
 }
 
-DepthMap makeOcclusionMap(const DepthImage& depth_m, const PinholeIntrinsics& intrinsics, int cell) {
+DepthMap makeOcclusionMap(const DepthImage& depth_m, const PinholeIntrinsics& intrinsics,
+                          int cell) {
   if (depth_m.empty()) throw InvalidInput("depth must be a non-empty image in metres");
   if (cell < 1) throw InvalidArgument("depth map cell must be >= 1");
   if (!intrinsics.isValid()) throw InvalidInput("invalid intrinsics for the depth map");

@@ -17,6 +17,7 @@ bool better(double value_a, ViewId id_a, double value_b, ViewId id_b) {
 }  // namespace
 
 void SelectionConfig::visitParameters(ParameterVisitor& v) {
+  v.section("Selection");
   visitInteger(v, "k", k, 1, 1000, "next view set size");
   visitChoice(v, "completion", completion, kCompletionModeNames,
               "paper: each unreached view joins its best predecessor's set; reachable: from a "
@@ -174,8 +175,7 @@ void completePaper(const ErrorResistanceTable& e, const std::vector<char>& visit
   }
 }
 
-void completeReachable(const ErrorResistanceTable& e, std::vector<char>& visited,
-                       Selection& out) {
+void completeReachable(const ErrorResistanceTable& e, std::vector<char>& visited, Selection& out) {
   // Unvisited views with a finite entry from some visited view, smallest id first.
   std::set<ViewId> candidates;
   size_t scanned = 0;  // views of `order` whose rows were already offered as candidates

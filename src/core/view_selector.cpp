@@ -67,7 +67,8 @@ FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
   if (!points.points.allFinite()) throw InvalidInput("point source produced non-finite points");
   for (const auto& [view, updated] : points.updated) {
     if (view < 0 || view >= id || !updated.allFinite())
-      throw InvalidInput("point source produced an invalid update for view " + std::to_string(view));
+      throw InvalidInput("point source produced an invalid update for view " +
+                         std::to_string(view));
   }
   result.points_seconds = secondsSince(t_points);
 
@@ -105,7 +106,8 @@ std::vector<ViewId> ViewSelector::applyPointUpdates() {
   auto updates = points_->takeUpdates();
   for (const auto& [view, updated] : updates) {
     if (view < 0 || static_cast<size_t>(view) >= matrix_.size() || !updated.allFinite())
-      throw InvalidInput("point source produced an invalid update for view " + std::to_string(view));
+      throw InvalidInput("point source produced an invalid update for view " +
+                         std::to_string(view));
   }
   std::vector<ViewId> rows;
   for (auto& [view, updated] : updates) {

@@ -59,7 +59,8 @@ double pointErrorResistanceByTriangulation(const Eigen::Vector3d& point,
                                       homogeneous.at<double>(1, 0) / w,
                                       homogeneous.at<double>(2, 0) / w);
     // The intersection must lie on the ray from O_i (t > 0) and in front of camera j.
-    if (!((moved_point - pose_i.position).dot(point - pose_i.position) > 0.0)) return core::kInfinity;
+    if (!((moved_point - pose_i.position).dot(point - pose_i.position) > 0.0))
+      return core::kInfinity;
     if (!(pose_j.worldToCamera(moved_point).z() > 0.0)) return core::kInfinity;
     worst = std::max(worst, (moved_point - point).norm());
   }

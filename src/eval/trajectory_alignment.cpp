@@ -12,14 +12,17 @@
 
 namespace view_selection::eval {
 
-SimilarityTransform alignUmeyama(const Eigen::Matrix3Xd& estimated, const Eigen::Matrix3Xd& ground_truth,
+SimilarityTransform alignUmeyama(const Eigen::Matrix3Xd& estimated,
+                                 const Eigen::Matrix3Xd& ground_truth,
                                  const AlignmentConfig& config) {
   if (estimated.cols() != ground_truth.cols())
-    throw core::InvalidArgument("trajectory alignment: " + std::to_string(estimated.cols()) + " estimated positions but " +
-                          std::to_string(ground_truth.cols()) + " ground-truth positions");
+    throw core::InvalidArgument("trajectory alignment: " + std::to_string(estimated.cols()) +
+                                " estimated positions but " + std::to_string(ground_truth.cols()) +
+                                " ground-truth positions");
   const Eigen::Index n = estimated.cols();
   if (n < 3)
-    throw core::InvalidArgument("trajectory alignment: needs at least 3 matched positions, got " + std::to_string(n));
+    throw core::InvalidArgument("trajectory alignment: needs at least 3 matched positions, got " +
+                                std::to_string(n));
   if (!estimated.allFinite() || !ground_truth.allFinite())
     throw core::InvalidArgument("trajectory alignment: a position is not finite");
 
@@ -28,23 +31,27 @@ SimilarityTransform alignUmeyama(const Eigen::Matrix3Xd& estimated, const Eigen:
   const Eigen::Matrix3Xd e = estimated.colwise() - mu_e;
   const Eigen::Matrix3Xd g = ground_truth.colwise() - mu_g;
 
-  // Both point sets must span at least a plane: collinear points leave a rotation about the line free.
+  // Both point sets must span at least a plane: collinear points leave a rotation about the line
+  // free.
   for (const auto* set : {&e, &g}) {
-    const Eigen::JacobiSVD<Eigen::Matrix3d> spread(*set * set->transpose() / static_cast<double>(n));
+    const Eigen::JacobiSVD<Eigen::Matrix3d> spread(*set * set->transpose() /
+                                                   static_cast<double>(n));
     const Eigen::Vector3d s = spread.singularValues();
     const char* which = set == &e ? "estimated" : "ground-truth";
     if (!(s(0) > 0.0))
-      throw core::InvalidArgument(std::string("trajectory alignment: the ") + which + " positions all coincide");
+      throw core::InvalidArgument(std::string("trajectory alignment: the ") + which +
+                                  " positions all coincide");
     if (std::sqrt(s(1) / s(0)) <= config.min_relative_spread)
       throw core::InvalidArgument(std::string("trajectory alignment: the ") + which +
-                            " positions are collinear; a similarity is not determined");
+                                  " positions are collinear; a similarity is not determined");
   }
 
   const double n_d = static_cast<double>(n);
   const Eigen::Matrix3d sigma = g * e.transpose() / n_d;  // covariance gt x est
   const Eigen::JacobiSVD<Eigen::Matrix3d> svd(sigma, Eigen::ComputeFullU | Eigen::ComputeFullV);
   Eigen::Matrix3d s_fix = Eigen::Matrix3d::Identity();
-  if (svd.matrixU().determinant() * svd.matrixV().determinant() < 0.0) s_fix(2, 2) = -1.0;  // no reflection
+  if (svd.matrixU().determinant() * svd.matrixV().determinant() < 0.0)
+    s_fix(2, 2) = -1.0;  // no reflection
 
   SimilarityTransform t;
   t.rotation = svd.matrixU() * s_fix * svd.matrixV().transpose();
@@ -56,7 +63,8 @@ SimilarityTransform alignUmeyama(const Eigen::Matrix3Xd& estimated, const Eigen:
   return t;
 }
 
-TrajectoryError absoluteTrajectoryError(const Eigen::Matrix3Xd& estimated, const Eigen::Matrix3Xd& ground_truth,
+TrajectoryError absoluteTrajectoryError(const Eigen::Matrix3Xd& estimated,
+                                        const Eigen::Matrix3Xd& ground_truth,
                                         const AlignmentConfig& config) {
   TrajectoryError r;
   r.alignment = alignUmeyama(estimated, ground_truth, config);
@@ -100,15 +108,18 @@ std::vector<ColmapImagePose> readColmapImagesTxt(const std::string& path) {
     double q[4], tv[3];
     if (!(s >> im.image_id >> q[0] >> q[1] >> q[2] >> q[3] >> tv[0] >> tv[1] >> tv[2] >> camera_id))
       throw core::IoError(path + ":" + std::to_string(line_no) +
-                    ": expected 'IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME'");
+                          ": expected 'IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME'");
     std::getline(s >> std::ws, im.name);
-    if (im.name.empty()) throw core::IoError(path + ":" + std::to_string(line_no) + ": image without a name");
+    if (im.name.empty())
+      throw core::IoError(path + ":" + std::to_string(line_no) + ": image without a name");
     im.qvec_wxyz = Eigen::Vector4d(q[0], q[1], q[2], q[3]);
     im.tvec = Eigen::Vector3d(tv[0], tv[1], tv[2]);
     const double norm = im.qvec_wxyz.norm();
     if (!im.qvec_wxyz.allFinite() || !im.tvec.allFinite() || std::abs(norm - 1.0) > 0.05)
-      throw core::IoError(path + ":" + std::to_string(line_no) + ": pose is not finite or the quaternion is not unit");
-    const Eigen::Matrix3d r_cw = Eigen::Quaterniond(q[0], q[1], q[2], q[3]).normalized().toRotationMatrix();
+      throw core::IoError(path + ":" + std::to_string(line_no) +
+                          ": pose is not finite or the quaternion is not unit");
+    const Eigen::Matrix3d r_cw =
+        Eigen::Quaterniond(q[0], q[1], q[2], q[3]).normalized().toRotationMatrix();
     im.centre = -r_cw.transpose() * im.tvec;
     images.push_back(im);
     expect_points = true;

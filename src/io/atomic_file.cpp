@@ -31,14 +31,15 @@ bool syncPath(const std::string& path, int flags) {
 /// format by it): "dir/.name.tmp-<pid>-<n>.png".
 std::string temporaryPath(const fs::path& path) {
   static std::atomic<unsigned> counter{0};
-  const std::string name = "." + path.stem().string() + ".tmp-" + std::to_string(::getpid()) +
-                           "-" + std::to_string(counter++) + path.extension().string();
+  const std::string name = "." + path.stem().string() + ".tmp-" + std::to_string(::getpid()) + "-" +
+                           std::to_string(counter++) + path.extension().string();
   return (path.parent_path() / name).string();
 }
 
 }  // namespace
 
-void writeAtomically(const std::string& path, const std::function<void(const std::string&)>& write) {
+void writeAtomically(const std::string& path,
+                     const std::function<void(const std::string&)>& write) {
   const fs::path target(path);
   const std::string tmp = temporaryPath(target);
   try {

@@ -18,8 +18,8 @@ ExportResult exportSelection(const std::string& directory, const core::Selection
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec || !fs::is_directory(dir))
-    throw core::IoError("cannot create folder '" + directory + "': " +
-                        (ec ? ec.message() : "not a folder"));
+    throw core::IoError("cannot create folder '" + directory +
+                        "': " + (ec ? ec.message() : "not a folder"));
   ExportResult result;
   result.selection_json = (dir / "selection.json").string();
   result.pairs_txt = (dir / "pairs.txt").string();

@@ -61,15 +61,16 @@ void writeReadable(std::ostream& out, const nlohmann::ordered_json& document) {
 
 }  // namespace
 
-nlohmann::json selectionToJson(const core::SelectionSnapshot& snapshot, const nlohmann::json& params,
+nlohmann::json selectionToJson(const core::SelectionSnapshot& snapshot,
+                               const nlohmann::json& params,
                                const core::ErrorResistanceMatrix* points) {
   const size_t n = snapshot.size();
   const core::Selection& selection = snapshot.selection;
   nlohmann::json keyframes = nlohmann::json::array();
   for (size_t i = 0; i < n; ++i) {
     const auto id = static_cast<core::ViewId>(i);
-    keyframes.push_back(keyframeToJson(id, snapshot.keyframes[i],
-                                       points ? &points->keyframe(id).points : nullptr));
+    keyframes.push_back(
+        keyframeToJson(id, snapshot.keyframes[i], points ? &points->keyframe(id).points : nullptr));
   }
   nlohmann::json rows = nlohmann::json::array();
   for (size_t i = 0; i < n; ++i) {
@@ -91,7 +92,8 @@ nlohmann::json selectionToJson(const core::SelectionSnapshot& snapshot, const nl
   doc["keyframes"] = std::move(keyframes);
   doc["error_resistance"] = std::move(rows);
   doc["next_views"] = selection.next_views;
-  doc["start_view"] = selection.start_view >= 0 ? nlohmann::json(selection.start_view) : nlohmann::json(nullptr);
+  doc["start_view"] =
+      selection.start_view >= 0 ? nlohmann::json(selection.start_view) : nlohmann::json(nullptr);
   doc["initial_pair"] = s >= 0 ? nlohmann::json({s, s_first}) : nlohmann::json(nullptr);
   doc["order"] = selection.order;
   doc["completed"] = std::move(completed);
@@ -113,9 +115,9 @@ void writeSelectionJson(const std::string& path, const core::SelectionSnapshot& 
   // nlohmann::ordered_json keeps METHOD.md's key order in the file.
   const nlohmann::json doc = selectionToJson(snapshot, params, points);
   nlohmann::ordered_json ordered;
-  for (const char* key : {"format", "params", "keyframes", "error_resistance", "next_views",
-                          "start_view", "initial_pair", "order", "completed", "isolated",
-                          "final_next_views", "pairs"})
+  for (const char* key :
+       {"format", "params", "keyframes", "error_resistance", "next_views", "start_view",
+        "initial_pair", "order", "completed", "isolated", "final_next_views", "pairs"})
     ordered[key] = doc.at(key);
   std::ofstream out(path);
   if (!out) throw core::IoError("cannot write '" + path + "'");
@@ -139,13 +141,14 @@ void writePairsTxt(const std::string& path, const std::vector<std::string>& imag
       const std::string& name = image_names[static_cast<size_t>(v)];
       if (name.empty() || name.find_first_of(" \t\r\n") != std::string::npos)
         throw core::IoError("pairs.txt: image name '" + name + "' of view " + std::to_string(v) +
-                      " is empty or contains whitespace, which COLMAP cannot read");
+                            " is empty or contains whitespace, which COLMAP cannot read");
     }
   }
   std::ofstream out(path);
   if (!out) throw core::IoError("cannot write '" + path + "'");
   for (const auto& [a, b] : pairs)
-    out << image_names[static_cast<size_t>(a)] << ' ' << image_names[static_cast<size_t>(b)] << '\n';
+    out << image_names[static_cast<size_t>(a)] << ' ' << image_names[static_cast<size_t>(b)]
+        << '\n';
   if (!out) throw core::IoError("error while writing '" + path + "'");
 }
 

@@ -96,7 +96,8 @@ cv::Mat renderSelectionPlot(const core::SelectionSnapshot& snapshot, int size,
 
   const std::string heading = title.empty() ? "view selection" : title;
   cv::putText(image, heading, {15, 28}, cv::FONT_HERSHEY_SIMPLEX, 0.7, kCamera, 2, cv::LINE_AA);
-  const std::string legend = std::to_string(n) + " views, " + std::to_string(selection.pairs.size()) +
+  const std::string legend = std::to_string(n) + " views, " +
+                             std::to_string(selection.pairs.size()) +
                              " pairs; blue: next view sets, red: completion, green: start";
   cv::putText(image, legend, {15, 52}, cv::FONT_HERSHEY_SIMPLEX, 0.5, kCamera, 1, cv::LINE_AA);
   return image;

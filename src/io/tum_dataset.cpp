@@ -36,7 +36,8 @@ std::string formatStamp(double stamp) {
 std::ifstream openForReading(const std::string& path) {
   std::error_code ec;
   const fs::file_status status = fs::status(path, ec);
-  if (!fs::exists(status)) throw core::IoError("cannot read " + inQuotes(path) + ": file does not exist");
+  if (!fs::exists(status))
+    throw core::IoError("cannot read " + inQuotes(path) + ": file does not exist");
   if (fs::is_directory(status)) {
     throw core::IoError("cannot read " + inQuotes(path) + ": it is a folder, not a file");
   }
@@ -65,7 +66,7 @@ void forEachDataLine(const std::string& path,
   }
   if (in.bad()) {
     throw core::IoError("error while reading " + inQuotes(path) + " after line " +
-                  std::to_string(line_number));
+                        std::to_string(line_number));
   }
 }
 
@@ -83,14 +84,15 @@ double parseFinite(const std::string& token, const std::string& what, const std:
   const auto [ptr, ec] = std::from_chars(begin, end, value);
   if (ec == std::errc::result_out_of_range) {
     throw core::IoError(lineContext(path, line_number) + what + " " + inQuotes(token) +
-                  " is out of the range of a double");
+                        " is out of the range of a double");
   }
   if (ec != std::errc() || ptr != end || begin == end) {
     throw core::IoError(lineContext(path, line_number) + what + " " + inQuotes(token) +
-                  " is not a number");
+                        " is not a number");
   }
   if (!std::isfinite(value)) {
-    throw core::IoError(lineContext(path, line_number) + what + " " + inQuotes(token) + " is not finite");
+    throw core::IoError(lineContext(path, line_number) + what + " " + inQuotes(token) +
+                        " is not finite");
   }
   return value;
 }
@@ -103,7 +105,7 @@ class DuplicateStampCheck {
     const auto [it, inserted] = first_line_.emplace(stamp, line_number);
     if (!inserted) {
       throw core::IoError(lineContext(path_, line_number) + "duplicate stamp " + token +
-                    " (already on line " + std::to_string(it->second) + ")");
+                          " (already on line " + std::to_string(it->second) + ")");
     }
   }
 
@@ -127,11 +129,11 @@ double yamlNumber(const YAML::Node& map, const std::string& key, const std::stri
     value = node.as<double>();
   } catch (const YAML::Exception&) {
     throw core::IoError(inQuotes(path) + ": key " + inQuotes(key_path) + " is not a number (" +
-                  inQuotes(node.Scalar()) + ")");
+                        inQuotes(node.Scalar()) + ")");
   }
   if (!std::isfinite(value)) {
     throw core::IoError(inQuotes(path) + ": key " + inQuotes(key_path) + " is not finite (" +
-                  inQuotes(node.Scalar()) + ")");
+                        inQuotes(node.Scalar()) + ")");
   }
   return value;
 }
@@ -141,7 +143,7 @@ int yamlImageSize(const YAML::Node& map, const std::string& key, const std::stri
   if (value <= 0.0 || value != std::floor(value) ||
       value > static_cast<double>(std::numeric_limits<int>::max())) {
     throw core::IoError(inQuotes(path) + ": key " + inQuotes(key) + " = " + map[key].Scalar() +
-                  " must be a positive whole number of pixels");
+                        " must be a positive whole number of pixels");
   }
   return static_cast<int>(value);
 }
@@ -161,21 +163,23 @@ core::PinholeIntrinsics rosCalibration(const YAML::Node& root, const std::string
   k.height = yamlImageSize(root, "image_height", path);
   const YAML::Node matrix = root["camera_matrix"];
   if (!matrix.IsMap()) {
-    throw core::IoError(inQuotes(path) + ": key 'camera_matrix' must be a map with rows, cols and data");
+    throw core::IoError(inQuotes(path) +
+                        ": key 'camera_matrix' must be a map with rows, cols and data");
   }
   for (const char* dim : {"rows", "cols"}) {
     if (!matrix[dim]) continue;  // optional; when given it must say 3
     const double n = yamlNumber(matrix, dim, path, std::string("camera_matrix/") + dim);
     if (n != 3.0) {
-      throw core::IoError(inQuotes(path) + ": 'camera_matrix/" + dim + "' is " + matrix[dim].Scalar() +
-                    ", expected 3");
+      throw core::IoError(inQuotes(path) + ": 'camera_matrix/" + dim + "' is " +
+                          matrix[dim].Scalar() + ", expected 3");
     }
   }
   const YAML::Node data = matrix["data"];
   if (!data) throw core::IoError(inQuotes(path) + ": missing key 'camera_matrix/data'");
   if (!data.IsSequence() || data.size() != 9) {
-    throw core::IoError(inQuotes(path) +
-                  ": 'camera_matrix/data' must be a list of 9 numbers [fx 0 cx 0 fy cy 0 0 1]");
+    throw core::IoError(
+        inQuotes(path) +
+        ": 'camera_matrix/data' must be a list of 9 numbers [fx 0 cx 0 fy cy 0 0 1]");
   }
   double m[9];
   for (size_t i = 0; i < 9; ++i) {
@@ -186,7 +190,7 @@ core::PinholeIntrinsics rosCalibration(const YAML::Node& root, const std::string
       m[i] = data[i].as<double>();
     } catch (const YAML::Exception&) {
       throw core::IoError(inQuotes(path) + ": " + inQuotes(key_path) + " is not a number (" +
-                    inQuotes(data[i].Scalar()) + ")");
+                          inQuotes(data[i].Scalar()) + ")");
     }
     if (!std::isfinite(m[i])) {
       throw core::IoError(inQuotes(path) + ": " + inQuotes(key_path) + " is not finite");
@@ -195,7 +199,7 @@ core::PinholeIntrinsics rosCalibration(const YAML::Node& root, const std::string
   // A skewed or non-normalised matrix cannot be represented by PinholeIntrinsics.
   if (m[1] != 0.0 || m[3] != 0.0 || m[6] != 0.0 || m[7] != 0.0 || m[8] != 1.0) {
     throw core::IoError(inQuotes(path) +
-                  ": 'camera_matrix/data' is not of the form [fx 0 cx 0 fy cy 0 0 1]");
+                        ": 'camera_matrix/data' is not of the form [fx 0 cx 0 fy cy 0 0 1]");
   }
   requirePositiveFocal(m[0], "camera_matrix/data[0] (fx)", path);
   requirePositiveFocal(m[4], "camera_matrix/data[4] (fy)", path);
@@ -299,10 +303,11 @@ std::vector<TumImageEntry> readTumImageList(const std::string& path) {
   DuplicateStampCheck duplicates(path);
   forEachDataLine(path, [&](const std::vector<std::string>& tokens, size_t line_number) {
     if (tokens.size() != 2) {
-      throw core::IoError(lineContext(path, line_number) + "expected 2 columns 'stamp path', found " +
-                    std::to_string(tokens.size()) +
-                    (tokens.size() < 2 ? " (the image path is missing)"
-                                       : " (image paths must not contain whitespace)"));
+      throw core::IoError(lineContext(path, line_number) +
+                          "expected 2 columns 'stamp path', found " +
+                          std::to_string(tokens.size()) +
+                          (tokens.size() < 2 ? " (the image path is missing)"
+                                             : " (image paths must not contain whitespace)"));
     }
     TumImageEntry entry;
     entry.stamp = parseFinite(tokens[0], "stamp", path, line_number);
@@ -320,8 +325,8 @@ std::vector<TumPoseEntry> readTumTrajectory(const std::string& path) {
   forEachDataLine(path, [&](const std::vector<std::string>& tokens, size_t line_number) {
     if (tokens.size() != 8) {
       throw core::IoError(lineContext(path, line_number) +
-                    "expected 8 columns 'stamp tx ty tz qx qy qz qw', found " +
-                    std::to_string(tokens.size()));
+                          "expected 8 columns 'stamp tx ty tz qx qy qz qw', found " +
+                          std::to_string(tokens.size()));
     }
     double v[8];
     for (size_t i = 0; i < 8; ++i) v[i] = parseFinite(tokens[i], kColumns[i], path, line_number);
@@ -353,8 +358,8 @@ core::PinholeIntrinsics loadCameraYaml(const std::string& path) {
   }
   if (!root.IsMap()) {
     throw core::IoError(inQuotes(path) +
-                  " is not a map of keys; expected fx, fy, cx, cy, width, height (or a ROS "
-                  "camera calibration file)");
+                        " is not a map of keys; expected fx, fy, cx, cy, width, height (or a ROS "
+                        "camera calibration file)");
   }
   try {
     if (root["camera_matrix"]) return rosCalibration(root, path);
@@ -402,7 +407,7 @@ std::vector<std::pair<size_t, size_t>> associateStamps(const std::vector<double>
                                                        double max_difference) {
   if (!(max_difference >= 0.0)) {
     throw core::InvalidArgument("associateStamps: max_difference must be >= 0, got " +
-                          std::to_string(max_difference));
+                                std::to_string(max_difference));
   }
   // b's indices by stamp; NaN stamps can never match and would break the ordering.
   std::vector<size_t> b_order;
@@ -458,88 +463,72 @@ std::string TumDataset::imageName(const TumFrame& frame) const {
       frame.rgb_path[image_dir.size()] == '/') {
     return frame.rgb_path.substr(image_dir.size() + 1);
   }
-  throw core::InvalidArgument("image " + inQuotes(frame.rgb_path) + " is not inside the image folder " +
-                        inQuotes(image_dir) + " of dataset " + inQuotes(root));
+  throw core::InvalidArgument("image " + inQuotes(frame.rgb_path) +
+                              " is not inside the image folder " + inQuotes(image_dir) +
+                              " of dataset " + inQuotes(root));
 }
 
-TumDataset loadTumDataset(const std::string& folder, const TumDatasetOptions& options) {
-  if (!(options.max_time_difference > 0.0) || !std::isfinite(options.max_time_difference)) {
-    throw core::InvalidArgument("max_time_difference must be positive and finite, got " +
-                          std::to_string(options.max_time_difference));
-  }
+namespace {
+
+/// Throws IoError unless `folder` is a folder with rgb.txt and groundtruth.txt.
+void checkDatasetFolder(const std::string& folder) {
   const fs::path root(folder);
   std::error_code ec;
   const fs::file_status status = fs::status(root, ec);
-  if (!fs::exists(status)) throw core::IoError("dataset folder " + inQuotes(folder) + " does not exist");
+  if (!fs::exists(status))
+    throw core::IoError("dataset folder " + inQuotes(folder) + " does not exist");
   if (!fs::is_directory(status)) {
     throw core::IoError("dataset folder " + inQuotes(folder) + " is not a folder");
   }
-  const fs::path rgb_file = root / "rgb.txt";
-  const fs::path depth_file = root / "depth.txt";
-  const fs::path gt_file = root / "groundtruth.txt";
-  if (!fs::exists(rgb_file, ec)) {
+  if (!fs::exists(root / "rgb.txt", ec)) {
     throw core::IoError("dataset folder " + inQuotes(folder) +
-                  " has no rgb.txt (the list of colour images, one 'stamp path' per line)");
+                        " has no rgb.txt (the list of colour images, one 'stamp path' per line)");
   }
-  if (!fs::exists(gt_file, ec)) {
-    throw core::IoError("dataset folder " + inQuotes(folder) +
-                  " has no groundtruth.txt: the view selection needs the camera pose of every "
-                  "frame (one 'stamp tx ty tz qx qy qz qw' line per pose, camera-to-world)");
+  if (!fs::exists(root / "groundtruth.txt", ec)) {
+    throw core::IoError(
+        "dataset folder " + inQuotes(folder) +
+        " has no groundtruth.txt: the view selection needs the camera pose of every "
+        "frame (one 'stamp tx ty tz qx qy qz qw' line per pose, camera-to-world)");
   }
+}
 
-  TumDataset dataset;
-  dataset.root = folder;
-  dataset.has_depth = fs::exists(depth_file, ec);
-
-  const std::vector<TumImageEntry> rgb = readTumImageList(rgb_file.string());
-  const std::vector<TumPoseEntry> gt = readTumTrajectory(gt_file.string());
-  std::vector<TumImageEntry> depth;
-  if (dataset.has_depth) depth = readTumImageList(depth_file.string());
-  dataset.rgb_entries = rgb.size();
-
-  const fs::path camera_file = root / "camera.yaml";
+/// camera.yaml, else TUM's published intrinsics for the camera the folder's name says.
+void loadIntrinsics(const std::string& folder, TumDataset& dataset) {
+  std::error_code ec;
+  const fs::path camera_file = fs::path(folder) / "camera.yaml";
   if (fs::exists(camera_file, ec)) {
     dataset.intrinsics = loadCameraYaml(camera_file.string());
     dataset.intrinsics_source = "camera.yaml";
-  } else {
-    const std::string name = folderBaseName(folder);
-    const std::optional<core::PinholeIntrinsics> defaults = tumDefaultIntrinsics(name);
-    if (!defaults) {
-      throw core::IoError("dataset folder " + inQuotes(folder) +
-                    " has no camera.yaml and its name does not say which TUM camera "
-                    "(freiburg1/2/3) took it; add a camera.yaml with the keys fx, fy, cx, cy, "
-                    "width, height (pixels)");
-    }
-    dataset.intrinsics = *defaults;
-    dataset.intrinsics_source = "TUM freiburg" + std::to_string(freiburgCamera(name)) + " defaults";
+    return;
   }
+  const std::string name = folderBaseName(folder);
+  const std::optional<core::PinholeIntrinsics> defaults = tumDefaultIntrinsics(name);
+  if (!defaults) {
+    throw core::IoError("dataset folder " + inQuotes(folder) +
+                        " has no camera.yaml and its name does not say which TUM camera "
+                        "(freiburg1/2/3) took it; add a camera.yaml with the keys fx, fy, cx, cy, "
+                        "width, height (pixels)");
+  }
+  dataset.intrinsics = *defaults;
+  dataset.intrinsics_source = "TUM freiburg" + std::to_string(freiburgCamera(name)) + " defaults";
+}
 
-  if (rgb.empty()) {
-    throw core::InvalidInput("dataset " + inQuotes(folder) + ": rgb.txt lists no images, no frame left");
-  }
-  if (gt.empty()) {
-    throw core::InvalidInput("dataset " + inQuotes(folder) +
-                       ": groundtruth.txt lists no poses, no frame left");
-  }
-  if (dataset.has_depth && depth.empty()) {
-    throw core::InvalidInput("dataset " + inQuotes(folder) +
-                       ": depth.txt lists no depth images, no frame left (remove depth.txt to "
-                       "load the colour images alone)");
-  }
+std::vector<double> stampsOf(const std::vector<TumImageEntry>& entries) {
+  std::vector<double> stamps;
+  for (const auto& e : entries) stamps.push_back(e.stamp);
+  return stamps;
+}
 
-  // rgb <-> depth: unique greedy association (associate.py).
+/// rgb <-> depth by associate.py's unique greedy association, then each rgb frame with depth to
+/// the nearest ground-truth pose (not unique: ground truth is often denser than the images).
+void associateFrames(const std::string& folder, const std::vector<TumImageEntry>& rgb,
+                     const std::vector<TumImageEntry>& depth, const std::vector<TumPoseEntry>& gt,
+                     double max_difference, TumDataset& dataset) {
   std::vector<long> depth_of(rgb.size(), -1);
   if (dataset.has_depth) {
-    std::vector<double> rgb_stamps, depth_stamps;
-    for (const auto& e : rgb) rgb_stamps.push_back(e.stamp);
-    for (const auto& e : depth) depth_stamps.push_back(e.stamp);
-    for (const auto& [i, j] :
-         associateStamps(rgb_stamps, depth_stamps, options.max_time_difference)) {
+    for (const auto& [i, j] : associateStamps(stampsOf(rgb), stampsOf(depth), max_difference))
       depth_of[i] = static_cast<long>(j);
-    }
   }
-
-  // rgb -> ground truth: nearest, not unique (ground truth is often denser than the images).
   std::vector<size_t> gt_order(gt.size());
   for (size_t k = 0; k < gt.size(); ++k) gt_order[k] = k;
   std::sort(gt_order.begin(), gt_order.end(),
@@ -552,7 +541,7 @@ TumDataset loadTumDataset(const std::string& folder, const TumDatasetOptions& op
       ++dataset.dropped_without_depth;
       continue;
     }
-    const long nearest = nearestWithin(gt_stamps, rgb[i].stamp, options.max_time_difference);
+    const long nearest = nearestWithin(gt_stamps, rgb[i].stamp, max_difference);
     if (nearest < 0) {
       ++dataset.dropped_without_pose;
       continue;
@@ -571,23 +560,23 @@ TumDataset loadTumDataset(const std::string& folder, const TumDatasetOptions& op
   }
 
   if (dataset.frames.empty()) {
-    std::vector<double> rgb_stamps, depth_stamps;
-    for (const auto& e : rgb) rgb_stamps.push_back(e.stamp);
-    for (const auto& e : depth) depth_stamps.push_back(e.stamp);
     std::ostringstream msg;
     msg << "dataset " << inQuotes(folder) << ": no frame left after association within "
-        << options.max_time_difference << " s: of " << rgb.size() << " rgb images, ";
+        << max_difference << " s: of " << rgb.size() << " rgb images, ";
     if (dataset.has_depth) msg << dataset.dropped_without_depth << " have no depth image and ";
     msg << dataset.dropped_without_pose << " have no ground-truth pose that close in time (rgb "
-        << stampRange(rgb_stamps);
-    if (dataset.has_depth) msg << ", depth " << stampRange(depth_stamps);
+        << stampRange(stampsOf(rgb));
+    if (dataset.has_depth) msg << ", depth " << stampRange(stampsOf(depth));
     msg << ", ground truth " << stampRange(gt_stamps) << ")";
     throw core::InvalidInput(msg.str());
   }
-
   std::sort(dataset.frames.begin(), dataset.frames.end(),
             [](const TumFrame& x, const TumFrame& y) { return x.stamp < y.stamp; });
+}
 
+/// Throws IoError when an associated image is missing or its name cannot go into pairs.txt.
+void checkImages(const std::string& folder, const TumDataset& dataset) {
+  const fs::path root(folder);
   size_t missing = 0;
   size_t checked = 0;
   std::string first_missing;
@@ -601,21 +590,60 @@ TumDataset loadTumDataset(const std::string& folder, const TumDatasetOptions& op
     if (dataset.has_depth) check(frame.depth_path);
   }
   if (missing > 0) {
-    throw core::IoError("dataset " + inQuotes(folder) + ": " + std::to_string(missing) + " of the " +
-                  std::to_string(checked) + " associated image files do not exist; the first is " +
-                  inQuotes(first_missing));
+    throw core::IoError("dataset " + inQuotes(folder) + ": " + std::to_string(missing) +
+                        " of the " + std::to_string(checked) +
+                        " associated image files do not exist; the first is " +
+                        inQuotes(first_missing));
   }
-
-  dataset.image_dir = commonDirectory(dataset.frames);
   for (const TumFrame& frame : dataset.frames) {
     const std::string name = dataset.imageName(frame);
     // COLMAP's pairs.txt separates names by spaces.
     if (std::any_of(name.begin(), name.end(),
                     [](unsigned char c) { return std::isspace(c) != 0; })) {
       throw core::IoError("dataset " + inQuotes(folder) + ": image name " + inQuotes(name) +
-                    " contains whitespace, which COLMAP's pairs.txt cannot hold; rename it");
+                          " contains whitespace, which COLMAP's pairs.txt cannot hold; rename it");
     }
   }
+}
+
+}  // namespace
+
+TumDataset loadTumDataset(const std::string& folder, const TumDatasetOptions& options) {
+  if (!(options.max_time_difference > 0.0) || !std::isfinite(options.max_time_difference)) {
+    throw core::InvalidArgument("max_time_difference must be positive and finite, got " +
+                                std::to_string(options.max_time_difference));
+  }
+  checkDatasetFolder(folder);
+  const fs::path root(folder);
+  std::error_code ec;
+  TumDataset dataset;
+  dataset.root = folder;
+  dataset.has_depth = fs::exists(root / "depth.txt", ec);
+
+  const std::vector<TumImageEntry> rgb = readTumImageList((root / "rgb.txt").string());
+  const std::vector<TumPoseEntry> gt = readTumTrajectory((root / "groundtruth.txt").string());
+  std::vector<TumImageEntry> depth;
+  if (dataset.has_depth) depth = readTumImageList((root / "depth.txt").string());
+  dataset.rgb_entries = rgb.size();
+  loadIntrinsics(folder, dataset);
+
+  if (rgb.empty()) {
+    throw core::InvalidInput("dataset " + inQuotes(folder) +
+                             ": rgb.txt lists no images, no frame left");
+  }
+  if (gt.empty()) {
+    throw core::InvalidInput("dataset " + inQuotes(folder) +
+                             ": groundtruth.txt lists no poses, no frame left");
+  }
+  if (dataset.has_depth && depth.empty()) {
+    throw core::InvalidInput(
+        "dataset " + inQuotes(folder) +
+        ": depth.txt lists no depth images, no frame left (remove depth.txt to "
+        "load the colour images alone)");
+  }
+  associateFrames(folder, rgb, depth, gt, options.max_time_difference, dataset);
+  dataset.image_dir = commonDirectory(dataset.frames);
+  checkImages(folder, dataset);
   return dataset;
 }
 

@@ -1,7 +1,7 @@
 #include "view_selection/io/tum_frames.h"
 
-#include "view_selection/points/image_conversion.h"
 #include "view_selection/core/exceptions.h"
+#include "view_selection/points/image_conversion.h"
 
 #include <opencv2/imgcodecs.hpp>
 
@@ -18,13 +18,15 @@ cv::Mat readImage(const std::string& path, int flags) {
   } catch (const cv::Exception& e) {
     throw core::IoError("cannot read image '" + path + "': " + e.what());
   }
-  if (image.empty()) throw core::IoError("cannot read image '" + path + "' (missing, unreadable or not an image)");
+  if (image.empty())
+    throw core::IoError("cannot read image '" + path + "' (missing, unreadable or not an image)");
   return image;
 }
 
 }  // namespace
 
-core::Frame loadTumFrame(const TumDataset& dataset, const TumFrame& tum, const FrameLoadOptions& options) {
+core::Frame loadTumFrame(const TumDataset& dataset, const TumFrame& tum,
+                         const FrameLoadOptions& options) {
   const std::filesystem::path root(dataset.root);
   core::Frame frame;
   frame.stamp = tum.stamp;
@@ -34,14 +36,16 @@ core::Frame loadTumFrame(const TumDataset& dataset, const TumFrame& tum, const F
   if (options.depth && dataset.has_depth && !tum.depth_path.empty()) {
     const std::string path = (root / tum.depth_path).string();
     try {
-      frame.depth = points::depthImageOf(points::depthToMetres(
-          readImage(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_GRAYSCALE), dataset.depth_metres_per_unit));
+      frame.depth = points::depthImageOf(
+          points::depthToMetres(readImage(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_GRAYSCALE),
+                                dataset.depth_metres_per_unit));
     } catch (const core::InvalidInput& e) {
       throw core::InvalidInput("depth image '" + path + "': " + e.what());
     }
   }
   if (options.image)
-    frame.image = points::colourImageOf(readImage((root / tum.rgb_path).string(), cv::IMREAD_COLOR));
+    frame.image =
+        points::colourImageOf(readImage((root / tum.rgb_path).string(), cv::IMREAD_COLOR));
   return frame;
 }
 

@@ -21,7 +21,8 @@ std::string inQuotes(const std::string& s) { return "'" + s + "'"; }
 std::string exact(double value) {
   char buffer[64];
   const auto [end, ec] = std::to_chars(buffer, buffer + sizeof(buffer), value);
-  if (ec != std::errc()) throw core::IoError("cannot format a number");  // cannot happen with 64 chars
+  if (ec != std::errc())
+    throw core::IoError("cannot format a number");  // cannot happen with 64 chars
   return std::string(buffer, end);
 }
 
@@ -61,11 +62,11 @@ void writeTumTrajectory(const std::string& path, const std::vector<TumPoseEntry>
     const TumPoseEntry& e = poses[q];
     if (!std::isfinite(e.stamp) || !e.pose.isValid()) {
       throw core::IoError("cannot write " + inQuotes(path) + ": pose " + std::to_string(q) +
-                    " has a non-finite value or a quaternion far from unit length");
+                          " has a non-finite value or a quaternion far from unit length");
     }
     if (!stamps.insert(e.stamp).second) {
       throw core::IoError("cannot write " + inQuotes(path) + ": stamp " + exact(e.stamp) +
-                    " appears twice (the reader rejects repeated stamps)");
+                          " appears twice (the reader rejects repeated stamps)");
     }
     const Eigen::Vector3d& t = e.pose.position;
     const Eigen::Quaterniond& r = e.pose.orientation;
@@ -86,17 +87,17 @@ void writeTumImageList(const std::string& path, const std::vector<TumImageEntry>
     const TumImageEntry& e = entries[q];
     if (!std::isfinite(e.stamp)) {
       throw core::IoError("cannot write " + inQuotes(path) + ": entry " + std::to_string(q) +
-                    " has a non-finite stamp");
+                          " has a non-finite stamp");
     }
     if (e.path.empty() || std::any_of(e.path.begin(), e.path.end(),
                                       [](unsigned char c) { return std::isspace(c) != 0; })) {
       throw core::IoError("cannot write " + inQuotes(path) + ": image path " + inQuotes(e.path) +
-                    " is empty or contains whitespace, which the list format cannot hold");
+                          " is empty or contains whitespace, which the list format cannot hold");
     }
     const std::string stamp = sixDecimals(e.stamp);
     if (!stamps.insert(stamp).second) {
       throw core::IoError("cannot write " + inQuotes(path) + ": stamp " + stamp +
-                    " appears twice at 6 decimals (the reader rejects repeated stamps)");
+                          " appears twice at 6 decimals (the reader rejects repeated stamps)");
     }
     out << stamp << ' ' << e.path << '\n';
   }
@@ -106,7 +107,7 @@ void writeTumImageList(const std::string& path, const std::vector<TumImageEntry>
 void writeCameraYaml(const std::string& path, const core::PinholeIntrinsics& k) {
   if (!k.isValid() || !std::isfinite(k.cx) || !std::isfinite(k.cy)) {
     throw core::IoError("cannot write " + inQuotes(path) +
-                  ": the intrinsics are invalid (focal lengths and size must be positive)");
+                        ": the intrinsics are invalid (focal lengths and size must be positive)");
   }
   std::ostringstream out;
   out << "# Pinhole intrinsics in pixels (view_selection camera.yaml)\n"

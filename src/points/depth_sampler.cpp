@@ -10,6 +10,7 @@
 namespace view_selection::points {
 
 void DepthSamplerConfig::visitParameters(core::ParameterVisitor& v) {
+  v.section("Points from depth");
   core::visitInteger(v, "grid", grid, 1, 256, "depth sampling grid, N x N cells, one point a cell");
   core::visitReal(v, "depth_min", min_depth, 0.0, 1e9, "valid depth range: nearest [m]");
   core::visitReal(v, "depth_max", max_depth, 0.0, 1e9, "valid depth range: farthest [m]");

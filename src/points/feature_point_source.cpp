@@ -82,13 +82,14 @@ cv::Mat toGrey(const cv::Mat& image) {
       return grey;
     default:
       throw core::InvalidInput("point source 'features' needs a grey, BGR or BGRA image, got " +
-                         std::to_string(image.channels()) + " channels");
+                               std::to_string(image.channels()) + " channels");
   }
 }
 
 }  // namespace
 
 void FeaturePointSourceConfig::visitParameters(core::ParameterVisitor& v) {
+  v.section("Points from features (no depth)");
   core::visitText(v, "features", detector, {"orb", "sift"}, "features: detector, orb or sift");
   core::visitInteger(v, "max_features", max_features, 1, 1000000, "features: per keyframe");
   core::visitInteger(v, "feature_max_match_views", max_match_views, 1, 1000,
@@ -399,6 +400,19 @@ Eigen::Matrix3Xd FeaturePointSource::pointsOf(core::ViewId id) const {
   return it == index_of_.end() ? Eigen::Matrix3Xd(3, 0) : pointsOfIndex(it->second);
 }
 
+FeatureStats& FeatureStats::operator+=(const FeatureStats& o) {
+  extract_seconds += o.extract_seconds;
+  match_seconds += o.match_seconds;
+  triangulate_seconds += o.triangulate_seconds;
+  refine_seconds += o.refine_seconds;
+  features += o.features;
+  candidates += o.candidates;
+  matches += o.matches;
+  points += o.points;
+  keyframes += o.keyframes;
+  return *this;
+}
+
 size_t FeaturePointSource::validTracks() const {
   size_t n = 0;
   for (const Track& t : tracks_) n += (t.alive && t.valid) ? 1 : 0;
@@ -446,8 +460,44 @@ core::PointSourceResult FeaturePointSource::process(core::ViewId id, const core:
   for (const int c : candidates) last_candidates_.push_back(views_[static_cast<size_t>(c)].id);
   stats.match_seconds = secondsSince(t0);
 
-  // Tracks: the union of the matches, never two features of one view in a track.
   t0 = cpuNow();
+  const std::set<int> touched = joinTracks(n, candidates, matches);
+  std::vector<int> live;
+  std::set<int> affected;
+  for (const int t : touched) {
+    if (!tracks_[static_cast<size_t>(t)].alive) continue;
+    live.push_back(t);
+    for (const auto& [v, f] : tracks_[static_cast<size_t>(t)].obs) affected.insert(v);
+  }
+  refine_seconds_ = 0.0;
+  triangulateTracks(live);
+  stats.refine_seconds = refine_seconds_;
+
+  core::PointSourceResult result;
+  for (const int v : affected) {
+    if (v == n) continue;
+    Eigen::Matrix3Xd points = pointsOfIndex(v);
+    View& view = views_[static_cast<size_t>(v)];
+    if (points.cols() == view.emitted.cols() && points == view.emitted) continue;  // unchanged
+    view.emitted = points;
+    updateMedianDepth(v);
+    result.updated.emplace_back(view.id, std::move(points));
+  }
+  result.points = pointsOfIndex(n);
+  views_[static_cast<size_t>(n)].emitted = result.points;
+  updateMedianDepth(n);
+  stats.triangulate_seconds = secondsSince(t0);
+  stats.points = static_cast<size_t>(result.points.cols());
+  stats.keyframes = 1;
+
+  last_ = stats;
+  total_ += stats;
+  return result;
+}
+
+std::set<int> FeaturePointSource::joinTracks(int n, const std::vector<int>& candidates,
+                                             const std::vector<std::vector<cv::DMatch>>& matches) {
+  // Tracks: the union of the matches, never two features of one view in a track.
   std::set<int> touched;
   for (size_t q = 0; q < candidates.size(); ++q) {
     const int c = candidates[q];
@@ -492,45 +542,7 @@ core::PointSourceResult FeaturePointSource::process(core::ViewId id, const core:
       }
     }
   }
-  std::vector<int> live;
-  std::set<int> affected;
-  for (const int t : touched) {
-    if (!tracks_[static_cast<size_t>(t)].alive) continue;
-    live.push_back(t);
-    for (const auto& [v, f] : tracks_[static_cast<size_t>(t)].obs) affected.insert(v);
-  }
-  refine_seconds_ = 0.0;
-  triangulateTracks(live);
-  stats.refine_seconds = refine_seconds_;
-
-  core::PointSourceResult result;
-  for (const int v : affected) {
-    if (v == n) continue;
-    Eigen::Matrix3Xd points = pointsOfIndex(v);
-    View& view = views_[static_cast<size_t>(v)];
-    if (points.cols() == view.emitted.cols() && points == view.emitted) continue;  // unchanged
-    view.emitted = points;
-    updateMedianDepth(v);
-    result.updated.emplace_back(view.id, std::move(points));
-  }
-  result.points = pointsOfIndex(n);
-  views_[static_cast<size_t>(n)].emitted = result.points;
-  updateMedianDepth(n);
-  stats.triangulate_seconds = secondsSince(t0);
-  stats.points = static_cast<size_t>(result.points.cols());
-  stats.keyframes = 1;
-
-  last_ = stats;
-  total_.extract_seconds += stats.extract_seconds;
-  total_.match_seconds += stats.match_seconds;
-  total_.triangulate_seconds += stats.triangulate_seconds;
-  total_.refine_seconds += stats.refine_seconds;
-  total_.features += stats.features;
-  total_.candidates += stats.candidates;
-  total_.matches += stats.matches;
-  total_.points += stats.points;
-  total_.keyframes += 1;
-  return result;
+  return touched;
 }
 
 }  // namespace view_selection::points

@@ -48,9 +48,7 @@ core::ColourImage colourImageOf(const cv::Mat& image) {
 
 cv::Mat matOf(const core::DepthImage& depth) { return matOfView(depth, CV_32FC1); }
 
-cv::Mat matOf(const core::ColourImage& image) {
-  return matOfView(image, CV_8UC(image.channels));
-}
+cv::Mat matOf(const core::ColourImage& image) { return matOfView(image, CV_8UC(image.channels)); }
 
 cv::Mat depthToMetres(const cv::Mat& depth, double metres_per_unit) {
   if (depth.empty()) throw core::InvalidInput("depth image is empty");
@@ -70,7 +68,8 @@ cv::Mat depthToMetres(const cv::Mat& depth, double metres_per_unit) {
     for (int r = 0; r < depth.rows; ++r) {
       const auto* in = depth.ptr<float>(r);
       auto* o = out.ptr<float>(r);
-      for (int c = 0; c < depth.cols; ++c) o[c] = std::isfinite(in[c]) && in[c] > 0.0f ? in[c] : 0.0f;
+      for (int c = 0; c < depth.cols; ++c)
+        o[c] = std::isfinite(in[c]) && in[c] > 0.0f ? in[c] : 0.0f;
     }
     return out;
   }

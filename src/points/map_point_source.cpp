@@ -8,6 +8,7 @@
 namespace view_selection::points {
 
 void MapPointSourceConfig::visitParameters(core::ParameterVisitor& v) {
+  v.section("Points from a map (point_source: map)");
   core::visitReal(v, "map_max_depth", max_depth, 0.0, 1e9,
                   "map: farthest point assigned to a keyframe along its axis; 0 = no limit");
   core::visitInteger(v, "map_max_points", max_points, 0, 100000000,
@@ -15,8 +16,9 @@ void MapPointSourceConfig::visitParameters(core::ParameterVisitor& v) {
 }
 
 Eigen::Matrix3Xd visibleMapPoints(const Eigen::Matrix3Xd& points,
-                                  const core::PinholeIntrinsics& intrinsics, const core::CameraPose& pose,
-                                  const core::DepthMap* depth, const MapPointSourceConfig& config) {
+                                  const core::PinholeIntrinsics& intrinsics,
+                                  const core::CameraPose& pose, const core::DepthMap* depth,
+                                  const MapPointSourceConfig& config) {
   const Eigen::Matrix3d world_to_camera = pose.rotation().transpose();
   std::vector<Eigen::Index> visible;
   for (Eigen::Index c = 0; c < points.cols(); ++c) {
@@ -83,8 +85,8 @@ core::PointSourceResult MapPointSource::process(core::ViewId id, const core::Fra
     throw core::InvalidInput("map point source: the frame's intrinsics or pose are unusable");
   if (!views_.empty() && id <= views_.back().id)
     throw core::InvalidArgument("map point source: keyframe id " + std::to_string(id) +
-                          " is not after the previous one (" + std::to_string(views_.back().id) +
-                          "); call reset() to start over");
+                                " is not after the previous one (" +
+                                std::to_string(views_.back().id) + "); call reset() to start over");
   View v;
   v.id = id;
   v.intrinsics = frame.intrinsics;

@@ -29,7 +29,7 @@ Eigen::Vector3d triangulateLinear(const std::vector<PixelObservation>& observati
   for (const auto& o : observations) {
     if (o.camera < 0 || static_cast<size_t>(o.camera) >= cameras.size())
       throw core::InvalidArgument("triangulateLinear: observation of unknown camera " +
-                            std::to_string(o.camera));
+                                  std::to_string(o.camera));
     mean += cameras[static_cast<size_t>(o.camera)].centre;
   }
   mean /= static_cast<double>(observations.size());
@@ -107,14 +107,14 @@ void refinePoints(std::vector<Eigen::Vector3d>& points,
                   const std::vector<TriangulationCamera>& cameras, const RefineOptions& options) {
   if (points.size() != observations.size())
     throw core::InvalidArgument("refinePoints: " + std::to_string(points.size()) + " points but " +
-                          std::to_string(observations.size()) + " observation lists");
+                                std::to_string(observations.size()) + " observation lists");
   if (!(options.huber_px > 0.0) || options.max_iterations < 1)
     throw core::InvalidArgument("refinePoints: huber_px must be > 0 and max_iterations >= 1");
   for (const auto& list : observations)
     for (const auto& o : list)
       if (o.camera < 0 || static_cast<size_t>(o.camera) >= cameras.size())
         throw core::InvalidArgument("refinePoints: observation of unknown camera " +
-                              std::to_string(o.camera));
+                                    std::to_string(o.camera));
   // Ceres' TinySolver (Levenberg-Marquardt for small dense problems): each point is independent
   // (cameras fixed), and one general ceres::Problem per point, or one for all, spends 20-60x
   // longer in set-up than in solving 3 unknowns.

@@ -24,8 +24,8 @@ core::PinholeIntrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& 
   k.height = static_cast<int>(info.height);
   if (!k.isValid() || !std::isfinite(k.cx) || !std::isfinite(k.cy)) {
     std::ostringstream s;
-    s << "camera_info is unusable (K: fx=" << k.fx << " fy=" << k.fy << " cx=" << k.cx << " cy=" << k.cy
-      << ", size " << info.width << "x" << info.height
+    s << "camera_info is unusable (K: fx=" << k.fx << " fy=" << k.fy << " cx=" << k.cx
+      << " cy=" << k.cy << ", size " << info.width << "x" << info.height
       << "): focal lengths must be positive and finite and the size non-zero";
     throw core::InvalidInput(s.str());
   }
@@ -49,25 +49,26 @@ void checkImageMessage(const sensor_msgs::Image& msg, const std::string& what) {
     throw core::InvalidInput(what + " has unusable encoding '" + msg.encoding + "'");
   const uint64_t row_bytes = static_cast<uint64_t>(msg.width) * channels * (bit_depth / 8);
   if (msg.step < row_bytes) {
-    s << what << " step " << msg.step << " is less than width " << msg.width << " x " << channels * (bit_depth / 8)
-      << " bytes of '" << msg.encoding << "'";
+    s << what << " step " << msg.step << " is less than width " << msg.width << " x "
+      << channels * (bit_depth / 8) << " bytes of '" << msg.encoding << "'";
     throw core::InvalidInput(s.str());
   }
   if (msg.data.size() < static_cast<uint64_t>(msg.step) * msg.height) {
-    s << what << " holds " << msg.data.size() << " bytes, but step " << msg.step << " x height " << msg.height
-      << " needs " << static_cast<uint64_t>(msg.step) * msg.height;
+    s << what << " holds " << msg.data.size() << " bytes, but step " << msg.step << " x height "
+      << msg.height << " needs " << static_cast<uint64_t>(msg.step) * msg.height;
     throw core::InvalidInput(s.str());
   }
-  if (what == "image" && !enc::isColor(msg.encoding) && !enc::isMono(msg.encoding) && !enc::isBayer(msg.encoding))
+  if (what == "image" && !enc::isColor(msg.encoding) && !enc::isMono(msg.encoding) &&
+      !enc::isBayer(msg.encoding))
     throw core::InvalidInput("image encoding '" + msg.encoding +
-                       "' is not a colour or grey image (expected rgb8, bgr8, mono8, ...)");
+                             "' is not a colour or grey image (expected rgb8, bgr8, mono8, ...)");
   const bool little = [] {
     const uint16_t one = 1;
     return *reinterpret_cast<const uint8_t*>(&one) == 1;
   }();
   if (bit_depth > 8 && msg.is_bigendian == little)
     throw core::InvalidInput(what + " is " + (msg.is_bigendian ? "big" : "little") +
-                       "-endian, which this machine does not read natively");
+                             "-endian, which this machine does not read natively");
 }
 
 cv::Mat imageView(const sensor_msgs::Image& msg) {
@@ -89,12 +90,14 @@ cv_bridge::CvImageConstPtr shareForCore(const sensor_msgs::ImageConstPtr& msg) {
     if (enc::isColor(msg->encoding) || enc::isMono(msg->encoding) || enc::isBayer(msg->encoding))
       return cv_bridge::toCvShare(msg, enc::isMono(msg->encoding) ? enc::MONO8 : enc::BGR8);
   } catch (const cv_bridge::Exception& e) {
-    throw core::InvalidInput("image with encoding '" + msg->encoding + "' cannot be converted: " + e.what());
+    throw core::InvalidInput("image with encoding '" + msg->encoding +
+                             "' cannot be converted: " + e.what());
   } catch (const cv::Exception& e) {
-    throw core::InvalidInput("image with encoding '" + msg->encoding + "' cannot be converted: " + e.what());
+    throw core::InvalidInput("image with encoding '" + msg->encoding +
+                             "' cannot be converted: " + e.what());
   }
   throw core::InvalidInput("image encoding '" + msg->encoding +
-                     "' is not a colour or grey image (expected rgb8, bgr8, mono8, ...)");
+                           "' is not a colour or grey image (expected rgb8, bgr8, mono8, ...)");
 }
 
 /// A std::shared_ptr that keeps a boost::shared_ptr (ROS messages, cv_bridge images) alive.
@@ -126,9 +129,10 @@ core::ColourImage borrowedImageView(const sensor_msgs::ImageConstPtr& msg) {
 }
 
 void checkDepthEncoding(const sensor_msgs::Image& msg) {
-  if (msg.encoding != enc::TYPE_16UC1 && msg.encoding != enc::MONO16 && msg.encoding != enc::TYPE_32FC1)
+  if (msg.encoding != enc::TYPE_16UC1 && msg.encoding != enc::MONO16 &&
+      msg.encoding != enc::TYPE_32FC1)
     throw core::InvalidInput("depth encoding '" + msg.encoding +
-                       "' is not 16UC1 (millimetres) or 32FC1 (metres)");
+                             "' is not 16UC1 (millimetres) or 32FC1 (metres)");
 }
 
 cv::Mat depthToMetres(const sensor_msgs::Image& msg, double metres_per_unit_16u) {

@@ -12,24 +12,26 @@ FrameInputs::FrameInputs(const NodeConfig& config, ros::NodeHandle nh, ros::Node
                          KeyframeWorker& worker, InputStatistics& statistics)
     : config_(config), nh_(nh), worker_(worker), statistics_(statistics), it_(nh) {
   if (config_.point_source == "map")
-    points_sub_ = nh_.subscribe("points", 2, &FrameInputs::onMapPoints, this);
+    points_sub_ = nh_.subscribe("points", kMapQueue, &FrameInputs::onMapPoints, this);
   const uint32_t q = static_cast<uint32_t>(config_.queue_size);
-  image_sub_.subscribe(it_, "image", q, image_transport::TransportHints("raw", ros::TransportHints(), private_nh));
+  image_sub_.subscribe(it_, "image", q,
+                       image_transport::TransportHints("raw", ros::TransportHints(), private_nh));
   image_sub_.registerCallback(&FrameInputs::onRawImage, this);
   info_sub_.subscribe(nh_, "camera_info", q);
   if (config_.use_depth) {
     depth_sub_.subscribe(it_, "depth", q,
                          image_transport::TransportHints("raw", ros::TransportHints(), private_nh,
                                                          "depth_image_transport"));
-    sync_depth_ = std::make_unique<message_filters::Synchronizer<SyncDepth>>(SyncDepth(q), image_sub_, info_sub_,
-                                                                              depth_sub_);
+    sync_depth_ = std::make_unique<message_filters::Synchronizer<SyncDepth>>(
+        SyncDepth(q), image_sub_, info_sub_, depth_sub_);
     sync_depth_->registerCallback(&FrameInputs::onFrame, this);
   } else {
-    sync_image_ = std::make_unique<message_filters::Synchronizer<SyncImage>>(SyncImage(q), image_sub_, info_sub_);
+    sync_image_ = std::make_unique<message_filters::Synchronizer<SyncImage>>(SyncImage(q),
+                                                                             image_sub_, info_sub_);
     sync_image_->registerCallback(&FrameInputs::onImageFrame, this);
   }
-  check_timer_ = private_nh.createWallTimer(ros::WallDuration(kCheckPeriod),
-                                            [this](const ros::WallTimerEvent&) { checkUnmatched(); });
+  check_timer_ = private_nh.createWallTimer(
+      ros::WallDuration(kCheckPeriod), [this](const ros::WallTimerEvent&) { checkUnmatched(); });
 }
 
 FrameInputs::~FrameInputs() {
@@ -42,7 +44,8 @@ FrameInputs::~FrameInputs() {
   points_sub_.shutdown();
 }
 
-void FrameInputs::onFrame(const sensor_msgs::ImageConstPtr& image, const sensor_msgs::CameraInfoConstPtr& info,
+void FrameInputs::onFrame(const sensor_msgs::ImageConstPtr& image,
+                          const sensor_msgs::CameraInfoConstPtr& info,
                           const sensor_msgs::ImageConstPtr& depth) {
   statistics_.frameReceived();
   worker_.push({image, info, depth});
@@ -56,11 +59,13 @@ void FrameInputs::onImageFrame(const sensor_msgs::ImageConstPtr& image,
 void FrameInputs::checkUnmatched() {
   // Images arrive but never become frames: the synchroniser finds no partner for them.
   if (raw_images_.load() < kUnmatchedWarning || statistics_.counts().frames_received > 0) return;
-  ROS_WARN_STREAM("view_selection: " << raw_images_.load() << " images arrived on '" << nh_.resolveName("image")
+  ROS_WARN_STREAM("view_selection: "
+                  << raw_images_.load() << " images arrived on '" << nh_.resolveName("image")
                   << "' but none was matched with camera_info"
                   << (config_.use_depth ? " and '" + nh_.resolveName("depth") + "'" : std::string())
                   << "; check the remaps"
-                  << (config_.use_depth ? " (or set ~use_depth false for images without depth)" : ""));
+                  << (config_.use_depth ? " (or set ~use_depth false for images without depth)"
+                                        : ""));
 }
 
 void FrameInputs::onMapPoints(const sensor_msgs::PointCloud2ConstPtr& cloud) {
@@ -80,7 +85,8 @@ void FrameInputs::onMapPoints(const sensor_msgs::PointCloud2ConstPtr& cloud) {
   try {
     sensor_msgs::PointCloud2ConstIterator<float> x(*cloud, "x"), y(*cloud, "y"), z(*cloud, "z");
     for (size_t i = 0; i < n; ++i, ++x, ++y, ++z) {
-      if (!std::isfinite(*x) || !std::isfinite(*y) || !std::isfinite(*z)) continue;  // organised clouds pad with NaN
+      if (!std::isfinite(*x) || !std::isfinite(*y) || !std::isfinite(*z))
+        continue;  // organised clouds pad with NaN
       points.col(kept++) = Eigen::Vector3d(*x, *y, *z);
     }
   } catch (const std::exception& e) {

@@ -37,7 +37,8 @@ void InputStatistics::frameOffered(double insertion_seconds) {
   ++version_;
 }
 
-void InputStatistics::drop(const std::string& reason, const std::string& message, const ros::Time& stamp) {
+void InputStatistics::drop(const std::string& reason, const std::string& message,
+                           const ros::Time& stamp) {
   uint64_t suppressed = 0;
   bool log = false;
   {
@@ -58,8 +59,10 @@ void InputStatistics::drop(const std::string& reason, const std::string& message
     }
   }
   if (log)
-    ROS_WARN_STREAM("view_selection: dropped input at " << stampText(stamp) << " (" << reason << "): " << message
-                    << (suppressed ? " [" + std::to_string(suppressed) + " more such drops not logged]" : ""));
+    ROS_WARN_STREAM(
+        "view_selection: dropped input at "
+        << stampText(stamp) << " (" << reason << "): " << message
+        << (suppressed ? " [" + std::to_string(suppressed) + " more such drops not logged]" : ""));
 }
 
 void InputStatistics::reset() {

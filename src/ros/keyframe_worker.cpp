@@ -12,7 +12,8 @@
 
 namespace view_selection::ros_node {
 
-KeyframeWorker::KeyframeWorker(const NodeConfig& config, PoseProvider& poses, InputStatistics& statistics)
+KeyframeWorker::KeyframeWorker(const NodeConfig& config, PoseProvider& poses,
+                               InputStatistics& statistics)
     : config_(config), poses_(poses), statistics_(statistics) {
   selector_ = std::make_unique<core::ViewSelector>(
       config_.selector, points::makePointSource(config_.point_source, config_.point_params,
@@ -56,7 +57,8 @@ void KeyframeWorker::push(PendingFrame frame) {
 
 size_t KeyframeWorker::pending(double* oldest_age) const {
   std::lock_guard<std::mutex> lock(queue_mutex_);
-  if (oldest_age) *oldest_age = queue_.empty() ? 0.0 : (ros::WallTime::now() - queue_.front().queued).toSec();
+  if (oldest_age)
+    *oldest_age = queue_.empty() ? 0.0 : (ros::WallTime::now() - queue_.front().queued).toSec();
   return queue_.size();
 }
 
@@ -80,8 +82,8 @@ void KeyframeWorker::setMapPoints(Eigen::Matrix3Xd points) {
   map->setMapPoints(std::move(points));
   const std::vector<core::ViewId> rows = selector_->applyPointUpdates();
   if (!rows.empty()) publishSnapshotLocked();
-  ROS_DEBUG_STREAM("view_selection: map of " << map->mapPoints().cols() << " points, " << rows.size()
-                                             << " keyframe rows recomputed");
+  ROS_DEBUG_STREAM("view_selection: map of " << map->mapPoints().cols() << " points, "
+                                             << rows.size() << " keyframe rows recomputed");
 }
 
 void KeyframeWorker::reconfigure(const core::ViewSelectorConfig& config) {
@@ -150,8 +152,8 @@ bool KeyframeWorker::convert(const PendingFrame& frame, core::PinholeIntrinsics&
   }
   if (image.width != frame.info->width || image.height != frame.info->height) {
     std::ostringstream s;
-    s << "image is " << image.width << "x" << image.height << " but camera_info says " << frame.info->width << "x"
-      << frame.info->height;
+    s << "image is " << image.width << "x" << image.height << " but camera_info says "
+      << frame.info->width << "x" << frame.info->height;
     statistics_.drop("bad_camera_info", s.str(), stamp);
     return false;
   }
@@ -169,8 +171,8 @@ void KeyframeWorker::process(const Queued& queued) {
     if (last_stamp_ && !(stamp.toSec() > *last_stamp_)) {
       const bool duplicate = stamp.toSec() == *last_stamp_;
       std::ostringstream s;
-      s << "stamp " << stampText(stamp) << " is " << (duplicate ? "the same as" : "before") << " the previous frame's "
-        << stampText(ros::Time(*last_stamp_));
+      s << "stamp " << stampText(stamp) << " is " << (duplicate ? "the same as" : "before")
+        << " the previous frame's " << stampText(ros::Time(*last_stamp_));
       statistics_.drop(duplicate ? "duplicate_stamp" : "out_of_order_stamp", s.str(), stamp);
       return;
     }
@@ -179,13 +181,15 @@ void KeyframeWorker::process(const Queued& queued) {
   const PoseLookup lookup = poses_.lookup(normaliseFrameId(frame.image->header.frame_id), stamp);
   if (!lookup.pose) return statistics_.drop(lookup.reason, lookup.message, stamp);
   if (!lookup.pose->isValid())
-    return statistics_.drop("bad_pose", "the camera pose is not finite or its quaternion is not unit length", stamp);
+    return statistics_.drop(
+        "bad_pose", "the camera pose is not finite or its quaternion is not unit length", stamp);
 
   std::lock_guard<std::mutex> lock(state_mutex_);
   // A reset while the pose was looked up: the frame belongs to the forgotten session.
   if (queued.generation != generation_) return;
   if (last_stamp_ && !(stamp.toSec() > *last_stamp_))
-    return statistics_.drop("out_of_order_stamp", "stamp " + stampText(stamp) + " is not after the previous frame's",
+    return statistics_.drop("out_of_order_stamp",
+                            "stamp " + stampText(stamp) + " is not after the previous frame's",
                             stamp);
   core::Frame core_frame;
   core_frame.stamp = stamp.toSec();
@@ -205,7 +209,8 @@ void KeyframeWorker::process(const Queued& queued) {
   // Feature points use the image alone (as select_views --points features reads no depth).
   if (wanted && frame.depth && config_.point_source != "features") {
     try {
-      core_frame.depth = points::depthImageOf(depthToMetres(*frame.depth, config_.depth_16u_metres_per_unit));
+      core_frame.depth =
+          points::depthImageOf(depthToMetres(*frame.depth, config_.depth_16u_metres_per_unit));
     } catch (const core::InvalidInput& e) {
       return statistics_.drop("bad_depth", e.what(), stamp);
     }
@@ -222,10 +227,11 @@ void KeyframeWorker::process(const Queued& queued) {
     if (config_.save_keyframe_images) images_.push_back(frame.image);
     publishSnapshotLocked();
     insertion = result.points_seconds + result.matrix_seconds;
-    ROS_DEBUG_STREAM("view_selection: keyframe " << result.id << " at " << stampText(stamp) << ": " << result.points
-                     << " points, insertion " << 1e3 * insertion << " ms (points " << 1e3 * result.points_seconds
-                     << " ms, matrix " << 1e3 * result.matrix_seconds << " ms), " << selector_->matrix().size()
-                     << " keyframes");
+    ROS_DEBUG_STREAM("view_selection: keyframe "
+                     << result.id << " at " << stampText(stamp) << ": " << result.points
+                     << " points, insertion " << 1e3 * insertion << " ms (points "
+                     << 1e3 * result.points_seconds << " ms, matrix " << 1e3 * result.matrix_seconds
+                     << " ms), " << selector_->matrix().size() << " keyframes");
   }
   statistics_.frameOffered(insertion);
 }

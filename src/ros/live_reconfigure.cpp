@@ -40,12 +40,13 @@ void fromReconfigure(const view_selection::ViewSelectionConfig& values, NodeConf
   config.selector.keyframes.mode = core::keyframeModeFromString(values.keyframe_policy);
 }
 
-LiveReconfigure::LiveReconfigure(const NodeConfig& config, ros::NodeHandle private_nh, KeyframeWorker& worker,
-                                 SelectionOutputs& outputs)
+LiveReconfigure::LiveReconfigure(const NodeConfig& config, ros::NodeHandle private_nh,
+                                 KeyframeWorker& worker, SelectionOutputs& outputs)
     : current_(config), worker_(worker), outputs_(outputs), server_(mutex_, private_nh) {
   // Start from the values in force, not from the .cfg defaults.
   server_.updateConfig(toReconfigure(current_));
-  server_.setCallback([this](view_selection::ViewSelectionConfig& v, uint32_t level) { onChange(v, level); });
+  server_.setCallback(
+      [this](view_selection::ViewSelectionConfig& v, uint32_t level) { onChange(v, level); });
 }
 
 void LiveReconfigure::onChange(view_selection::ViewSelectionConfig& values, uint32_t level) {
@@ -60,11 +61,13 @@ void LiveReconfigure::onChange(view_selection::ViewSelectionConfig& values, uint
   }
   if (core::paramsOf(next.selector) != core::paramsOf(current_.selector)) {
     worker_.reconfigure(next.selector);
-    ROS_INFO_STREAM("view_selection: reconfigured (level " << level << "): k " << next.selector.selection.k
-                    << ", completion " << core::toString(next.selector.selection.completion)
-                    << ", keyframes " << core::toString(next.selector.keyframes.mode));
+    ROS_INFO_STREAM("view_selection: reconfigured (level "
+                    << level << "): k " << next.selector.selection.k << ", completion "
+                    << core::toString(next.selector.selection.completion) << ", keyframes "
+                    << core::toString(next.selector.keyframes.mode));
   }
-  if (next.publish_period != current_.publish_period) outputs_.setPublishPeriod(next.publish_period);
+  if (next.publish_period != current_.publish_period)
+    outputs_.setPublishPeriod(next.publish_period);
   current_ = next;
 }
 

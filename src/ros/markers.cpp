@@ -14,8 +14,8 @@ geometry_msgs::Point point(const Eigen::Vector3d& p) {
   return m;
 }
 
-visualization_msgs::Marker lineList(const std::string& ns, const std::string& frame, double width, float r,
-                                    float g, float b, float a) {
+visualization_msgs::Marker lineList(const std::string& ns, const std::string& frame, double width,
+                                    float r, float g, float b, float a) {
   visualization_msgs::Marker m;
   m.header.frame_id = frame;
   m.ns = ns;
@@ -35,7 +35,9 @@ void addFrustum(visualization_msgs::Marker& m, const core::KeyframeSummary& kf, 
   const core::PinholeIntrinsics& k = kf.intrinsics;
   const Eigen::Matrix3d R = kf.pose.rotation();
   const Eigen::Vector3d o = kf.pose.position;
-  const Eigen::Vector2d px[4] = {{0.0, 0.0}, {double(k.width), 0.0}, {double(k.width), double(k.height)},
+  const Eigen::Vector2d px[4] = {{0.0, 0.0},
+                                 {double(k.width), 0.0},
+                                 {double(k.width), double(k.height)},
                                  {0.0, double(k.height)}};
   Eigen::Vector3d corner[4];
   for (int c = 0; c < 4; ++c) corner[c] = o + R * (k.backProject(px[c]) * scale);

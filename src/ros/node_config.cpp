@@ -12,6 +12,7 @@
 namespace view_selection::ros_node {
 
 void NodeConfig::visitParameters(core::ParameterVisitor& v) {
+  v.section("Frames and poses");
   core::visitText(v, "world_frame", world_frame, {},
                   "frame of every pose, marker and selection (a leading '/' is removed)");
   core::visitText(v, "camera_frame", camera_frame, {},
@@ -23,16 +24,19 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
                   "how long a frame waits for its pose before it is dropped [s, wall]");
   core::visitReal(v, "pose_max_time_difference", pose_max_time_difference, 0.0, 10.0,
                   "topic: the nearest pose must be this close to the image stamp [s]");
+  v.section("Input");
   core::visitInteger(v, "queue_size", queue_size, 1, 10000,
                      "message_filters ApproximateTime queue (image, camera_info, depth)");
-  core::visitInteger(v, "max_pending_frames", max_pending_frames, 1, 100000,
-                     "frames waiting for the worker; beyond, the oldest is dropped (worker_behind)");
+  core::visitInteger(
+      v, "max_pending_frames", max_pending_frames, 1, 100000,
+      "frames waiting for the worker; beyond, the oldest is dropped (worker_behind)");
   core::visitFlag(v, "use_depth", use_depth,
                   "synchronise `depth` (16UC1 millimetres or 32FC1 metres) with the image");
   core::visitText(v, "point_source", point_source, {"auto", "depth", "features", "map"},
                   "where sample points come from; auto = depth with use_depth, else features");
   core::visitReal(v, "depth_16u_metres_per_unit", depth_16u_metres_per_unit, 1e-9, 1e3,
                   "scale of 16UC1 depth (0.001: millimetres)");
+  v.section("Output");
   core::visitReal(v, "publish_period", publish_period, 0.0, 3600.0,
                   "~selection and ~markers at most this often, when changed [s, wall]");
   core::visitFlag(v, "save_keyframe_images", save_keyframe_images,
@@ -58,7 +62,9 @@ class RosParamReader : public core::ParameterVisitor {
     read(i, value, "a number");
     if (!std::isfinite(value) || value < i.min || value > i.max) outOfRange(i, value);
   }
-  void visit(const core::ParameterInfo& i, bool& value) override { read(i, value, "true or false"); }
+  void visit(const core::ParameterInfo& i, bool& value) override {
+    read(i, value, "true or false");
+  }
   void visit(const core::ParameterInfo& i, std::string& value) override {
     read(i, value, "a string");
     if (i.choices.empty() ||
@@ -78,8 +84,8 @@ class RosParamReader : public core::ParameterVisitor {
   }
   [[noreturn]] void outOfRange(const core::ParameterInfo& i, double value) {
     std::ostringstream s;
-    s << "parameter " << nh_.resolveName(i.name) << " = " << value << " is out of range ["
-      << i.min << ", " << i.max << "]";
+    s << "parameter " << nh_.resolveName(i.name) << " = " << value << " is out of range [" << i.min
+      << ", " << i.max << "]";
     throw core::InvalidArgument(s.str());
   }
 
@@ -107,7 +113,8 @@ NodeConfig loadNodeConfig(const ros::NodeHandle& nh) {
   c.visitParameters(reader);
   c.world_frame = normaliseFrameId(c.world_frame);
   if (c.world_frame.empty())
-    throw core::InvalidArgument("parameter " + nh.resolveName("world_frame") + " must name a frame");
+    throw core::InvalidArgument("parameter " + nh.resolveName("world_frame") +
+                                " must name a frame");
   c.camera_frame = normaliseFrameId(c.camera_frame);
   // As select_views: auto is depth when there is depth, features otherwise.
   if (c.point_source == "auto") c.point_source = c.use_depth ? "depth" : "features";

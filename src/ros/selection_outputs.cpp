@@ -13,8 +13,9 @@
 
 namespace view_selection::ros_node {
 
-SelectionOutputs::SelectionOutputs(const NodeConfig& config, ros::NodeHandle nh, ros::NodeHandle private_nh,
-                                   const KeyframeWorker& worker, const InputStatistics& statistics)
+SelectionOutputs::SelectionOutputs(const NodeConfig& config, ros::NodeHandle nh,
+                                   ros::NodeHandle private_nh, const KeyframeWorker& worker,
+                                   const InputStatistics& statistics)
     : config_(config), worker_(worker), statistics_(statistics), diagnostics_(nh, private_nh) {
   selection_pub_ = private_nh.advertise<view_selection::ViewSelection>("selection", 1, true);
   markers_pub_ = private_nh.advertise<visualization_msgs::MarkerArray>("markers", 1, true);
@@ -22,10 +23,12 @@ SelectionOutputs::SelectionOutputs(const NodeConfig& config, ros::NodeHandle nh,
   diagnostics_.setHardwareID(config_.camera_frame.empty() ? "camera" : config_.camera_frame);
   diagnostics_.add("view selection", this, &SelectionOutputs::diagnose);
   update();
-  timer_ = private_nh.createWallTimer(ros::WallDuration(std::max(config_.publish_period, kMinPeriod)),
-                                      [this](const ros::WallTimerEvent&) { update(); });
-  diagnostics_timer_ = private_nh.createWallTimer(ros::WallDuration(kDiagnosticsPeriod),
-                                                  [this](const ros::WallTimerEvent&) { diagnostics_.force_update(); });
+  timer_ =
+      private_nh.createWallTimer(ros::WallDuration(std::max(config_.publish_period, kMinPeriod)),
+                                 [this](const ros::WallTimerEvent&) { update(); });
+  diagnostics_timer_ = private_nh.createWallTimer(
+      ros::WallDuration(kDiagnosticsPeriod),
+      [this](const ros::WallTimerEvent&) { diagnostics_.force_update(); });
 }
 
 SelectionOutputs::~SelectionOutputs() {
@@ -42,7 +45,8 @@ void SelectionOutputs::update() {
   const std::shared_ptr<const NodeSnapshot> snapshot = worker_.snapshot();
   if (snapshot->version != published_version_) {
     selection_pub_.publish(selectionToMsg(snapshot->selection, config_.world_frame));
-    markers_pub_.publish(selectionMarkers(snapshot->selection, config_.world_frame, config_.marker_scale));
+    markers_pub_.publish(
+        selectionMarkers(snapshot->selection, config_.world_frame, config_.marker_scale));
     published_version_ = snapshot->version;
   }
   const uint64_t stats_version = statistics_.version();
@@ -59,7 +63,8 @@ void SelectionOutputs::diagnose(diagnostic_updater::DiagnosticStatusWrapper& sta
   {
     std::lock_guard<std::mutex> lock(mutex_);
     received_.emplace_back(now, counts.frames_received);
-    while (received_.size() > 2 && (now - received_.front().first).toSec() > kRateWindow) received_.pop_front();
+    while (received_.size() > 2 && (now - received_.front().first).toSec() > kRateWindow)
+      received_.pop_front();
     const double span = (received_.back().first - received_.front().first).toSec();
     if (span > 0.0 && received_.back().second >= received_.front().second)
       rate = static_cast<double>(received_.back().second - received_.front().second) / span;
@@ -69,11 +74,13 @@ void SelectionOutputs::diagnose(diagnostic_updater::DiagnosticStatusWrapper& sta
   const size_t keyframes = worker_.snapshot()->selection.size();
 
   if (lag > kLagWarning)
-    status.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "worker %.1f s behind (%zu frames waiting)", lag, pending);
+    status.summaryf(diagnostic_msgs::DiagnosticStatus::WARN,
+                    "worker %.1f s behind (%zu frames waiting)", lag, pending);
   else if (counts.frames_received == 0)
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, "waiting for frames");
   else
-    status.summaryf(diagnostic_msgs::DiagnosticStatus::OK, "%zu keyframes, %.1f frames/s", keyframes, rate);
+    status.summaryf(diagnostic_msgs::DiagnosticStatus::OK, "%zu keyframes, %.1f frames/s",
+                    keyframes, rate);
   status.add("input rate [frames/s]", rate);
   status.add("frames received", counts.frames_received);
   status.add("frames offered", counts.frames_offered);

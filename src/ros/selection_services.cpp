@@ -14,9 +14,9 @@ namespace view_selection::ros_node {
 
 namespace fs = std::filesystem;
 
-SelectionServices::SelectionServices(const NodeConfig& config, ros::NodeHandle private_nh, KeyframeWorker& worker,
-                                     InputStatistics& statistics, PoseProvider& poses,
-                                     std::function<void()> on_reset)
+SelectionServices::SelectionServices(const NodeConfig& config, ros::NodeHandle private_nh,
+                                     KeyframeWorker& worker, InputStatistics& statistics,
+                                     PoseProvider& poses, std::function<void()> on_reset)
     : config_(config),
       worker_(worker),
       statistics_(statistics),
@@ -55,8 +55,9 @@ bool SelectionServices::getNextViews(view_selection::GetNextViews::Request& req,
     res.error_resistance.push_back(s.table.at(req.view, j));
   }
   res.success = true;
-  res.message = std::to_string(res.next_views.size()) + " next views of view " + std::to_string(req.view) +
-                (req.after_completion ? " after completion" : "") + " (" + std::to_string(n) + " keyframes)";
+  res.message = std::to_string(res.next_views.size()) + " next views of view " +
+                std::to_string(req.view) + (req.after_completion ? " after completion" : "") +
+                " (" + std::to_string(n) + " keyframes)";
   return true;
 }
 
@@ -78,7 +79,9 @@ int writeKeyframeImages(const std::string& directory, const NodeSnapshot& snapsh
     const fs::path path = fs::path(directory) / names[i];
     std::error_code ec;
     fs::create_directories(path.parent_path(), ec);
-    if (ec) throw core::IoError("cannot create folder '" + path.parent_path().string() + "': " + ec.message());
+    if (ec)
+      throw core::IoError("cannot create folder '" + path.parent_path().string() +
+                          "': " + ec.message());
     cv::Mat bgr;
     try {
       bgr = imageForCore(snapshot.images[i]);
@@ -93,7 +96,8 @@ int writeKeyframeImages(const std::string& directory, const NodeSnapshot& snapsh
   return written;
 }
 
-bool SelectionServices::exportSelection(view_selection::Export::Request& req, view_selection::Export::Response& res) {
+bool SelectionServices::exportSelection(view_selection::Export::Request& req,
+                                        view_selection::Export::Response& res) {
   res.success = false;
   if (req.directory.empty()) {
     res.message = "directory is empty: give the folder to write selection.json and pairs.txt into";
@@ -114,11 +118,12 @@ bool SelectionServices::exportSelection(view_selection::Export::Request& req, vi
     res.pairs_txt = written.pairs_txt;
     res.images_written = writeKeyframeImages(req.directory, *snapshot);
     res.success = true;
-    res.message = "wrote " + std::to_string(s.size()) + " keyframes, " + std::to_string(s.selection.pairs.size()) +
-                  " pairs" +
-                  (config_.save_keyframe_images ? ", " + std::to_string(res.images_written) + " images"
-                                                : " (no images: ~save_keyframe_images is false)") +
-                  " to " + req.directory;
+    res.message =
+        "wrote " + std::to_string(s.size()) + " keyframes, " +
+        std::to_string(s.selection.pairs.size()) + " pairs" +
+        (config_.save_keyframe_images ? ", " + std::to_string(res.images_written) + " images"
+                                      : " (no images: ~save_keyframe_images is false)") +
+        " to " + req.directory;
   } catch (const std::exception& e) {
     res.success = false;
     res.message = std::string("export failed: ") + e.what();

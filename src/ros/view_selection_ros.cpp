@@ -7,8 +7,10 @@ namespace {
 NodeConfig loadAndCheck(const ros::NodeHandle& private_nh) {
   NodeConfig config = loadNodeConfig(private_nh);
   for (const std::string& name : unknownParameters(private_nh))
-    ROS_WARN_STREAM("view_selection: unknown parameter " << private_nh.resolveName(name)
-                    << " is ignored (misspelled? every parameter is in config/view_selection.yaml)");
+    ROS_WARN_STREAM(
+        "view_selection: unknown parameter "
+        << private_nh.resolveName(name)
+        << " is ignored (misspelled? every parameter is in config/view_selection.yaml)");
   return config;
 }
 
@@ -28,12 +30,14 @@ ViewSelectionRos::ViewSelectionRos(ros::NodeHandle nh, ros::NodeHandle private_n
       reconfigure_(config_, withQueue(private_nh, services_.queue()), worker_, outputs_),
       inputs_(config_, nh, private_nh, worker_, statistics_) {
   const auto& s = config_.selector;
-  ROS_INFO_STREAM("view_selection_node: " << (config_.use_depth ? "image + camera_info + depth" : "image + camera_info")
+  ROS_INFO_STREAM("view_selection_node: "
+                  << (config_.use_depth ? "image + camera_info + depth" : "image + camera_info")
                   << " from '" << nh.resolveName("image") << "', poses from " << poses_->describe()
                   << ", points from " << config_.point_source
-                  << (config_.point_source == "map" ? " ('" + nh.resolveName("points") + "')" : std::string())
-                  << ", keyframes " << core::toString(s.keyframes.mode) << ", k " << s.selection.k << ", completion "
-                  << core::toString(s.selection.completion));
+                  << (config_.point_source == "map" ? " ('" + nh.resolveName("points") + "')"
+                                                    : std::string())
+                  << ", keyframes " << core::toString(s.keyframes.mode) << ", k " << s.selection.k
+                  << ", completion " << core::toString(s.selection.completion));
 }
 
 }  // namespace view_selection::ros_node

@@ -28,7 +28,7 @@ void createFolder(const fs::path& folder) {
   fs::create_directories(folder, ec);
   if (ec || !fs::is_directory(folder)) {
     throw core::IoError("cannot create folder '" + folder.string() + "'" +
-                  (ec ? ": " + ec.message() : std::string(": a file of that name exists")));
+                        (ec ? ": " + ec.message() : std::string(": a file of that name exists")));
   }
 }
 
@@ -128,7 +128,7 @@ void SyntheticSequence::writeTumFolder(const std::string& folder,
   io::writeCameraYaml((root / "camera.yaml").string(), config_.intrinsics);
   const std::string comment = "synthetic sequence, seed " + std::to_string(config_.seed);
   io::writeTumTrajectory((root / "groundtruth.txt").string(), path_,
-                     comment + "\nexact camera-to-world poses of the optical frame");
+                         comment + "\nexact camera-to-world poses of the optical frame");
   io::writeTumImageList((root / "depth.txt").string(), depth, comment + "\ndepth images");
   io::writeTumImageList((root / "rgb.txt").string(), rgb, comment + "\ncolour images");
 }

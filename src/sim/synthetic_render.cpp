@@ -77,7 +77,7 @@ SyntheticSequence::SyntheticSequence(const SyntheticSequenceConfig& config)
 SyntheticFrame SyntheticSequence::render(size_t index) const {
   if (index >= path_.size()) {
     throw core::InvalidArgument("synthetic sequence: frame " + std::to_string(index) +
-                          " does not exist (" + std::to_string(path_.size()) + " frames)");
+                                " does not exist (" + std::to_string(path_.size()) + " frames)");
   }
   const core::PinholeIntrinsics& k = config_.intrinsics;
   SyntheticFrame frame;

@@ -148,8 +148,8 @@ void readParameters(const CommandLine& cli, Config& config) {
     const CommandLine& cli;
     explicit Reader(const CommandLine& c) : cli(c) {}
     void visit(const core::ParameterInfo& i, int& v) override {
-      v = static_cast<int>(cli.integer(optionName(i.name), v, static_cast<long>(i.min),
-                                       static_cast<long>(i.max)));
+      v = static_cast<int>(
+          cli.integer(optionName(i.name), v, static_cast<long>(i.min), static_cast<long>(i.max)));
     }
     void visit(const core::ParameterInfo& i, double& v) override {
       v = cli.real(optionName(i.name), v, i.min, i.max);
@@ -160,7 +160,8 @@ void readParameters(const CommandLine& cli, Config& config) {
       v = text == "true";
     }
     void visit(const core::ParameterInfo& i, std::string& v) override {
-      v = i.choices.empty() ? cli.text(optionName(i.name), v) : cli.choice(optionName(i.name), v, i.choices);
+      v = i.choices.empty() ? cli.text(optionName(i.name), v)
+                            : cli.choice(optionName(i.name), v, i.choices);
     }
   } reader(cli);
   config.visitParameters(reader);
@@ -175,7 +176,8 @@ std::string parameterHelp(Config config) {
       std::string head = "  --" + optionName(i.name) + " " +
                          (i.choices.empty() ? std::string("X") : "{" + join(i.choices, "|") + "}");
       if (head.size() < 34) head.resize(34, ' ');
-      text += head + " " + i.doc + " (default " + value + (range.empty() ? "" : "; " + range) + ")\n";
+      text +=
+          head + " " + i.doc + " (default " + value + (range.empty() ? "" : "; " + range) + ")\n";
     }
     static std::string join(const std::vector<std::string>& list, const char* sep) {
       std::string out;
@@ -185,11 +187,15 @@ std::string parameterHelp(Config config) {
     static std::string range(const core::ParameterInfo& i) {
       return core::formatNumber(i.min) + ".." + core::formatNumber(i.max);
     }
-    void visit(const core::ParameterInfo& i, int& v) override { line(i, std::to_string(v), range(i)); }
+    void visit(const core::ParameterInfo& i, int& v) override {
+      line(i, std::to_string(v), range(i));
+    }
     void visit(const core::ParameterInfo& i, double& v) override {
       line(i, core::formatNumber(v), range(i));
     }
-    void visit(const core::ParameterInfo& i, bool& v) override { line(i, v ? "true" : "false", ""); }
+    void visit(const core::ParameterInfo& i, bool& v) override {
+      line(i, v ? "true" : "false", "");
+    }
     void visit(const core::ParameterInfo& i, std::string& v) override { line(i, v, ""); }
   } help;
   config.visitParameters(help);

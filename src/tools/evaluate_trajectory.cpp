@@ -26,7 +26,8 @@ using view_selection::tools::UsageError;
 
 namespace {
 
-const char* kUsage = R"(usage: evaluate_trajectory --model PATH (--dataset DIR | --groundtruth FILE) [options]
+const char* kUsage =
+    R"(usage: evaluate_trajectory --model PATH (--dataset DIR | --groundtruth FILE) [options]
 
 Absolute trajectory error (ATE) of a COLMAP text model against ground truth: the registered
 camera centres are aligned to the ground-truth centres by a similarity (Umeyama; scale, rotation,
@@ -60,8 +61,8 @@ GroundTruthLookup fromDataset(const std::string& dir, double tolerance) {
 }
 
 /// Names are resolved lazily against a trajectory: the stem of the name is the stamp.
-std::optional<Eigen::Vector3d> poseForStampName(const std::vector<TumPoseEntry>& traj, const std::string& name,
-                                                double tolerance) {
+std::optional<Eigen::Vector3d> poseForStampName(const std::vector<TumPoseEntry>& traj,
+                                                const std::string& name, double tolerance) {
   const std::string stem = fs::path(name).stem().string();
   char* end = nullptr;
   const double stamp = std::strtod(stem.c_str(), &end);
@@ -74,7 +75,8 @@ std::optional<Eigen::Vector3d> poseForStampName(const std::vector<TumPoseEntry>&
 }
 
 int run(int argc, char** argv) {
-  const CommandLine cli(argc, argv, {"model", "dataset", "groundtruth", "max-time-difference", "json"},
+  const CommandLine cli(argc, argv,
+                        {"model", "dataset", "groundtruth", "max-time-difference", "json"},
                         {"no-scale", "help"});
   if (cli.flag("help")) {
     std::cout << kUsage;
@@ -88,8 +90,10 @@ int run(int argc, char** argv) {
   if (fs::is_directory(model)) {
     if (!fs::exists(model / "images.txt")) {
       if (fs::exists(model / "images.bin"))
-        throw IoError("'" + model.string() + "' is a binary COLMAP model; convert it first: colmap model_converter "
-                      "--input_path " + model.string() + " --output_path OUT --output_type TXT");
+        throw IoError("'" + model.string() +
+                      "' is a binary COLMAP model; convert it first: colmap model_converter "
+                      "--input_path " +
+                      model.string() + " --output_path OUT --output_type TXT");
       throw IoError("'" + model.string() + "' has no images.txt");
     }
     model /= "images.txt";
@@ -102,7 +106,8 @@ int run(int argc, char** argv) {
     lookup = fromDataset(*cli.text("dataset"), tolerance);
   } else {
     trajectory = readTumTrajectory(*cli.text("groundtruth"));
-    lookup.describe = *cli.text("groundtruth") + " (" + std::to_string(trajectory.size()) + " poses)";
+    lookup.describe =
+        *cli.text("groundtruth") + " (" + std::to_string(trajectory.size()) + " poses)";
   }
 
   std::vector<const ColmapImagePose*> used;
@@ -124,11 +129,14 @@ int run(int argc, char** argv) {
     gt.push_back(*p);
   }
   if (!unmatched.empty())
-    std::fprintf(stderr, "evaluate_trajectory: %zu registered image(s) without ground truth, left out (first: %s)\n",
-                 unmatched.size(), unmatched.front().c_str());
+    std::fprintf(
+        stderr,
+        "evaluate_trajectory: %zu registered image(s) without ground truth, left out (first: %s)\n",
+        unmatched.size(), unmatched.front().c_str());
   if (used.size() < 3)
-    throw InvalidInput("only " + std::to_string(used.size()) + " of " + std::to_string(images.size()) +
-                       " registered images have ground truth in " + lookup.describe + "; the ATE needs at least 3");
+    throw InvalidInput("only " + std::to_string(used.size()) + " of " +
+                       std::to_string(images.size()) + " registered images have ground truth in " +
+                       lookup.describe + "; the ATE needs at least 3");
 
   Eigen::Matrix3Xd est(3, static_cast<Eigen::Index>(used.size())), truth(3, est.cols());
   for (size_t i = 0; i < used.size(); ++i) {
@@ -139,10 +147,11 @@ int run(int argc, char** argv) {
   config.with_scale = !cli.flag("no-scale");
   const TrajectoryError r = absoluteTrajectoryError(est, truth, config);
 
-  std::printf("model        %s: %zu registered images, %zu with ground truth\n", model.c_str(), images.size(),
-              used.size());
+  std::printf("model        %s: %zu registered images, %zu with ground truth\n", model.c_str(),
+              images.size(), used.size());
   std::printf("ground_truth %s\n", lookup.describe.c_str());
-  std::printf("alignment    %s, scale %.6g\n", config.with_scale ? "sim3" : "se3", r.alignment.scale);
+  std::printf("alignment    %s, scale %.6g\n", config.with_scale ? "sim3" : "se3",
+              r.alignment.scale);
   std::printf("ate_rmse     %.6g\n", r.rmse);
   std::printf("ate_mean     %.6g\n", r.mean);
   std::printf("ate_median   %.6g\n", r.median);
@@ -154,15 +163,19 @@ int run(int argc, char** argv) {
     j["registered"] = images.size();
     j["matched"] = used.size();
     j["unmatched"] = unmatched;
-    j["alignment"] = {{"type", config.with_scale ? "sim3" : "se3"},
-                      {"scale", r.alignment.scale},
-                      {"rotation", {{r.alignment.rotation(0, 0), r.alignment.rotation(0, 1), r.alignment.rotation(0, 2)},
-                                    {r.alignment.rotation(1, 0), r.alignment.rotation(1, 1), r.alignment.rotation(1, 2)},
-                                    {r.alignment.rotation(2, 0), r.alignment.rotation(2, 1), r.alignment.rotation(2, 2)}}},
-                      {"translation", {r.alignment.translation.x(), r.alignment.translation.y(), r.alignment.translation.z()}}};
+    j["alignment"] = {
+        {"type", config.with_scale ? "sim3" : "se3"},
+        {"scale", r.alignment.scale},
+        {"rotation",
+         {{r.alignment.rotation(0, 0), r.alignment.rotation(0, 1), r.alignment.rotation(0, 2)},
+          {r.alignment.rotation(1, 0), r.alignment.rotation(1, 1), r.alignment.rotation(1, 2)},
+          {r.alignment.rotation(2, 0), r.alignment.rotation(2, 1), r.alignment.rotation(2, 2)}}},
+        {"translation",
+         {r.alignment.translation.x(), r.alignment.translation.y(), r.alignment.translation.z()}}};
     j["ate"] = {{"rmse", r.rmse}, {"mean", r.mean}, {"median", r.median}, {"max", r.max}};
     nlohmann::json per = nlohmann::json::array();
-    for (size_t i = 0; i < used.size(); ++i) per.push_back({{"name", used[i]->name}, {"error", r.errors[i]}});
+    for (size_t i = 0; i < used.size(); ++i)
+      per.push_back({{"name", used[i]->name}, {"error", r.errors[i]}});
     j["per_image"] = per;
     std::ofstream out(*cli.text("json"));
     if (!(out << j.dump(1) << "\n")) throw IoError("cannot write '" + *cli.text("json") + "'");

@@ -127,5 +127,6 @@ int run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return view_selection::tools::runTool("generate_sequence", [&] { return run(parse(argc, argv)); });
+  return view_selection::tools::runTool("generate_sequence",
+                                        [&] { return run(parse(argc, argv)); });
 }

@@ -99,10 +99,13 @@ std::vector<std::string> expandAliases(int argc, char** argv) {
 }
 
 Options parse(int argc, char** argv) {
-  std::set<std::string> options = {"dataset", "every", "max-frames", "points", "max-time-difference",
-                                   "out", "print-sets", "strategy", "nearest-k", "nearest-max-angle"};
-  const std::set<std::string> method = view_selection::tools::parameterOptions(ViewSelectorConfig{});
-  const std::set<std::string> sources = view_selection::tools::parameterOptions(PointSourceParams{});
+  std::set<std::string> options = {
+      "dataset", "every",      "max-frames", "points",    "max-time-difference",
+      "out",     "print-sets", "strategy",   "nearest-k", "nearest-max-angle"};
+  const std::set<std::string> method =
+      view_selection::tools::parameterOptions(ViewSelectorConfig{});
+  const std::set<std::string> sources =
+      view_selection::tools::parameterOptions(PointSourceParams{});
   options.insert(method.begin(), method.end());
   options.insert(sources.begin(), sources.end());
   std::vector<std::string> args = expandAliases(argc, argv);
@@ -120,10 +123,11 @@ Options parse(int argc, char** argv) {
   o.dataset = *cli.text("dataset");
   o.out = cli.text("out", "view_selection_output");
 
-  if (cli.has("every") &&
-      (cli.has("min-translation") || cli.has("min-rotation-deg") || cli.has("keyframe-policy") ||
-       cli.has("every-n")))
-    throw UsageError("--every and --min-translation/--min-rotation/--keyframe-policy/--every-n exclude each other");
+  if (cli.has("every") && (cli.has("min-translation") || cli.has("min-rotation-deg") ||
+                           cli.has("keyframe-policy") || cli.has("every-n")))
+    throw UsageError(
+        "--every and --min-translation/--min-rotation/--keyframe-policy/--every-n exclude each "
+        "other");
   if (cli.has("no-occlusion") && cli.has("occlusion-test"))
     throw UsageError("--no-occlusion and --occlusion-test exclude each other");
   view_selection::tools::readParameters(cli, o.config);
@@ -142,7 +146,8 @@ Options parse(int argc, char** argv) {
   o.quiet = cli.flag("quiet");
   o.strategy = cli.choice("strategy", "ours", {"ours", "nearest"});
   o.nearest.k = static_cast<int>(cli.integer("nearest-k", o.nearest.k, 1, 1000));
-  o.nearest.max_view_angle_deg = cli.real("nearest-max-angle", o.nearest.max_view_angle_deg, 0.0, 180.0);
+  o.nearest.max_view_angle_deg =
+      cli.real("nearest-max-angle", o.nearest.max_view_angle_deg, 0.0, 180.0);
   if (o.strategy != "nearest" && (cli.has("nearest-k") || cli.has("nearest-max-angle")))
     throw UsageError("--nearest-k and --nearest-max-angle need --strategy nearest");
   try {
@@ -162,8 +167,9 @@ std::string percent(double part, double whole) {
 }
 
 size_t framesToUse(const Options& o, const TumDataset& dataset) {
-  return o.max_frames > 0 ? std::min<size_t>(dataset.frames.size(), static_cast<size_t>(o.max_frames))
-                          : dataset.frames.size();
+  return o.max_frames > 0
+             ? std::min<size_t>(dataset.frames.size(), static_cast<size_t>(o.max_frames))
+             : dataset.frames.size();
 }
 
 /// --strategy nearest: the same keyframes (same policy, same frames), paired by pose alone.
@@ -174,7 +180,8 @@ int runNearest(const Options& o, const TumDataset& dataset) {
   std::vector<std::string> names;
   for (size_t q = 0; q < total; ++q) {
     const TumFrame& f = dataset.frames[q];
-    if (!f.pose.isValid()) throw InvalidInput("frame " + std::to_string(q) + " (" + f.rgb_path + "): invalid pose");
+    if (!f.pose.isValid())
+      throw InvalidInput("frame " + std::to_string(q) + " (" + f.rgb_path + "): invalid pose");
     if (!policy.offer(f.pose)) continue;
     policy.keyframeAccepted(f.pose);
     poses.push_back(f.pose);
@@ -185,10 +192,13 @@ int runNearest(const Options& o, const TumDataset& dataset) {
   fs::create_directories(o.out, ec);
   if (ec) throw IoError("cannot create output folder '" + o.out.string() + "': " + ec.message());
   writePairsTxt((o.out / "pairs.txt").string(), names, pairs);
-  const double exhaustive = poses.size() > 1 ? 0.5 * static_cast<double>(poses.size()) * (poses.size() - 1) : 0.0;
-  std::printf("dataset     %s: %zu frames used of %zu in rgb.txt\n", o.dataset.c_str(), total, dataset.rgb_entries);
+  const double exhaustive =
+      poses.size() > 1 ? 0.5 * static_cast<double>(poses.size()) * (poses.size() - 1) : 0.0;
+  std::printf("dataset     %s: %zu frames used of %zu in rgb.txt\n", o.dataset.c_str(), total,
+              dataset.rgb_entries);
   std::printf("keyframes   %zu\n", poses.size());
-  std::printf("strategy    nearest: k %d, max view angle %.1f deg\n", o.nearest.k, o.nearest.max_view_angle_deg);
+  std::printf("strategy    nearest: k %d, max view angle %.1f deg\n", o.nearest.k,
+              o.nearest.max_view_angle_deg);
   std::printf("pairs       %zu to match, exhaustive would be %.0f (%s)\n", pairs.size(), exhaustive,
               percent(static_cast<double>(pairs.size()), exhaustive).c_str());
   std::printf("wrote       %s\n", (o.out / "pairs.txt").c_str());
@@ -210,13 +220,15 @@ void addFrames(const Options& o, const TumDataset& dataset, ViewSelector& select
     const auto t0 = std::chrono::steady_clock::now();
     // Frames the policy will skip are passed without depth: reading PNGs is the slow part.
     const bool wanted = selector.wantsFrame(dataset.frames[q].pose);
-    const Frame frame = loadTumFrame(dataset, dataset.frames[q], {wanted && !features, wanted && features});
+    const Frame frame =
+        loadTumFrame(dataset, dataset.frames[q], {wanted && !features, wanted && features});
     t.read += seconds(t0);
     FrameResult r;
     try {
       r = selector.addFrame(frame);
     } catch (const InvalidInput& e) {
-      throw InvalidInput("frame " + std::to_string(q) + " (" + dataset.frames[q].rgb_path + "): " + e.what());
+      throw InvalidInput("frame " + std::to_string(q) + " (" + dataset.frames[q].rgb_path +
+                         "): " + e.what());
     }
     t.points += r.points_seconds;
     t.rows_updated += r.updated_rows.size();
@@ -232,18 +244,23 @@ void addFrames(const Options& o, const TumDataset& dataset, ViewSelector& select
 
 std::string keyframeRule(const KeyframePolicyConfig& kf) {
   if (kf.mode == KeyframeMode::kMotion)
-    return "motion >= " + formatNumber(kf.min_translation) + " or " + formatNumber(kf.min_rotation_deg) + " deg";
-  return "every " + std::to_string(kf.mode == KeyframeMode::kEveryFrame ? 1 : kf.every_n) + " frames";
+    return "motion >= " + formatNumber(kf.min_translation) + " or " +
+           formatNumber(kf.min_rotation_deg) + " deg";
+  return "every " + std::to_string(kf.mode == KeyframeMode::kEveryFrame ? 1 : kf.every_n) +
+         " frames";
 }
 
 void printFeatureStats(const FeaturePointSource& fs, size_t rows_updated) {
   const FeatureStats& t = fs.totalStats();
   const double kf = std::max<double>(1.0, static_cast<double>(t.keyframes));
-  std::printf("features    %s, per keyframe (mean of %zu): extract %.1f ms | match %.1f ms | triangulate %.1f ms (Ceres %.1f)"
-              " | %.0f features, %.1f views matched, %.0f matches, %.0f points; %zu earlier rows recomputed\n",
-              fs.config().detector.c_str(), t.keyframes, 1e3 * t.extract_seconds / kf, 1e3 * t.match_seconds / kf,
-              1e3 * t.triangulate_seconds / kf, 1e3 * t.refine_seconds / kf, t.features / kf, t.candidates / kf,
-              t.matches / kf, t.points / kf, rows_updated);
+  std::printf(
+      "features    %s, per keyframe (mean of %zu): extract %.1f ms | match %.1f ms | triangulate "
+      "%.1f ms (Ceres %.1f)"
+      " | %.0f features, %.1f views matched, %.0f matches, %.0f points; %zu earlier rows "
+      "recomputed\n",
+      fs.config().detector.c_str(), t.keyframes, 1e3 * t.extract_seconds / kf,
+      1e3 * t.match_seconds / kf, 1e3 * t.triangulate_seconds / kf, 1e3 * t.refine_seconds / kf,
+      t.features / kf, t.candidates / kf, t.matches / kf, t.points / kf, rows_updated);
 }
 
 void printSets(const Selection& selection, size_t limit) {
@@ -255,7 +272,8 @@ void printSets(const Selection& selection, size_t limit) {
     std::printf("  %4zu:", i);
     for (const ViewId j : selection.next_views[i]) std::printf(" %d", j);
     const auto& fin = selection.final_next_views[i];
-    for (size_t q = selection.next_views[i].size(); q < fin.size(); ++q) std::printf(" +%d", fin[q]);
+    for (size_t q = selection.next_views[i].size(); q < fin.size(); ++q)
+      std::printf(" +%d", fin[q]);
     std::printf("\n");
   }
   if (shown < n) std::printf("  ... %zu more in selection.json (--print-sets N)\n", n - shown);
@@ -271,30 +289,40 @@ void printSummary(const Options& o, const TumDataset& dataset, const ViewSelecto
   for (const KeyframeSummary& k : snapshot.keyframes) counts.push_back(k.num_points);
   size_t median_points = 0;
   if (!counts.empty()) {
-    std::nth_element(counts.begin(), counts.begin() + static_cast<std::ptrdiff_t>(counts.size() / 2), counts.end());
+    std::nth_element(counts.begin(),
+                     counts.begin() + static_cast<std::ptrdiff_t>(counts.size() / 2), counts.end());
     median_points = counts[counts.size() / 2];
   }
   const double offdiag = n > 1 ? static_cast<double>(n) * (n - 1) : 0.0;
   const double exhaustive = offdiag / 2.0;
-  std::printf("dataset     %s: %zu frames used of %zu in rgb.txt (%zu without depth, %zu without pose dropped)\n",
-              o.dataset.c_str(), framesToUse(o, dataset), dataset.rgb_entries, dataset.dropped_without_depth,
-              dataset.dropped_without_pose);
-  std::printf("intrinsics  %s: fx %.2f fy %.2f cx %.2f cy %.2f, %dx%d\n", dataset.intrinsics_source.c_str(),
-              dataset.intrinsics.fx, dataset.intrinsics.fy, dataset.intrinsics.cx, dataset.intrinsics.cy,
-              dataset.intrinsics.width, dataset.intrinsics.height);
+  std::printf(
+      "dataset     %s: %zu frames used of %zu in rgb.txt (%zu without depth, %zu without pose "
+      "dropped)\n",
+      o.dataset.c_str(), framesToUse(o, dataset), dataset.rgb_entries,
+      dataset.dropped_without_depth, dataset.dropped_without_pose);
+  std::printf("intrinsics  %s: fx %.2f fy %.2f cx %.2f cy %.2f, %dx%d\n",
+              dataset.intrinsics_source.c_str(), dataset.intrinsics.fx, dataset.intrinsics.fy,
+              dataset.intrinsics.cx, dataset.intrinsics.cy, dataset.intrinsics.width,
+              dataset.intrinsics.height);
   std::printf("keyframes   %zu (%s), %zu sample points each (median), source: %s\n", n,
-              keyframeRule(o.config.keyframes).c_str(), median_points, selector.pointSource().name().c_str());
+              keyframeRule(o.config.keyframes).c_str(), median_points,
+              selector.pointSource().name().c_str());
   if (const auto* fs = dynamic_cast<const FeaturePointSource*>(&selector.pointSource()))
     printFeatureStats(*fs, t.rows_updated);
   std::printf("matrix      %zu x %zu, %zu finite entries of %.0f off-diagonal (%s)\n", n, n,
-              matrix.table().finiteCount(), offdiag, percent(static_cast<double>(matrix.table().finiteCount()), offdiag).c_str());
-  std::printf("selection   k %d, completion %s: start view %d, traversal reached %zu, completed %zu, isolated %zu\n",
-              o.config.selection.k, toString(o.config.selection.completion).c_str(), selection.start_view,
-              selection.order.size(), selection.completed.size(), selection.isolated.size());
-  std::printf("pairs       %zu to match, exhaustive would be %.0f (%s)\n", selection.pairs.size(), exhaustive,
-              percent(static_cast<double>(selection.pairs.size()), exhaustive).c_str());
-  std::printf("time        read %.2f s | points %.2f s | matrix %.3f s | selection %.4f s | write %.2f s | total %.2f s\n",
-              t.read, t.points, t.matrix, t.selection, t.write, total_seconds);
+              matrix.table().finiteCount(), offdiag,
+              percent(static_cast<double>(matrix.table().finiteCount()), offdiag).c_str());
+  std::printf(
+      "selection   k %d, completion %s: start view %d, traversal reached %zu, completed %zu, "
+      "isolated %zu\n",
+      o.config.selection.k, toString(o.config.selection.completion).c_str(), selection.start_view,
+      selection.order.size(), selection.completed.size(), selection.isolated.size());
+  std::printf("pairs       %zu to match, exhaustive would be %.0f (%s)\n", selection.pairs.size(),
+              exhaustive, percent(static_cast<double>(selection.pairs.size()), exhaustive).c_str());
+  std::printf(
+      "time        read %.2f s | points %.2f s | matrix %.3f s | selection %.4f s | write %.2f s | "
+      "total %.2f s\n",
+      t.read, t.points, t.matrix, t.selection, t.write, total_seconds);
   std::printf("wrote       %s, %s, %s\n", written.selection_json.c_str(), written.pairs_txt.c_str(),
               written.plot_png.c_str());
   printSets(selection, static_cast<size_t>(o.print_sets));
@@ -307,10 +335,13 @@ int run(const Options& o) {
   const TumDataset dataset = loadTumDataset(o.dataset, dataset_options);
   if (o.strategy == "nearest") return runNearest(o, dataset);
 
-  const std::string source = o.points == "auto" ? (dataset.has_depth ? "depth" : "features") : o.points;
+  const std::string source =
+      o.points == "auto" ? (dataset.has_depth ? "depth" : "features") : o.points;
   if (source == "depth" && !dataset.has_depth)
-    throw InvalidInput("'" + o.dataset + "' has no depth (no depth.txt): the depth point source cannot run on it");
-  ViewSelector selector(o.config, makePointSource(source, o.point_params, o.config.matrix.occlusion));
+    throw InvalidInput("'" + o.dataset +
+                       "' has no depth (no depth.txt): the depth point source cannot run on it");
+  ViewSelector selector(o.config,
+                        makePointSource(source, o.point_params, o.config.matrix.occlusion));
   Timings t;
   addFrames(o, dataset, selector, t);
 
@@ -325,7 +356,8 @@ int run(const Options& o) {
   params["image_path"] = dataset.image_dir;
   if (o.max_frames > 0) params["max_frames"] = o.max_frames;
   ExportOptions options;
-  options.title = fs::path(o.dataset).filename().string() + ", k = " + std::to_string(o.config.selection.k) +
+  options.title = fs::path(o.dataset).filename().string() +
+                  ", k = " + std::to_string(o.config.selection.k) +
                   ", completion: " + toString(o.config.selection.completion);
   options.points = o.dump_points ? &selector.matrix() : nullptr;
   const ExportResult written = exportSelection(o.out.string(), snapshot, params, options);

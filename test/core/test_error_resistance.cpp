@@ -9,8 +9,8 @@
 #include <cmath>
 #include <random>
 #include <vector>
-#include "view_selection/eval/reference_error_resistance.h"
 #include "support/layers.h"
+#include "view_selection/eval/reference_error_resistance.h"
 
 namespace view_selection {
 namespace {
@@ -61,7 +61,8 @@ TEST(ErrorResistance, ClosedFormMatchesBruteForceTriangulation) {
     ASSERT_TRUE(std::isfinite(brute)) << "trial " << trial;
     ASSERT_GT(closed, 0.0);
     EXPECT_NEAR(closed, brute, 1e-6 * brute) << "trial " << trial;
-    const double sine_law = pointErrorResistanceSineLaw(c.point, c.pose_i.position, c.k_j, c.pose_j);
+    const double sine_law =
+        pointErrorResistanceSineLaw(c.point, c.pose_i.position, c.k_j, c.pose_j);
     EXPECT_NEAR(sine_law, brute, 1e-6 * brute) << "trial " << trial;
     ++compared;
   }
@@ -74,7 +75,8 @@ TEST(ErrorResistance, EpipoleAtInfinityUsesTheProjectedBaseline) {
   CameraPose pose_i, pose_j;
   pose_i.position = Eigen::Vector3d(0.0, 0.0, 0.0);
   pose_j.position = Eigen::Vector3d(0.4, 0.1, 0.0);
-  for (const Eigen::Vector3d& p : {Eigen::Vector3d(0.2, 0.05, 2.0), Eigen::Vector3d(-0.3, 0.4, 3.0)}) {
+  for (const Eigen::Vector3d& p :
+       {Eigen::Vector3d(0.2, 0.05, 2.0), Eigen::Vector3d(-0.3, 0.4, 3.0)}) {
     const Eigen::Vector3d epipole = k.matrix() * pose_j.worldToCamera(pose_i.position);
     ASSERT_EQ(epipole.z(), 0.0);
     const double closed = pointErrorResistance(p, pose_i.position, k, pose_j);
@@ -112,7 +114,8 @@ TEST(ErrorResistance, InfiniteWhenBehindCameraOnBaselineOrWithoutParallax) {
   // Parallax far below one pixel: the moved ray turning away never meets the ray from O_i.
   const CameraPose pose_j_tiny = lookAt({1e-6, 0, 0}, {1e-6, 0, 1});
   EXPECT_EQ(pointErrorResistance({0.0, 0.0, 3.0}, pose_i.position, k, pose_j_tiny), kInfinity);
-  EXPECT_EQ(pointErrorResistanceSineLaw({0.0, 0.0, 3.0}, pose_i.position, k, pose_j_tiny), kInfinity);
+  EXPECT_EQ(pointErrorResistanceSineLaw({0.0, 0.0, 3.0}, pose_i.position, k, pose_j_tiny),
+            kInfinity);
   EXPECT_EQ(pointErrorResistanceSineLaw({0.2, 0.0, -2.0}, pose_i.position, k, pose_j), kInfinity);
   // A sane configuration is finite and positive.
   const double r = pointErrorResistance({0.25, 0.0, 2.0}, pose_i.position, k, pose_j);
@@ -147,11 +150,13 @@ TEST(ErrorResistance, CurveFallsSteeplyHasMinimumThenRisesSlowly) {
     values.push_back(pointErrorResistance(p, pose_i.position, k, pose_j));
     ASSERT_TRUE(std::isfinite(values.back())) << deg;
   }
-  const size_t best = static_cast<size_t>(std::min_element(values.begin(), values.end()) - values.begin());
+  const size_t best =
+      static_cast<size_t>(std::min_element(values.begin(), values.end()) - values.begin());
   EXPECT_GE(angles[best], 60.0);
   EXPECT_LE(angles[best], 92.0);
   for (size_t q = 1; q <= best; ++q) EXPECT_LT(values[q], values[q - 1]) << angles[q];
-  for (size_t q = best + 1; q < values.size(); ++q) EXPECT_GT(values[q], values[q - 1]) << angles[q];
+  for (size_t q = best + 1; q < values.size(); ++q)
+    EXPECT_GT(values[q], values[q - 1]) << angles[q];
   // Steep: 1 deg of parallax is far worse than 10 deg; slow: 150 deg is within 2.5x of the best.
   EXPECT_GT(values[0] / values[9], 8.0);
   EXPECT_GT(values[9] / values[best], 5.0);

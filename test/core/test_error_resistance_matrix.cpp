@@ -22,10 +22,11 @@ using test::vgaIntrinsics;
 
 /// The definition of METHOD.md written out plainly, independent of the optimised code path.
 double naiveEntry(const Keyframe& i, const Keyframe& j, const ErrorResistanceConfig& config) {
-  const double needed = std::max<double>(config.min_covisible_points,
-                                         config.min_covisible_ratio * i.points.cols());
+  const double needed =
+      std::max<double>(config.min_covisible_points, config.min_covisible_ratio * i.points.cols());
   if (config.max_view_angle_deg > 0.0) {
-    const double angle = std::acos(std::clamp(i.pose.opticalAxis().dot(j.pose.opticalAxis()), -1.0, 1.0));
+    const double angle =
+        std::acos(std::clamp(i.pose.opticalAxis().dot(j.pose.opticalAxis()), -1.0, 1.0));
     if (angle * 180.0 / M_PI > config.max_view_angle_deg) return kInfinity;
   }
   std::vector<double> values;
@@ -64,11 +65,21 @@ Scene makeScene(unsigned seed, int views, bool with_depth) {
     const int wall = static_cast<int>(uni(rng) * 5);
     const double a = uni(rng), b = uni(rng);
     switch (wall) {
-      case 0: world.emplace_back(-3.0, 3.0 * a - 1.5, 5.0 * b - 2.5); break;
-      case 1: world.emplace_back(3.0, 3.0 * a - 1.5, 5.0 * b - 2.5); break;
-      case 2: world.emplace_back(6.0 * a - 3.0, 3.0 * b - 1.5, -2.5); break;
-      case 3: world.emplace_back(6.0 * a - 3.0, 3.0 * b - 1.5, 2.5); break;
-      default: world.emplace_back(1.5 * a - 0.75, 1.5 * b - 0.75, 0.0); break;  // panel
+      case 0:
+        world.emplace_back(-3.0, 3.0 * a - 1.5, 5.0 * b - 2.5);
+        break;
+      case 1:
+        world.emplace_back(3.0, 3.0 * a - 1.5, 5.0 * b - 2.5);
+        break;
+      case 2:
+        world.emplace_back(6.0 * a - 3.0, 3.0 * b - 1.5, -2.5);
+        break;
+      case 3:
+        world.emplace_back(6.0 * a - 3.0, 3.0 * b - 1.5, 2.5);
+        break;
+      default:
+        world.emplace_back(1.5 * a - 0.75, 1.5 * b - 0.75, 0.0);
+        break;  // panel
     }
   }
   Scene scene;
@@ -203,7 +214,8 @@ std::pair<Keyframe, Keyframe> twoViews(int count) {
   a.pose = lookAt({0, 0, 0}, {0.5, 0, 3});
   b.pose = lookAt({1, 0, 0}, {0.5, 0, 3});
   a.points.resize(3, count);
-  for (int q = 0; q < count; ++q) a.points.col(q) = Eigen::Vector3d(0.5 + 0.05 * (q % 10), 0.05 * (q / 10), 3.0);
+  for (int q = 0; q < count; ++q)
+    a.points.col(q) = Eigen::Vector3d(0.5 + 0.05 * (q % 10), 0.05 * (q / 10), 3.0);
   return {a, b};
 }
 
@@ -271,7 +283,8 @@ TEST(ErrorResistanceMatrix, ViewAngleGateAndDiagonal) {
 TEST(ErrorResistanceMatrix, MedianOfEvenCountIsMeanOfMiddleValues) {
   auto [a, b] = twoViews(12);
   std::vector<double> r;
-  for (int q = 0; q < 12; ++q) r.push_back(pointErrorResistance(a.points.col(q), a.pose.position, b.intrinsics, b.pose));
+  for (int q = 0; q < 12; ++q)
+    r.push_back(pointErrorResistance(a.points.col(q), a.pose.position, b.intrinsics, b.pose));
   std::sort(r.begin(), r.end());
   ASSERT_LT(r[5], r[6]);  // distinct middle values, so the rule matters
   EXPECT_DOUBLE_EQ(computeErrorResistance(a, b, {}), 0.5 * (r[5] + r[6]));

@@ -1,37 +1,70 @@
-// The core (and the offline tools) compile and run without ROS: no ROS header may appear in them.
+// The layers depend downwards only (docs/architecture.md): the core on Eigen alone; the point
+// sources, files, the built-in sequence and the evaluation on no ROS; nothing ROS-free on the
+// ROS layer. Checked on the sources' #include lines, so a wrong include fails here first.
 #include <gtest/gtest.h>
 
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <regex>
 #include <string>
+#include <vector>
 
 namespace {
 
 namespace fs = std::filesystem;
 
-TEST(CoreIsRosFree, NoRosIncludeInCoreOrTools) {
+const std::string kRosHeaders =
+    R"((ros/|roscpp|rosbag|tf2|tf/|sensor_msgs|geometry_msgs|std_msgs|std_srvs|nav_msgs|)"
+    R"(visualization_msgs|diagnostic_|dynamic_reconfigure|cv_bridge|image_transport|message_filters|)"
+    R"(nodelet|pluginlib|view_selection/ros/|view_selection/[A-Z]))";
+
+/// Lines of files under `dirs` whose #include matches `forbidden`, as "file:line: text".
+std::string offences(const std::vector<std::string>& dirs, const std::string& forbidden,
+                     int* files) {
   const fs::path root(VIEW_SELECTION_SOURCE_DIR);
-  const std::regex ros_include(
-      R"(^\s*#\s*include\s*[<"](ros/|roscpp|rosbag|tf2|tf/|sensor_msgs|geometry_msgs|std_msgs|)"
-      R"(std_srvs|nav_msgs|visualization_msgs|cv_bridge|image_transport|message_filters|nodelet|)"
-      R"(pluginlib|view_selection/ros/|view_selection/[A-Z]))");
-  int files = 0;
-  std::string offences;
-  for (const char* dir : {"include/view_selection/core", "src/core", "src/tools"}) {
+  const std::regex include(R"(^\s*#\s*include\s*[<"])" + forbidden);
+  std::string out;
+  for (const std::string& dir : dirs) {
     if (!fs::exists(root / dir)) continue;
     for (const auto& entry : fs::recursive_directory_iterator(root / dir)) {
       if (!entry.is_regular_file()) continue;
-      ++files;
+      ++*files;
       std::ifstream in(entry.path());
       std::string line;
       for (int number = 1; std::getline(in, line); ++number)
-        if (std::regex_search(line, ros_include))
-          offences += entry.path().string() + ":" + std::to_string(number) + ": " + line + "\n";
+        if (std::regex_search(line, include))
+          out += entry.path().string() + ":" + std::to_string(number) + ": " + line + "\n";
     }
   }
+  return out;
+}
+
+TEST(CoreIsRosFree, NoRosIncludeInCoreOrTools) {
+  int files = 0;
+  const std::string found =
+      offences({"include/view_selection/core", "src/core", "src/tools"}, kRosHeaders, &files);
   EXPECT_GT(files, 10);  // the walk found the sources
-  EXPECT_TRUE(offences.empty()) << "ROS includes in the ROS-free core:\n" << offences;
+  EXPECT_TRUE(found.empty()) << "ROS includes in the ROS-free core:\n" << found;
+}
+
+TEST(Layers, EachLayerIncludesOnlyTheLayersBelowIt) {
+  // layer -> what its sources must not include
+  const std::map<std::string, std::string> rules = {
+      {"core", R"((opencv2|ceres|nlohmann|yaml-cpp|view_selection/(points|io|sim|eval|ros)/)|)" +
+                   kRosHeaders},
+      {"points", R"((nlohmann|yaml-cpp|view_selection/(io|sim|eval|ros)/)|)" + kRosHeaders},
+      {"io", R"((ceres|view_selection/(sim|eval|ros)/)|)" + kRosHeaders},
+      {"sim", R"((view_selection/(eval|ros)/)|)" + kRosHeaders},
+      {"eval", R"((view_selection/(sim|ros)/)|)" + kRosHeaders},
+  };
+  for (const auto& [layer, forbidden] : rules) {
+    int files = 0;
+    const std::string found = offences({"include/view_selection/" + layer, "src/" + layer},
+                                       "(" + forbidden + ")", &files);
+    EXPECT_GE(files, 2) << layer << ": no sources found";
+    EXPECT_TRUE(found.empty()) << "layer " << layer << " includes what it must not:\n" << found;
+  }
 }
 
 }  // namespace

@@ -182,7 +182,8 @@ TEST(Selection, RandomMatricesKeepTheInvariants) {
         ASSERT_LE(c.size(), static_cast<size_t>(k));
         ASSERT_EQ(c.size(), std::min(static_cast<size_t>(k), e.row(static_cast<ViewId>(i)).size()));
         for (size_t q = 1; q < c.size(); ++q) {
-          const double a = e.at(static_cast<ViewId>(i), c[q - 1]), b = e.at(static_cast<ViewId>(i), c[q]);
+          const double a = e.at(static_cast<ViewId>(i), c[q - 1]),
+                       b = e.at(static_cast<ViewId>(i), c[q]);
           ASSERT_TRUE(a < b || (a == b && c[q - 1] < c[q]));
         }
         // ... and they are the k best of the row: a full sort of the row agrees.
@@ -226,7 +227,8 @@ TEST(Selection, RandomMatricesKeepTheInvariants) {
       std::set<std::pair<ViewId, ViewId>> expected;
       for (size_t i = 0; i < n; ++i)
         for (const ViewId j : s.final_next_views[i])
-          expected.insert({std::min<ViewId>(static_cast<ViewId>(i), j), std::max<ViewId>(static_cast<ViewId>(i), j)});
+          expected.insert({std::min<ViewId>(static_cast<ViewId>(i), j),
+                           std::max<ViewId>(static_cast<ViewId>(i), j)});
       ASSERT_EQ(s.pairs, Pairs(expected.begin(), expected.end()));
     }
   }
@@ -260,13 +262,15 @@ TEST(Selection, TableKeepsEachRowsBestEntriesThroughEveryKindOfChange) {
     } else {
       std::vector<TableEntry> entries;
       for (size_t q = 0; q < n; ++q)
-        if (uni(rng) < 0.5) entries.push_back({static_cast<ViewId>(q), std::round(uni(rng) * 30) / 30});
+        if (uni(rng) < 0.5)
+          entries.push_back({static_cast<ViewId>(q), std::round(uni(rng) * 30) / 30});
       e.replaceRow(i, entries);
     }
     check(step);
   }
   // Larger k than the cache holds takes the scan: the same sets as a full sort.
-  const Selection s = selectViews(e, {static_cast<int>(ErrorResistanceTable::kTopCapacity) + 4, CompletionMode::kPaper});
+  const Selection s = selectViews(
+      e, {static_cast<int>(ErrorResistanceTable::kTopCapacity) + 4, CompletionMode::kPaper});
   for (size_t i = 0; i < n; ++i) {
     std::vector<TableEntry> row = e.row(static_cast<ViewId>(i));
     std::sort(row.begin(), row.end(), [](const TableEntry& a, const TableEntry& b) {

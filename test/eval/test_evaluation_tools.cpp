@@ -38,10 +38,12 @@ class EvaluationTools : public ::testing::Test {
     std::ofstream rgb(dir_ / "rgb.txt"), gt(dir_ / "groundtruth.txt");
     gt.precision(17);
     for (int i = 0; i < 6; ++i) {
-      const double a = 0.25 * i + 0.02 * i * i;  // growing steps: each view's nearest is the one before
+      const double a =
+          0.25 * i + 0.02 * i * i;  // growing steps: each view's nearest is the one before
       TumPoseEntry p;
       p.stamp = 1.0 + i;
-      p.pose = test::lookAt(Eigen::Vector3d(3.0 * std::sin(a), 0.2 * i, -3.0 * std::cos(a)), Eigen::Vector3d::Zero());
+      p.pose = test::lookAt(Eigen::Vector3d(3.0 * std::sin(a), 0.2 * i, -3.0 * std::cos(a)),
+                            Eigen::Vector3d::Zero());
       poses_.push_back(p);
       char name[64];
       std::snprintf(name, sizeof(name), "%.6f.png", p.stamp);
@@ -49,15 +51,18 @@ class EvaluationTools : public ::testing::Test {
       rgb << std::string(name).substr(0, std::string(name).size() - 4) << " rgb/" << name << "\n";
       const Eigen::Vector3d& t = p.pose.position;
       const Eigen::Quaterniond& q = p.pose.orientation;
-      gt << p.stamp << ' ' << t.x() << ' ' << t.y() << ' ' << t.z() << ' ' << q.x() << ' ' << q.y() << ' ' << q.z()
-         << ' ' << q.w() << "\n";
+      gt << p.stamp << ' ' << t.x() << ' ' << t.y() << ' ' << t.z() << ' ' << q.x() << ' ' << q.y()
+         << ' ' << q.z() << ' ' << q.w() << "\n";
       std::ofstream(dir_ / "rgb" / name) << "not an image; the tools here read names only";
     }
-    std::ofstream(dir_ / "camera.yaml") << "fx: 525\nfy: 525\ncx: 319.5\ncy: 239.5\nwidth: 640\nheight: 480\n";
+    std::ofstream(dir_ / "camera.yaml")
+        << "fx: 525\nfy: 525\ncx: 319.5\ncy: 239.5\nwidth: 640\nheight: 480\n";
   }
   void TearDown() override { fs::remove_all(dir_); }
 
-  static std::string tool(const std::string& name) { return std::string(VIEW_SELECTION_TOOLS_DIR) + "/" + name; }
+  static std::string tool(const std::string& name) {
+    return std::string(VIEW_SELECTION_TOOLS_DIR) + "/" + name;
+  }
   int runTool(const std::string& command, std::string* output) {
     const fs::path out = dir_ / "stdout.txt";
     const int status = std::system((command + " > " + out.string() + " 2>&1").c_str());
@@ -74,27 +79,29 @@ TEST_F(EvaluationTools, EvaluateTrajectoryRecoversAKnownSimilarity) {
   // The "reconstruction" is the ground truth seen through an arbitrary similarity (COLMAP's own
   // frame and scale), one camera left out (not registered) and one unknown image added.
   const double scale = 0.37;
-  const Eigen::Matrix3d rot = Eigen::AngleAxisd(1.1, Eigen::Vector3d(1, 2, -1).normalized()).toRotationMatrix();
+  const Eigen::Matrix3d rot =
+      Eigen::AngleAxisd(1.1, Eigen::Vector3d(1, 2, -1).normalized()).toRotationMatrix();
   const Eigen::Vector3d shift(0.5, -2.0, 7.0);
   std::ofstream f(dir_ / "images.txt");
   f << "# IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n";
   for (int i = 0; i < 6; ++i) {
     if (i == 3) continue;
-    const Eigen::Vector3d c = scale * (rot * poses_[i].pose.position) + shift;  // centre in model frame
-    const Eigen::Matrix3d r_wc = rot * poses_[i].pose.rotation();               // camera-to-model
+    const Eigen::Vector3d c =
+        scale * (rot * poses_[i].pose.position) + shift;           // centre in model frame
+    const Eigen::Matrix3d r_wc = rot * poses_[i].pose.rotation();  // camera-to-model
     const Eigen::Matrix3d r_cw = r_wc.transpose();
     const Eigen::Vector3d t = -r_cw * c;
     const Eigen::Quaterniond q(r_cw);
     f.precision(17);
-    f << i + 1 << ' ' << q.w() << ' ' << q.x() << ' ' << q.y() << ' ' << q.z() << ' ' << t.x() << ' ' << t.y() << ' '
-      << t.z() << " 1 " << names_[i] << "\n1.0 2.0 -1\n";
+    f << i + 1 << ' ' << q.w() << ' ' << q.x() << ' ' << q.y() << ' ' << q.z() << ' ' << t.x()
+      << ' ' << t.y() << ' ' << t.z() << " 1 " << names_[i] << "\n1.0 2.0 -1\n";
   }
   f << "9 1 0 0 0 0 0 0 1 unknown.png\n\n";
   f.close();
 
   std::string out;
-  ASSERT_EQ(runTool(tool("evaluate_trajectory") + " --model " + dir_.string() + " --dataset " + dir_.string() +
-                        " --json " + (dir_ / "ate.json").string(),
+  ASSERT_EQ(runTool(tool("evaluate_trajectory") + " --model " + dir_.string() + " --dataset " +
+                        dir_.string() + " --json " + (dir_ / "ate.json").string(),
                     &out),
             0)
       << out;
@@ -105,16 +112,16 @@ TEST_F(EvaluationTools, EvaluateTrajectoryRecoversAKnownSimilarity) {
   EXPECT_LT(j["ate"]["rmse"].get<double>(), 1e-6);
 
   // The stamp-named alternative gives the same alignment.
-  ASSERT_EQ(runTool(tool("evaluate_trajectory") + " --model " + (dir_ / "images.txt").string() + " --groundtruth " +
-                        (dir_ / "groundtruth.txt").string(),
+  ASSERT_EQ(runTool(tool("evaluate_trajectory") + " --model " + (dir_ / "images.txt").string() +
+                        " --groundtruth " + (dir_ / "groundtruth.txt").string(),
                     &out),
             0)
       << out;
   EXPECT_NE(out.find("ate_rmse"), std::string::npos) << out;
 
   // Bad input: a clear message and a non-zero exit, no crash.
-  EXPECT_EQ(runTool(tool("evaluate_trajectory") + " --model " + (dir_ / "missing").string() + " --dataset " +
-                        dir_.string(),
+  EXPECT_EQ(runTool(tool("evaluate_trajectory") + " --model " + (dir_ / "missing").string() +
+                        " --dataset " + dir_.string(),
                     &out),
             1);
   EXPECT_NE(out.find("cannot read COLMAP images file"), std::string::npos) << out;
@@ -124,16 +131,19 @@ TEST_F(EvaluationTools, EvaluateTrajectoryRecoversAKnownSimilarity) {
 TEST_F(EvaluationTools, SelectViewsNearestWritesPairsByName) {
   std::string out;
   const fs::path result = dir_ / "nearest";
-  ASSERT_EQ(runTool(tool("select_views") + " --dataset " + dir_.string() +
-                        " --every 1 --strategy nearest --nearest-k 1 --nearest-max-angle 90 --out " + result.string(),
-                    &out),
-            0)
+  ASSERT_EQ(
+      runTool(tool("select_views") + " --dataset " + dir_.string() +
+                  " --every 1 --strategy nearest --nearest-k 1 --nearest-max-angle 90 --out " +
+                  result.string(),
+              &out),
+      0)
       << out;
   // Each camera's nearest is the one before it (view 0: view 1): a chain of 5 pairs.
   std::string expected;
   for (int i = 0; i + 1 < 6; ++i) expected += names_[i] + " " + names_[i + 1] + "\n";
   EXPECT_EQ(readAll(result / "pairs.txt"), expected);
-  EXPECT_EQ(runTool(tool("select_views") + " --dataset " + dir_.string() + " --nearest-k 2", &out), 2);
+  EXPECT_EQ(runTool(tool("select_views") + " --dataset " + dir_.string() + " --nearest-k 2", &out),
+            2);
   EXPECT_NE(out.find("need --strategy nearest"), std::string::npos) << out;
 }
 

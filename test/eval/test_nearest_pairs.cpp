@@ -13,7 +13,8 @@ namespace {
 using test::lookAt;
 
 // Cameras on a line along x at the given positions, all looking along +z (or rotated about y).
-std::vector<CameraPose> lineOfCameras(const std::vector<double>& xs, const std::vector<double>& yaw_deg = {}) {
+std::vector<CameraPose> lineOfCameras(const std::vector<double>& xs,
+                                      const std::vector<double>& yaw_deg = {}) {
   std::vector<CameraPose> poses;
   for (size_t i = 0; i < xs.size(); ++i) {
     const double yaw = i < yaw_deg.size() ? yaw_deg[i] * M_PI / 180.0 : 0.0;
@@ -35,7 +36,8 @@ TEST(NearestPairs, TakesKNearestCentresWithTiesOnLowerId) {
   EXPECT_EQ(sets[2], (std::vector<ViewId>{1}));
   EXPECT_EQ(sets[3], (std::vector<ViewId>{2}));
   EXPECT_EQ(sets[4], (std::vector<ViewId>{3}));
-  EXPECT_EQ(nearestPairs(poses, c), (std::vector<std::pair<ViewId, ViewId>>{{0, 1}, {1, 2}, {2, 3}, {3, 4}}));
+  EXPECT_EQ(nearestPairs(poses, c),
+            (std::vector<std::pair<ViewId, ViewId>>{{0, 1}, {1, 2}, {2, 3}, {3, 4}}));
   c.k = 2;
   const auto sets2 = nearestNeighbourSets(poses, c);
   EXPECT_EQ(sets2[1], (std::vector<ViewId>{0, 2}));

@@ -25,7 +25,8 @@ Eigen::Matrix3Xd randomPoints(std::mt19937& rng, int n, double spread = 2.0) {
 SimilarityTransform knownTransform() {
   SimilarityTransform t;
   t.scale = 3.7;
-  t.rotation = Eigen::AngleAxisd(2.1, Eigen::Vector3d(0.3, -0.8, 0.5).normalized()).toRotationMatrix();
+  t.rotation =
+      Eigen::AngleAxisd(2.1, Eigen::Vector3d(0.3, -0.8, 0.5).normalized()).toRotationMatrix();
   t.translation = Eigen::Vector3d(10.0, -4.0, 2.5);
   return t;
 }
@@ -68,7 +69,8 @@ TEST(TrajectoryAlignment, NoisyPointsGiveCloseTransformAndErrorOfNoiseSize) {
   Eigen::Matrix3Xd gt = applyTo(truth, est);
   const double sigma = 0.05;  // per axis, ground-truth units
   std::normal_distribution<double> noise(0.0, sigma);
-  for (Eigen::Index i = 0; i < gt.cols(); ++i) gt.col(i) += Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
+  for (Eigen::Index i = 0; i < gt.cols(); ++i)
+    gt.col(i) += Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
   const TrajectoryError r = absoluteTrajectoryError(est, gt);
   EXPECT_NEAR(r.alignment.scale, truth.scale, 0.01);
   EXPECT_LT(Eigen::AngleAxisd(r.alignment.rotation.transpose() * truth.rotation).angle(), 0.005);

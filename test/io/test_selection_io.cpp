@@ -20,7 +20,8 @@ using test::lookAt;
 using test::vgaIntrinsics;
 
 fs::path freshDir(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / ("view_selection_test_" + name + "_" + std::to_string(::getpid()));
+  const fs::path dir = fs::temp_directory_path() /
+                       ("view_selection_test_" + name + "_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   fs::create_directories(dir);
   return dir;
@@ -42,7 +43,8 @@ ErrorResistanceMatrix threeViews() {
     kf.intrinsics = vgaIntrinsics();
     kf.pose = lookAt({0.3 * v, 0, 0}, {0.3, 0, 3});
     kf.points.resize(3, 20);
-    for (int q = 0; q < 20; ++q) kf.points.col(q) = Eigen::Vector3d(0.1 * (q % 5), 0.1 * (q / 5), 3.0);
+    for (int q = 0; q < 20; ++q)
+      kf.points.col(q) = Eigen::Vector3d(0.1 * (q % 5), 0.1 * (q / 5), 3.0);
     m.addKeyframe(kf);
   }
   return m;
@@ -71,7 +73,7 @@ TEST(SelectionIo, JsonFollowsTheFormat) {
   const auto e = errorResistanceFromJson(doc);
   ASSERT_EQ(e.size(), 3u);
   for (int i = 0; i < 3; ++i) {
-    EXPECT_TRUE(doc["error_resistance"][i][i].is_null());  // +inf diagonal as null
+    EXPECT_TRUE(doc["error_resistance"][i][i].is_null());        // +inf diagonal as null
     for (int j = 0; j < 3; ++j) EXPECT_EQ(e[i][j], m.at(i, j));  // exact doubles
   }
   EXPECT_EQ(doc["next_views"].get<std::vector<NextViewSet>>(), s.next_views);
@@ -113,11 +115,13 @@ TEST(SelectionIo, CompletionAndNullStartAreWritten) {
 
 TEST(SelectionIo, PairsTxtForColmap) {
   const fs::path dir = freshDir("pairs");
-  writePairsTxt((dir / "pairs.txt").string(), {"a.jpg", "b.jpg", "sub/c.jpg"}, {{0, 1}, {0, 2}, {1, 2}});
+  writePairsTxt((dir / "pairs.txt").string(), {"a.jpg", "b.jpg", "sub/c.jpg"},
+                {{0, 1}, {0, 2}, {1, 2}});
   EXPECT_EQ(slurp(dir / "pairs.txt"), "a.jpg b.jpg\na.jpg sub/c.jpg\nb.jpg sub/c.jpg\n");
   EXPECT_THROW(writePairsTxt((dir / "x.txt").string(), {"a b.jpg", "c.jpg"}, {{0, 1}}), IoError);
   EXPECT_THROW(writePairsTxt((dir / "x.txt").string(), {"a.jpg"}, {{0, 1}}), IoError);
-  EXPECT_THROW(writePairsTxt((dir / "no" / "such" / "dir.txt").string(), {"a", "b"}, {{0, 1}}), IoError);
+  EXPECT_THROW(writePairsTxt((dir / "no" / "such" / "dir.txt").string(), {"a", "b"}, {{0, 1}}),
+               IoError);
   EXPECT_THROW(readSelectionJson((dir / "missing.json").string()), IoError);
   std::ofstream(dir / "bad.json") << "{ not json";
   EXPECT_THROW(readSelectionJson((dir / "bad.json").string()), IoError);

@@ -19,8 +19,8 @@ namespace view_selection {
 namespace {
 
 // The tests hold depth as cv::Mat; the sampler and the occlusion map read core views of it.
-Eigen::Matrix3Xd sampleDepthPoints(const cv::Mat& depth, const PinholeIntrinsics& k, const CameraPose& pose,
-                                   const DepthSamplerConfig& config) {
+Eigen::Matrix3Xd sampleDepthPoints(const cv::Mat& depth, const PinholeIntrinsics& k,
+                                   const CameraPose& pose, const DepthSamplerConfig& config) {
   return points::sampleDepthPoints(depthImageOf(depth), k, pose, config);
 }
 DepthMap downsampleDepth(const cv::Mat& depth, const PinholeIntrinsics& k, int cell) {
@@ -119,9 +119,9 @@ TEST(DepthSampler, SkipsEmptyCellsAndIgnoresOutliers) {
 TEST(DepthSampler, DownsampledMapHoldsCellMedians) {
   PinholeIntrinsics k = vgaIntrinsics();
   cv::Mat depth(480, 640, CV_32FC1, cv::Scalar(3.0f));
-  depth(cv::Rect(0, 0, 8, 8)).setTo(0.0f);        // cell (0, 0) unknown
-  depth(cv::Rect(8, 0, 8, 8)).setTo(1.0f);        // cell (1, 0) at 1 m ...
-  depth(cv::Rect(8, 0, 2, 8)).setTo(9.0f);        // ... with a 25 % spike
+  depth(cv::Rect(0, 0, 8, 8)).setTo(0.0f);  // cell (0, 0) unknown
+  depth(cv::Rect(8, 0, 8, 8)).setTo(1.0f);  // cell (1, 0) at 1 m ...
+  depth(cv::Rect(8, 0, 2, 8)).setTo(9.0f);  // ... with a 25 % spike
   const DepthMap map = downsampleDepth(depth, k, 8);
   EXPECT_EQ(map.cols, 80);
   EXPECT_EQ(map.rows, 60);

@@ -2,10 +2,10 @@
 // Ceres refinement against the linear start, earlier rows updated when later keyframes add
 // points, bounded overlap-ranked candidates, parameter checks, and the real DTU views.
 #include "view_selection/core/exceptions.h"
+#include "view_selection/core/view_selector.h"
+#include "view_selection/io/tum_frames.h"
 #include "view_selection/points/feature_point_source.h"
 #include "view_selection/points/point_source_factory.h"
-#include "view_selection/io/tum_frames.h"
-#include "view_selection/core/view_selector.h"
 
 #include "support/test_support.h"
 #include "support/textured_room.h"
@@ -17,9 +17,9 @@
 #include <filesystem>
 #include <map>
 #include <random>
+#include "support/layers.h"
 #include "view_selection/io/params_json.h"
 #include "view_selection/points/image_conversion.h"
-#include "support/layers.h"
 
 namespace view_selection {
 namespace {
@@ -352,7 +352,8 @@ TEST(FeaturePointSource, BadParametersAndInputsThrow) {
   no_image.image = {};
   EXPECT_THROW(source.process(0, no_image), InvalidInput);
   Frame wrong_type = roomFrame(0);
-  const cv::Mat two_channels(wrong_type.image.height, wrong_type.image.width, CV_8UC2, cv::Scalar(0, 0));
+  const cv::Mat two_channels(wrong_type.image.height, wrong_type.image.width, CV_8UC2,
+                             cv::Scalar(0, 0));
   wrong_type.image.data = two_channels.data;  // neither grey, BGR nor BGRA
   wrong_type.image.channels = 2;
   wrong_type.image.step = two_channels.step[0];

@@ -1,8 +1,8 @@
 // Map point source: visibility assignment on hand-built cases, thinning, and map changes that
 // update exactly the affected keyframes' rows.
 #include "view_selection/core/exceptions.h"
-#include "view_selection/points/map_point_source.h"
 #include "view_selection/core/view_selector.h"
+#include "view_selection/points/map_point_source.h"
 
 #include "support/test_support.h"
 

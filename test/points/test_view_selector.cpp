@@ -7,8 +7,8 @@
 #include "view_selection/points/depth_point_source.h"
 #include "view_selection/points/image_conversion.h"
 
-#include "support/layers.h"
 #include "support/box_depth.h"
+#include "support/layers.h"
 #include "support/test_support.h"
 
 #include <gtest/gtest.h>
@@ -75,7 +75,7 @@ TEST(ViewSelector, RejectsBadFramesWithoutChangingState) {
   const auto before = selector.matrix().table();
 
   Frame dup = frameAt(2.0, 0.2);
-  EXPECT_THROW(selector.addFrame(dup), InvalidInput);       // duplicate stamp
+  EXPECT_THROW(selector.addFrame(dup), InvalidInput);                // duplicate stamp
   EXPECT_THROW(selector.addFrame(frameAt(1.5, 0.2)), InvalidInput);  // out of order
   Frame nan_pose = frameAt(3.0, 0.2);
   nan_pose.pose.orientation.x() = std::nan("");
@@ -141,7 +141,7 @@ TEST(ViewSelector, WantsFrameAsksThePolicyWithoutChangingIt) {
     const bool wanted = selector.wantsFrame(f.pose);
     EXPECT_EQ(wanted, q % 3 == 0) << q;
     EXPECT_EQ(selector.wantsFrame(f.pose), wanted);  // asking twice changes nothing
-    if (!wanted) f.depth = {};                        // skipped frames need no depth
+    if (!wanted) f.depth = {};                       // skipped frames need no depth
     EXPECT_EQ(selector.addFrame(f).outcome == FrameOutcome::kKeyframe, wanted);
   }
   EXPECT_EQ(selector.matrix().size(), 3u);

@@ -4,16 +4,16 @@
 //
 // Good frames come from ../shared/data/redkitchen-0-499 (relative to the source folder) when it
 // is there, otherwise from a synthetic tilted wall seen by a camera moving sideways.
+#include <view_selection/Export.h>
 #include <view_selection/GetNextViews.h>
 #include <view_selection/GetSelection.h>
-#include <view_selection/Export.h>
 #include <view_selection/InputStatistics.h>
 #include <view_selection/ViewSelection.h>
 
-#include "view_selection/points/depth_sampler.h"
+#include "view_selection/core/view_selector.h"
 #include "view_selection/io/tum_dataset.h"
 #include "view_selection/io/tum_frames.h"
-#include "view_selection/core/view_selector.h"
+#include "view_selection/points/depth_sampler.h"
 #include "view_selection/ros/conversions.h"
 
 #include <cv_bridge/cv_bridge.h>
@@ -22,10 +22,10 @@
 #include "view_selection/points/point_source_factory.h"
 
 #include <geometry_msgs/PoseStamped.h>
-#include <sensor_msgs/point_cloud2_iterator.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 #include <sensor_msgs/image_encodings.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
 #include <std_srvs/Trigger.h>
 #include <tf2_msgs/TFMessage.h>
 #include <visualization_msgs/MarkerArray.h>
@@ -52,8 +52,8 @@ struct GoodFrame {
   ros::Time stamp;
   core::PinholeIntrinsics intrinsics;
   core::CameraPose pose;
-  cv::Mat image;    // BGR
-  cv::Mat depth;    // as published: CV_32FC1 metres or CV_16UC1 millimetres
+  cv::Mat image;  // BGR
+  cv::Mat depth;  // as published: CV_32FC1 metres or CV_16UC1 millimetres
 };
 
 std::vector<GoodFrame> realFrames(const std::string& folder, size_t count, size_t step) {
@@ -84,7 +84,8 @@ std::vector<GoodFrame> syntheticFrames(size_t count) {
     GoodFrame g;
     g.intrinsics = k;
     g.pose.position = {0.08 * static_cast<double>(i), 0.02 * std::sin(static_cast<double>(i)), 0.0};
-    g.pose.orientation = Eigen::Quaterniond(Eigen::AngleAxisd(0.02 * static_cast<double>(i), Eigen::Vector3d::UnitY()));
+    g.pose.orientation = Eigen::Quaterniond(
+        Eigen::AngleAxisd(0.02 * static_cast<double>(i), Eigen::Vector3d::UnitY()));
     g.depth = cv::Mat(k.height, k.width, CV_32FC1);
     g.image = cv::Mat(k.height, k.width, CV_8UC3, cv::Scalar(90, 120, 150));
     const Eigen::Matrix3d R = g.pose.rotation();
@@ -137,7 +138,8 @@ class BadInputTest : public ::testing::Test {
   bool waitForSubscribers() {
     const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(20.0);
     while (ros::WallTime::now() < deadline) {
-      const bool poses = pose_source_ == "tf" ? tf_pub_.getNumSubscribers() > 0 : pose_pub_.getNumSubscribers() > 0;
+      const bool poses = pose_source_ == "tf" ? tf_pub_.getNumSubscribers() > 0
+                                              : pose_pub_.getNumSubscribers() > 0;
       if (image_pub_.getNumSubscribers() > 0 && info_pub_.getNumSubscribers() > 0 &&
           depth_pub_.getNumSubscribers() > 0 && poses && stats() &&
           (point_source_ != "map" || points_pub_.getNumSubscribers() > 0))
@@ -152,7 +154,7 @@ class BadInputTest : public ::testing::Test {
     ros::Time stamp;
     sensor_msgs::ImagePtr image, depth;
     sensor_msgs::CameraInfo info;
-    std::string camera_frame;       // "" = no pose published at all
+    std::string camera_frame;  // "" = no pose published at all
     core::CameraPose pose;
     std::string pose_frame = "world";
   };
@@ -163,14 +165,24 @@ class BadInputTest : public ::testing::Test {
     h.stamp = stamp;
     h.frame_id = "/" + camera;  // leading '/' as in old bags: the node normalises it
     s.image = cv_bridge::CvImage(h, sensor_msgs::image_encodings::BGR8, g.image).toImageMsg();
-    s.depth = cv_bridge::CvImage(h, g.depth.type() == CV_16UC1 ? sensor_msgs::image_encodings::TYPE_16UC1
-                                                                : sensor_msgs::image_encodings::TYPE_32FC1,
-                                 g.depth)
-                  .toImageMsg();
+    s.depth =
+        cv_bridge::CvImage(h,
+                           g.depth.type() == CV_16UC1 ? sensor_msgs::image_encodings::TYPE_16UC1
+                                                      : sensor_msgs::image_encodings::TYPE_32FC1,
+                           g.depth)
+            .toImageMsg();
     s.info.header = h;
     s.info.width = static_cast<uint32_t>(g.intrinsics.width);
     s.info.height = static_cast<uint32_t>(g.intrinsics.height);
-    s.info.K = {g.intrinsics.fx, 0.0, g.intrinsics.cx, 0.0, g.intrinsics.fy, g.intrinsics.cy, 0.0, 0.0, 1.0};
+    s.info.K = {g.intrinsics.fx,
+                0.0,
+                g.intrinsics.cx,
+                0.0,
+                g.intrinsics.fy,
+                g.intrinsics.cy,
+                0.0,
+                0.0,
+                1.0};
     s.camera_frame = camera;
     s.pose = g.pose;
     return s;
@@ -198,7 +210,8 @@ class BadInputTest : public ::testing::Test {
     info_pub_.publish(s.info);
     image_pub_.publish(s.image);
     const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(10.0);
-    while (handled() < expect_handled && ros::WallTime::now() < deadline) ros::WallDuration(0.01).sleep();
+    while (handled() < expect_handled && ros::WallTime::now() < deadline)
+      ros::WallDuration(0.01).sleep();
     ASSERT_GE(handled(), expect_handled) << "the node did not handle the frame at " << s.stamp;
   }
 
@@ -213,18 +226,21 @@ class BadInputTest : public ::testing::Test {
 
 TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames) {
   if (point_source_ == "map") GTEST_SKIP() << "map_input.test runs MapPointsReplaceAndUpdateRows";
-  const fs::path data = fs::path(VIEW_SELECTION_SOURCE_DIR).parent_path() / "shared" / "data" / "redkitchen-0-499";
+  const fs::path data =
+      fs::path(VIEW_SELECTION_SOURCE_DIR).parent_path() / "shared" / "data" / "redkitchen-0-499";
   bool synthetic = false;  // ~synthetic forces the built-in frames even when the data is there
   ros::NodeHandle("~").param("synthetic", synthetic, false);
-  std::vector<GoodFrame> good =
-      !synthetic && fs::exists(data / "rgb.txt") ? realFrames(data.string(), 6, 15) : syntheticFrames(6);
+  std::vector<GoodFrame> good = !synthetic && fs::exists(data / "rgb.txt")
+                                    ? realFrames(data.string(), 6, 15)
+                                    : syntheticFrames(6);
   ASSERT_EQ(good.size(), 6u);
   // One good frame in 16UC1 millimetres, the other path the node reads.
   {
     cv::Mat mm(good[3].depth.size(), CV_16UC1);
     for (int v = 0; v < mm.rows; ++v)
       for (int u = 0; u < mm.cols; ++u)
-        mm.at<uint16_t>(v, u) = static_cast<uint16_t>(std::lround(good[3].depth.at<float>(v, u) * 1000.0f));
+        mm.at<uint16_t>(v, u) =
+            static_cast<uint16_t>(std::lround(good[3].depth.at<float>(v, u) * 1000.0f));
     good[3].depth = mm;
   }
   ASSERT_TRUE(waitForSubscribers()) << "the node under test did not subscribe within 20 s";
@@ -279,7 +295,8 @@ TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames
   }
   {  // colour on the depth topic
     Send s = next(good[2]);
-    s.depth = cv_bridge::CvImage(s.image->header, sensor_msgs::image_encodings::BGR8, good[2].image).toImageMsg();
+    s.depth = cv_bridge::CvImage(s.image->header, sensor_msgs::image_encodings::BGR8, good[2].image)
+                  .toImageMsg();
     sendBad(s, "bad_depth");
   }
   sendGood(2);
@@ -308,7 +325,8 @@ TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames
     sendBad(s, "duplicate_stamp");
   }
   {  // a stamp before the last good one
-    Send s = makeSend(good[4], expected_stamps[1] + ros::Duration(0.05), "cam_" + std::to_string(camera++));
+    Send s = makeSend(good[4], expected_stamps[1] + ros::Duration(0.05),
+                      "cam_" + std::to_string(camera++));
     sendBad(s, "out_of_order_stamp");
   }
   sendGood(4);
@@ -331,7 +349,8 @@ TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames
   ASSERT_TRUE(srv.response.success) << srv.response.message;
   const auto& sel = srv.response.selection;
   ASSERT_EQ(sel.keyframes.size(), expected.size());
-  for (size_t i = 0; i < expected.size(); ++i) EXPECT_EQ(sel.keyframes[i].stamp, expected_stamps[i]) << i;
+  for (size_t i = 0; i < expected.size(); ++i)
+    EXPECT_EQ(sel.keyframes[i].stamp, expected_stamps[i]) << i;
 
   // The same frames through the core directly: the node's selection must equal it exactly.
   core::ViewSelectorConfig config;
@@ -344,7 +363,8 @@ TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames
     f.image_name = ros_node::keyframeImageName(f.stamp);
     f.intrinsics = expected[i].intrinsics;
     f.pose = expected[i].pose;
-    f.depth = depthImageOf(points::depthToMetres(expected[i].depth, expected[i].depth.type() == CV_16UC1 ? 0.001 : 1.0));
+    f.depth = depthImageOf(points::depthToMetres(
+        expected[i].depth, expected[i].depth.type() == CV_16UC1 ? 0.001 : 1.0));
     ASSERT_EQ(selector.addFrame(f).outcome, core::FrameOutcome::kKeyframe);
   }
   const core::Selection want = selector.select();
@@ -352,9 +372,11 @@ TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames
   size_t finite = 0;
   for (size_t i = 0; i < want.next_views.size(); ++i) {
     const auto& got = sel.next_view_sets[i];
-    EXPECT_EQ(std::vector<int>(got.next_views.begin(), got.next_views.end()), want.next_views[i]) << "view " << i;
+    EXPECT_EQ(std::vector<int>(got.next_views.begin(), got.next_views.end()), want.next_views[i])
+        << "view " << i;
     for (size_t q = 0; q < got.next_views.size(); ++q) {
-      EXPECT_EQ(got.error_resistance[q], selector.matrix().at(static_cast<core::ViewId>(i), got.next_views[q]));
+      EXPECT_EQ(got.error_resistance[q],
+                selector.matrix().at(static_cast<core::ViewId>(i), got.next_views[q]));
       ++finite;
     }
   }
@@ -393,8 +415,8 @@ TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames
   }
 
   // Markers: one frustum (16 line points) per keyframe, the start view's in its own namespace.
-  const auto markers = ros::topic::waitForMessage<visualization_msgs::MarkerArray>(node_ + "/markers", nh_,
-                                                                                    ros::Duration(10.0));
+  const auto markers = ros::topic::waitForMessage<visualization_msgs::MarkerArray>(
+      node_ + "/markers", nh_, ros::Duration(10.0));
   ASSERT_TRUE(markers) << "no markers";
   size_t frustum_points = 0;
   for (const auto& m : markers->markers)
@@ -403,7 +425,8 @@ TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames
 
   // Export with ~save_keyframe_images: every name in pairs.txt is a written image.
   view_selection::Export exp;
-  const fs::path dir = fs::temp_directory_path() / ("view_selection_bad_input_" + std::to_string(::getpid()));
+  const fs::path dir =
+      fs::temp_directory_path() / ("view_selection_bad_input_" + std::to_string(::getpid()));
   exp.request.directory = dir.string();
   ASSERT_TRUE(ros::service::call(node_ + "/export", exp));
   ASSERT_TRUE(exp.response.success) << exp.response.message;
@@ -453,7 +476,8 @@ TEST_F(BadInputTest, MapPointsReplaceAndUpdateRows) {
   for (const auto& kf : srv.response.selection.keyframes) EXPECT_EQ(kf.num_points, 0);
 
   // The map: points on the surface frame 0 sees, back-projected from its depth.
-  Eigen::Matrix3Xd map = sampleDepthPoints(depthImageOf(good[0].depth), good[0].intrinsics, good[0].pose, DepthSamplerConfig{});
+  Eigen::Matrix3Xd map = sampleDepthPoints(depthImageOf(good[0].depth), good[0].intrinsics,
+                                           good[0].pose, DepthSamplerConfig{});
   ASSERT_GT(map.cols(), 50);
   auto cloud = [&](const std::string& frame) {
     sensor_msgs::PointCloud2 c;
@@ -507,14 +531,18 @@ TEST_F(BadInputTest, MapPointsReplaceAndUpdateRows) {
     f.depth = depthImageOf(good[i].depth);
     ASSERT_EQ(selector.addFrame(f).outcome, core::FrameOutcome::kKeyframe);
   }
-  dynamic_cast<MapPointSource&>(selector.pointSource()).setMapPoints(map.cast<float>().cast<double>());
+  dynamic_cast<MapPointSource&>(selector.pointSource())
+      .setMapPoints(map.cast<float>().cast<double>());
   selector.applyPointUpdates();
   EXPECT_EQ(sel.finite_entries, selector.matrix().table().finiteCount());
   for (size_t i = 0; i < good.size(); ++i) {
-    EXPECT_EQ(sel.keyframes[i].num_points, selector.matrix().keyframe(static_cast<core::ViewId>(i)).points.cols()) << i;
+    EXPECT_EQ(sel.keyframes[i].num_points,
+              selector.matrix().keyframe(static_cast<core::ViewId>(i)).points.cols())
+        << i;
     for (size_t q = 0; q < sel.next_view_sets[i].next_views.size(); ++q)
-      EXPECT_EQ(sel.next_view_sets[i].error_resistance[q],
-                selector.matrix().at(static_cast<core::ViewId>(i), sel.next_view_sets[i].next_views[q]));
+      EXPECT_EQ(
+          sel.next_view_sets[i].error_resistance[q],
+          selector.matrix().at(static_cast<core::ViewId>(i), sel.next_view_sets[i].next_views[q]));
   }
 }
 

@@ -6,16 +6,19 @@
 #include <view_selection/InputStatistics.h>
 #include <view_selection/ViewSelection.h>
 
+#include <diagnostic_msgs/DiagnosticArray.h>
+#include <dynamic_reconfigure/Reconfigure.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 #include <std_srvs/Trigger.h>
 
-#include <algorithm>
 #include <unistd.h>
+#include <algorithm>
 
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -40,7 +43,8 @@ void systemState(std::vector<std::string>& published, std::vector<std::string>& 
   ASSERT_TRUE(ros::master::execute("getSystemState", args, result, payload, true));
   for (int kind = 0; kind < 2; ++kind) {
     auto& out = kind == 0 ? published : subscribed;
-    for (int i = 0; i < payload[kind].size(); ++i) out.push_back(static_cast<std::string>(payload[kind][i][0]));
+    for (int i = 0; i < payload[kind].size(); ++i)
+      out.push_back(static_cast<std::string>(payload[kind][i][0]));
   }
 }
 
@@ -85,19 +89,24 @@ TEST(Interface, EmptyNodeAnswersSensibly) {
 
   // The latched topic carries the same empty selection.
   ros::NodeHandle nh;
-  view_selection::ViewSelection::ConstPtr latched = ros::topic::waitForMessage<view_selection::ViewSelection>(
-      node + "/selection", nh, ros::Duration(10.0));
+  view_selection::ViewSelection::ConstPtr latched =
+      ros::topic::waitForMessage<view_selection::ViewSelection>(node + "/selection", nh,
+                                                                ros::Duration(10.0));
   ASSERT_TRUE(latched) << "no latched message on " << node << "/selection";
   EXPECT_TRUE(latched->keyframes.empty());
-  view_selection::InputStatistics::ConstPtr stats = ros::topic::waitForMessage<view_selection::InputStatistics>(
-      node + "/statistics", nh, ros::Duration(10.0));
+  view_selection::InputStatistics::ConstPtr stats =
+      ros::topic::waitForMessage<view_selection::InputStatistics>(node + "/statistics", nh,
+                                                                  ros::Duration(10.0));
   ASSERT_TRUE(stats) << "no latched message on " << node << "/statistics";
   EXPECT_EQ(stats->keyframes, 0u);
   EXPECT_EQ(stats->frames_dropped, 0u);
 
   view_selection::Export exp;
+  // A folder of this test's own (the node name has a '/'; keep it one path component).
+  std::string own = node;
+  std::replace(own.begin(), own.end(), '/', '_');
   exp.request.directory = (std::filesystem::temp_directory_path() /
-                           ("view_selection_test_" + std::to_string(::getpid()) + node))
+                           ("view_selection_test_" + std::to_string(::getpid()) + own))
                               .string();
   ASSERT_TRUE(call(node + "/export", exp));
   EXPECT_TRUE(exp.response.success) << exp.response.message;
@@ -106,11 +115,58 @@ TEST(Interface, EmptyNodeAnswersSensibly) {
   std::ifstream json(exp.response.selection_json);
   EXPECT_TRUE(json.good()) << exp.response.selection_json << " was not written";
   std::error_code ec;
-  std::filesystem::remove_all(std::filesystem::path(exp.request.directory).parent_path(), ec);
+  std::filesystem::remove_all(exp.request.directory, ec);
 
   std_srvs::Trigger reset;
   ASSERT_TRUE(call(node + "/reset", reset));
   EXPECT_TRUE(reset.response.success) << reset.response.message;
+}
+
+TEST(Interface, PublishesDiagnostics) {
+  const std::string node = nodeName();
+  ros::NodeHandle nh;
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(15.0);
+  while (ros::WallTime::now() < deadline) {
+    const auto array = ros::topic::waitForMessage<diagnostic_msgs::DiagnosticArray>(
+        "/diagnostics", nh, ros::Duration(5.0));
+    if (!array) continue;
+    for (const auto& status : array->status) {
+      if (status.name.find("view selection") == std::string::npos) continue;
+      std::map<std::string, std::string> values;
+      for (const auto& kv : status.values) values[kv.key] = kv.value;
+      for (const char* key : {"input rate [frames/s]", "frames received", "frames dropped",
+                              "worker lag [s]", "keyframes", "last insertion [s]"})
+        EXPECT_TRUE(values.count(key)) << "no '" << key << "' in the diagnostics of " << node;
+      EXPECT_EQ(values["keyframes"], "0");
+      EXPECT_EQ(status.level, diagnostic_msgs::DiagnosticStatus::OK) << status.message;
+      return;
+    }
+  }
+  ADD_FAILURE() << "no 'view selection' status on /diagnostics within 15 s";
+}
+
+TEST(Interface, ReconfigureChangesTheSelectionLive) {
+  const std::string node = nodeName();
+  dynamic_reconfigure::Reconfigure srv;
+  dynamic_reconfigure::IntParameter k;
+  k.name = "k";
+  k.value = 2;
+  srv.request.config.ints.push_back(k);
+  dynamic_reconfigure::StrParameter completion;
+  completion.name = "completion";
+  completion.value = "paper";
+  srv.request.config.strs.push_back(completion);
+  ASSERT_TRUE(call(node + "/set_parameters", srv));
+  view_selection::GetSelection selection;
+  ASSERT_TRUE(call(node + "/get_selection", selection));
+  EXPECT_EQ(selection.response.selection.k, 2);
+  EXPECT_EQ(selection.response.selection.completion, "paper");
+  // Back to the launch file's values, for the other tests.
+  srv.request.config.ints[0].value = 3;
+  srv.request.config.strs[0].value = "reachable";
+  ASSERT_TRUE(call(node + "/set_parameters", srv));
+  ASSERT_TRUE(call(node + "/get_selection", selection));
+  EXPECT_EQ(selection.response.selection.k, 3);
 }
 
 TEST(Interface, UnknownViewIsAnErrorWithAMessage) {

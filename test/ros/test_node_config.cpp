@@ -7,6 +7,7 @@
 #include <ros/ros.h>
 
 #include <string>
+#include <vector>
 
 using namespace view_selection;
 using namespace view_selection::ros_node;
@@ -96,10 +97,12 @@ TEST(NodeConfig, BadValuesNameTheParameter) {
   const Case cases[] = {
       {"k", XmlRpc::XmlRpcValue(0), "/bad/k = 0 is out of range [1, 1000]"},
       {"k", XmlRpc::XmlRpcValue("five"), "/bad/k must be an integer"},
-      {"min_covisible_ratio", XmlRpc::XmlRpcValue(1.5), "/bad/min_covisible_ratio = 1.5 is out of range"},
+      {"min_covisible_ratio", XmlRpc::XmlRpcValue(1.5),
+       "/bad/min_covisible_ratio = 1.5 is out of range"},
       {"pose_timeout", XmlRpc::XmlRpcValue(-1.0), "/bad/pose_timeout"},
       {"completion", XmlRpc::XmlRpcValue("best"), "is not one of: paper, reachable"},
-      {"keyframe_policy", XmlRpc::XmlRpcValue("sometimes"), "is not one of: every_frame, every_nth, motion"},
+      {"keyframe_policy", XmlRpc::XmlRpcValue("sometimes"),
+       "is not one of: every_frame, every_nth, motion"},
       {"pose_source", XmlRpc::XmlRpcValue("gps"), "is not one of: tf, topic"},
       {"occlusion_test", XmlRpc::XmlRpcValue("yes"), "must be true or false"},
       {"world_frame", XmlRpc::XmlRpcValue("/"), "must name a frame"},
@@ -135,6 +138,17 @@ TEST(NodeConfig, PointSources) {
   const NodeConfig features = loadNodeConfig(nh);
   EXPECT_EQ(features.point_params.features.detector, "sift");
   EXPECT_EQ(features.point_params.depth.grid, 12);
+}
+
+TEST(NodeConfig, MisspelledParametersAreNamed) {
+  ros::NodeHandle nh = fresh("misspelled");
+  nh.setParam("k", 3);
+  nh.setParam("min_covisble_ratio", 0.5);        // misspelled
+  nh.setParam("completoin", "reachable");        // misspelled
+  nh.setParam("image_transport/compressed", 1);  // another component's namespace: not judged
+  EXPECT_EQ(unknownParameters(nh), (std::vector<std::string>{"completoin", "min_covisble_ratio"}));
+  EXPECT_EQ(loadNodeConfig(nh).selector.selection.k, 3);  // the known ones still arrive
+  EXPECT_TRUE(unknownParameters(fresh("clean")).empty());
 }
 
 TEST(NodeConfig, NormaliseFrameId) {

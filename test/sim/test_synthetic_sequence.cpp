@@ -4,9 +4,9 @@
 #include "view_selection/sim/synthetic_sequence.h"
 
 #include "view_selection/core/exceptions.h"
+#include "view_selection/core/view_selector.h"
 #include "view_selection/io/tum_dataset.h"
 #include "view_selection/io/tum_frames.h"
-#include "view_selection/core/view_selector.h"
 
 #include <gtest/gtest.h>
 #include <opencv2/core/utility.hpp>
@@ -26,9 +26,9 @@
 #include <random>
 #include <string>
 #include <tuple>
+#include "support/layers.h"
 #include "view_selection/points/image_conversion.h"
 #include "view_selection/points/point_source_factory.h"
-#include "support/layers.h"
 
 namespace view_selection {
 namespace {

@@ -26,7 +26,8 @@ inline PinholeIntrinsics vgaIntrinsics(double f = 525.0) {
 inline CameraPose lookAt(const Eigen::Vector3d& eye, const Eigen::Vector3d& target,
                          double roll = 0.0) {
   const Eigen::Vector3d z = (target - eye).normalized();
-  Eigen::Vector3d helper = std::abs(z.y()) < 0.9 ? Eigen::Vector3d::UnitY() : Eigen::Vector3d::UnitX();
+  Eigen::Vector3d helper =
+      std::abs(z.y()) < 0.9 ? Eigen::Vector3d::UnitY() : Eigen::Vector3d::UnitX();
   Eigen::Vector3d x = helper.cross(z).normalized();  // image x to the right when y is "down"
   Eigen::Vector3d y = z.cross(x);
   Eigen::Matrix3d r;

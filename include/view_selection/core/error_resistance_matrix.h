@@ -25,9 +25,7 @@ struct ErrorResistanceConfig {
   double max_view_angle_deg = 0.0;
   OcclusionConfig occlusion;  ///< visibility against j's depth map
 
-  bool operator==(const ErrorResistanceConfig& o) const {
-    return paramsOf(*this) == paramsOf(o);
-  }
+  bool operator==(const ErrorResistanceConfig& o) const { return paramsOf(*this) == paramsOf(o); }
   void visitParameters(ParameterVisitor& v);
   /// Throws InvalidArgument naming the first field out of range.
   void validate() const { checkRanges(*this); }
@@ -71,12 +69,12 @@ class ErrorResistanceMatrix {
   /// Per-keyframe data computed once (rotation, frustum, points grouped for culling).
   struct View {
     Keyframe keyframe;
-    Eigen::Matrix3d world_to_camera;   // R^T
-    Eigen::Vector3d sphere_centre;     // of all of X_i, world
-    double sphere_radius = -1.0;       // < 0: no points
+    Eigen::Matrix3d world_to_camera;              // R^T
+    Eigen::Vector3d sphere_centre;                // of all of X_i, world
+    double sphere_radius = -1.0;                  // < 0: no points
     Eigen::Matrix<double, 3, 5> frustum_normals;  // camera frame, inward unit normals
-    Eigen::Matrix3Xd grouped_points;   // X_i reordered so each group is contiguous
-    std::vector<PointGroup> groups;    // kd-tree leaves of at most kGroupSize points
+    Eigen::Matrix3Xd grouped_points;              // X_i reordered so each group is contiguous
+    std::vector<PointGroup> groups;               // kd-tree leaves of at most kGroupSize points
   };
   static constexpr Eigen::Index kGroupSize = 16;
   static View makeView(Keyframe keyframe);

@@ -10,12 +10,12 @@
 namespace view_selection::core {
 
 struct Frame {
-  double stamp = 0.0;             ///< [s]
-  std::string image_name;         ///< name used in pairs.txt
+  double stamp = 0.0;      ///< [s]
+  std::string image_name;  ///< name used in pairs.txt
   PinholeIntrinsics intrinsics;
-  CameraPose pose;                ///< camera-to-world, optical frame
-  DepthImage depth;               ///< metres (0 = invalid), or empty when there is no depth
-  ColourImage image;              ///< colour (BGR) or grey; may be empty for depth-only sources
+  CameraPose pose;    ///< camera-to-world, optical frame
+  DepthImage depth;   ///< metres (0 = invalid), or empty when there is no depth
+  ColourImage image;  ///< colour (BGR) or grey; may be empty for depth-only sources
 };
 
 /// Throws InvalidInput when a frame cannot be used (stamp, intrinsics, pose, image and depth

@@ -28,9 +28,9 @@ inline KeyframeMode keyframeModeFromString(const std::string& text) {
 
 struct KeyframePolicyConfig {
   KeyframeMode mode = KeyframeMode::kMotion;
-  int every_n = 10;                 ///< kEveryNth: keep one frame in every_n
-  double min_translation = 0.10;    ///< kMotion: [m, scene units] since the last keyframe
-  double min_rotation_deg = 10.0;   ///< kMotion: [deg] since the last keyframe
+  int every_n = 10;                ///< kEveryNth: keep one frame in every_n
+  double min_translation = 0.10;   ///< kMotion: [m, scene units] since the last keyframe
+  double min_rotation_deg = 10.0;  ///< kMotion: [deg] since the last keyframe
 
   void visitParameters(ParameterVisitor& v);
   /// Throws InvalidArgument naming the first field out of range.

@@ -12,10 +12,10 @@
 namespace view_selection::core {
 
 struct OcclusionConfig {
-  bool enabled = true;           ///< keep a depth map per keyframe that has depth, and test against it
-  double abs_tolerance = 0.05;   ///< visible when |z_j - D_j(p)| <= max(abs, rel * z_j) [m]
-  double rel_tolerance = 0.03;   ///< [fraction of z_j]
-  int depth_map_cell = 8;        ///< one depth map value per n x n image pixels
+  bool enabled = true;  ///< keep a depth map per keyframe that has depth, and test against it
+  double abs_tolerance = 0.05;  ///< visible when |z_j - D_j(p)| <= max(abs, rel * z_j) [m]
+  double rel_tolerance = 0.03;  ///< [fraction of z_j]
+  int depth_map_cell = 8;       ///< one depth map value per n x n image pixels
 
   void visitParameters(ParameterVisitor& v);
   /// Throws InvalidArgument naming the first field out of range.

@@ -18,10 +18,10 @@ namespace view_selection::core {
 /// What a visitor learns about one parameter besides its value.
 struct ParameterInfo {
   const char* name = "";
-  const char* doc = "";                ///< one line, with the unit in brackets where there is one
-  double min = 0.0;                    ///< numbers: accepted range, inclusive
+  const char* doc = "";  ///< one line, with the unit in brackets where there is one
+  double min = 0.0;      ///< numbers: accepted range, inclusive
   double max = 0.0;
-  std::vector<std::string> choices;    ///< strings: the accepted values (empty: any string)
+  std::vector<std::string> choices;  ///< strings: the accepted values (empty: any string)
 };
 
 /// Receives each parameter of a config with a reference to the field. A visitor may read the
@@ -37,6 +37,8 @@ class ParameterVisitor {
   /// belong to it. Readers that keep names flat may ignore groups.
   virtual void beginGroup(const char* /*name*/) {}
   virtual void endGroup() {}
+  /// A heading for the parameters that follow, for documentation (the YAML file, the docs).
+  virtual void section(const char* /*title*/) {}
 };
 
 /// An enumeration's names, in the order they are documented.
@@ -159,5 +161,40 @@ void checkRanges(Config config) {
 
 /// A number written as a person would (no trailing zeros): 0.1, 1e+09, 30.
 std::string formatNumber(double value);
+
+/// One parameter as the documentation shows it.
+struct ParameterDoc {
+  std::string section;  ///< the heading it falls under
+  std::string name;
+  std::string type;   ///< "int", "double", "bool", "string"
+  std::string value;  ///< the default, as YAML writes it (doubles with a decimal point)
+  std::string range;  ///< "1..1000", "paper | reachable", or ""
+  std::string doc;
+};
+
+/// Every parameter of `config` with its default, in visiting order.
+template <typename Config>
+std::vector<ParameterDoc> describeParameters(Config config);
+
+class ParameterDescriber : public ParameterVisitor {
+ public:
+  void visit(const ParameterInfo& info, int& value) override;
+  void visit(const ParameterInfo& info, double& value) override;
+  void visit(const ParameterInfo& info, bool& value) override;
+  void visit(const ParameterInfo& info, std::string& value) override;
+  void section(const char* title) override { section_ = title; }
+  std::vector<ParameterDoc> docs;
+
+ private:
+  void add(const ParameterInfo& info, const char* type, std::string value, std::string range);
+  std::string section_;
+};
+
+template <typename Config>
+std::vector<ParameterDoc> describeParameters(Config config) {
+  ParameterDescriber describer;
+  config.visitParameters(describer);
+  return describer.docs;
+}
 
 }  // namespace view_selection::core

@@ -27,7 +27,7 @@ inline CompletionMode completionModeFromString(const std::string& text) {
 }
 
 struct SelectionConfig {
-  int k = 5;                                      ///< size of each next view set
+  int k = 5;  ///< size of each next view set
   CompletionMode completion = CompletionMode::kPaper;
 
   void visitParameters(ParameterVisitor& v);
@@ -45,12 +45,12 @@ struct CompletedView {
 };
 
 struct Selection {
-  std::vector<NextViewSet> next_views;        ///< C_i before completion
-  std::vector<NextViewSet> final_next_views;  ///< C_i after completion
-  ViewId start_view = -1;                     ///< s; -1 when E has no finite entry
-  std::vector<ViewId> order;                  ///< traversal order (extended in reachable mode)
-  std::vector<CompletedView> completed;       ///< in the order they were added
-  std::vector<ViewId> isolated;               ///< ascending
+  std::vector<NextViewSet> next_views;           ///< C_i before completion
+  std::vector<NextViewSet> final_next_views;     ///< C_i after completion
+  ViewId start_view = -1;                        ///< s; -1 when E has no finite entry
+  std::vector<ViewId> order;                     ///< traversal order (extended in reachable mode)
+  std::vector<CompletedView> completed;          ///< in the order they were added
+  std::vector<ViewId> isolated;                  ///< ascending
   std::vector<std::pair<ViewId, ViewId>> pairs;  ///< undirected, i < j, sorted
 
   /// (s, C_s[0]); {-1, -1} when there is no start view or C_s is empty.

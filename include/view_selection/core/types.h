@@ -41,8 +41,8 @@ struct PinholeIntrinsics {
 
 /// Camera pose, camera-to-world, optical frame (z forward, x right, y down).
 struct CameraPose {
-  Eigen::Vector3d position = Eigen::Vector3d::Zero();                  ///< camera centre O [m]
-  Eigen::Quaterniond orientation = Eigen::Quaterniond::Identity();     ///< camera-to-world
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();               ///< camera centre O [m]
+  Eigen::Quaterniond orientation = Eigen::Quaterniond::Identity();  ///< camera-to-world
 
   /// True when every component is finite and the quaternion has a usable norm.
   bool isValid() const;
@@ -82,11 +82,11 @@ struct DepthMap {
 
 /// One keyframe: where the camera was, how it images, and what it observed.
 struct Keyframe {
-  double stamp = 0.0;          ///< seconds
-  std::string image_name;      ///< image path relative to the image folder given to COLMAP
+  double stamp = 0.0;      ///< seconds
+  std::string image_name;  ///< image path relative to the image folder given to COLMAP
   PinholeIntrinsics intrinsics;
   CameraPose pose;
-  Eigen::Matrix3Xd points;     ///< sample points X_i, world coordinates [scene units]
+  Eigen::Matrix3Xd points;                ///< sample points X_i, world coordinates [scene units]
   std::shared_ptr<const DepthMap> depth;  ///< optional, for the occlusion test in this view
 };
 

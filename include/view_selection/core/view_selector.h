@@ -6,8 +6,8 @@
 #include "view_selection/core/error_resistance_matrix.h"
 #include "view_selection/core/frame.h"
 #include "view_selection/core/keyframe_policy.h"
-#include "view_selection/core/point_source.h"
 #include "view_selection/core/parameters.h"
+#include "view_selection/core/point_source.h"
 #include "view_selection/core/selection.h"
 #include "view_selection/core/selection_snapshot.h"
 
@@ -21,7 +21,7 @@ namespace view_selection::core {
 /// Every parameter of the method (the point sources have their own, in points/).
 struct ViewSelectorConfig {
   KeyframePolicyConfig keyframes;
-  ErrorResistanceConfig matrix;      ///< gates; matrix.occlusion: the depth map kept per keyframe
+  ErrorResistanceConfig matrix;  ///< gates; matrix.occlusion: the depth map kept per keyframe
   SelectionConfig selection;
 
   void visitParameters(ParameterVisitor& v);
@@ -35,11 +35,11 @@ enum class FrameOutcome {
 
 struct FrameResult {
   FrameOutcome outcome = FrameOutcome::kSkippedByPolicy;
-  ViewId id = -1;                     ///< keyframe id when outcome == kKeyframe
-  size_t points = 0;                  ///< sample points of the new keyframe
-  std::vector<ViewId> updated_rows;   ///< earlier keyframes whose rows were recomputed
-  double points_seconds = 0.0;        ///< time in the point source
-  double matrix_seconds = 0.0;        ///< time inserting into the matrix (row, column, updates)
+  ViewId id = -1;                    ///< keyframe id when outcome == kKeyframe
+  size_t points = 0;                 ///< sample points of the new keyframe
+  std::vector<ViewId> updated_rows;  ///< earlier keyframes whose rows were recomputed
+  double points_seconds = 0.0;       ///< time in the point source
+  double matrix_seconds = 0.0;       ///< time inserting into the matrix (row, column, updates)
 };
 
 class ViewSelector {

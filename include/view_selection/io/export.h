@@ -12,8 +12,9 @@
 namespace view_selection::io {
 
 struct ExportOptions {
-  std::string title;                                ///< heading of selection.png
-  const core::ErrorResistanceMatrix* points = nullptr;  ///< set: selection.json lists each keyframe's points
+  std::string title;  ///< heading of selection.png
+  const core::ErrorResistanceMatrix* points =
+      nullptr;  ///< set: selection.json lists each keyframe's points
 };
 
 struct ExportResult {

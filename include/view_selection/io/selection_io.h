@@ -15,7 +15,8 @@ namespace view_selection::io {
 /// The selection.json document ("format": "view_selection/1") of a snapshot. `params` holds
 /// every parameter that shaped the result. With `points` (the matrix the snapshot was made of),
 /// every keyframe's sample points are included.
-nlohmann::json selectionToJson(const core::SelectionSnapshot& snapshot, const nlohmann::json& params,
+nlohmann::json selectionToJson(const core::SelectionSnapshot& snapshot,
+                               const nlohmann::json& params,
                                const core::ErrorResistanceMatrix* points = nullptr);
 /// The same for a matrix and its selection; `dump_points` includes the points.
 nlohmann::json selectionToJson(const core::ErrorResistanceMatrix& matrix,

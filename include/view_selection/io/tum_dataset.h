@@ -57,11 +57,11 @@ std::vector<std::pair<size_t, size_t>> associateStamps(const std::vector<double>
                                                        double max_difference);
 
 struct TumFrame {
-  double stamp = 0.0;            ///< rgb stamp [s]
-  std::string rgb_path;          ///< relative to the dataset folder
-  std::string depth_path;        ///< relative to the dataset folder; empty without depth
+  double stamp = 0.0;      ///< rgb stamp [s]
+  std::string rgb_path;    ///< relative to the dataset folder
+  std::string depth_path;  ///< relative to the dataset folder; empty without depth
   double depth_stamp = 0.0;
-  core::CameraPose pose;               ///< ground truth nearest to the rgb stamp (camera-to-world)
+  core::CameraPose pose;  ///< ground truth nearest to the rgb stamp (camera-to-world)
   double pose_stamp = 0.0;
 };
 
@@ -70,14 +70,14 @@ struct TumDatasetOptions {
 };
 
 struct TumDataset {
-  std::string root;                   ///< the folder, as given
+  std::string root;  ///< the folder, as given
   core::PinholeIntrinsics intrinsics;
-  std::string intrinsics_source;      ///< "camera.yaml", or "TUM freiburg1 defaults", ...
-  bool has_depth = false;             ///< depth.txt present and associated
+  std::string intrinsics_source;                ///< "camera.yaml", or "TUM freiburg1 defaults", ...
+  bool has_depth = false;                       ///< depth.txt present and associated
   double depth_metres_per_unit = 1.0 / 5000.0;  ///< TUM depth PNGs: 5000 units per metre
-  std::string image_dir;              ///< folder COLMAP is given as --image_path, relative to root
-  std::vector<TumFrame> frames;       ///< associated frames, ascending stamp
-  size_t rgb_entries = 0;             ///< lines in rgb.txt
+  std::string image_dir;         ///< folder COLMAP is given as --image_path, relative to root
+  std::vector<TumFrame> frames;  ///< associated frames, ascending stamp
+  size_t rgb_entries = 0;        ///< lines in rgb.txt
   /// rgb frames with no depth within the tolerance (after the unique rgb<->depth association).
   size_t dropped_without_depth = 0;
   /// rgb frames with depth (or without depth.txt) but no ground truth within the tolerance; a

@@ -15,6 +15,6 @@ struct FrameLoadOptions {
 /// Reads what `options` asks for. Throws IoError naming the file when an image cannot be read,
 /// InvalidInput when its content is unusable (e.g. depth of a type other than 16UC1/32FC1).
 core::Frame loadTumFrame(const TumDataset& dataset, const TumFrame& frame,
-                   const FrameLoadOptions& options);
+                         const FrameLoadOptions& options);
 
 }  // namespace view_selection::io

@@ -11,11 +11,11 @@
 namespace view_selection::points {
 
 struct DepthSamplerConfig {
-  int grid = 16;                      ///< grid x grid cells over the image, one point a cell
-  double min_depth = 0.1;             ///< valid depth range [m]; outside is treated as missing
+  int grid = 16;           ///< grid x grid cells over the image, one point a cell
+  double min_depth = 0.1;  ///< valid depth range [m]; outside is treated as missing
   double max_depth = 10.0;
-  double min_valid_fraction = 0.2;    ///< a cell needs this share of valid pixels to give a point
-  int pixel_stride = 2;               ///< look at every n-th pixel of a cell in each direction
+  double min_valid_fraction = 0.2;  ///< a cell needs this share of valid pixels to give a point
+  int pixel_stride = 2;             ///< look at every n-th pixel of a cell in each direction
 
   void visitParameters(core::ParameterVisitor& v);
   /// Throws InvalidArgument naming the first field out of range.

@@ -11,6 +11,7 @@
 #include <opencv2/features2d.hpp>
 
 #include <map>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -46,6 +47,8 @@ struct FeatureStats {
   size_t matches = 0;     ///< after ratio and epipolar checks
   size_t points = 0;      ///< of the new keyframe
   size_t keyframes = 0;   ///< in totals: keyframes summed over
+
+  FeatureStats& operator+=(const FeatureStats& o);
 };
 
 class FeaturePointSource : public core::PointSource {
@@ -114,6 +117,9 @@ class FeaturePointSource : public core::PointSource {
   std::vector<int> chooseCandidates(const TriangulationCamera& camera) const;
   std::vector<cv::DMatch> match(const View& next, int candidate) const;
   bool trackHasView(int track, int view) const;
+  /// Joins the new view `n`'s matches with each candidate into tracks; returns the tracks changed.
+  std::set<int> joinTracks(int n, const std::vector<int>& candidates,
+                           const std::vector<std::vector<cv::DMatch>>& matches);
   void triangulateTracks(const std::vector<int>& tracks);
   Eigen::Matrix3Xd pointsOfIndex(int view) const;
   void updateMedianDepth(int view);

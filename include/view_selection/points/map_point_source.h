@@ -30,8 +30,9 @@ struct MapPointSourceConfig {
 /// projecting inside the image, and (with a depth map) not contradicted by it. Then thinned to
 /// config.max_points. Column order follows `points`.
 Eigen::Matrix3Xd visibleMapPoints(const Eigen::Matrix3Xd& points,
-                                  const core::PinholeIntrinsics& intrinsics, const core::CameraPose& pose,
-                                  const core::DepthMap* depth, const MapPointSourceConfig& config);
+                                  const core::PinholeIntrinsics& intrinsics,
+                                  const core::CameraPose& pose, const core::DepthMap* depth,
+                                  const MapPointSourceConfig& config);
 
 class MapPointSource : public core::PointSource {
  public:

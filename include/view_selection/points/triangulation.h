@@ -17,7 +17,8 @@ struct TriangulationCamera {
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();               ///< O, world
   Eigen::Matrix3d world_to_camera = Eigen::Matrix3d::Identity();  ///< R^T
 
-  static TriangulationCamera from(const core::PinholeIntrinsics& intrinsics, const core::CameraPose& pose);
+  static TriangulationCamera from(const core::PinholeIntrinsics& intrinsics,
+                                  const core::CameraPose& pose);
   Eigen::Vector3d toCamera(const Eigen::Vector3d& x) const {
     return world_to_camera * (x - centre);
   }

@@ -11,9 +11,9 @@
 
 #include <geometry_msgs/Pose.h>
 #include <geometry_msgs/Transform.h>
-#include <opencv2/core.hpp>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <opencv2/core.hpp>
 
 #include <string>
 

@@ -26,17 +26,19 @@ class FrameInputs {
  public:
   /// Subscribes (relative names on `nh`, transports from `private_nh`'s ~image_transport and
   /// ~depth_image_transport). Throws what image_transport throws for an unknown transport.
-  FrameInputs(const NodeConfig& config, ros::NodeHandle nh, ros::NodeHandle private_nh, KeyframeWorker& worker,
-              InputStatistics& statistics);
+  FrameInputs(const NodeConfig& config, ros::NodeHandle nh, ros::NodeHandle private_nh,
+              KeyframeWorker& worker, InputStatistics& statistics);
   ~FrameInputs();
 
  private:
+  static constexpr uint32_t kMapQueue = 2;      ///< map clouds: each replaces the last, keep few
   static constexpr double kCheckPeriod = 10.0;  ///< [s, wall] between checks for unmatched images
   static constexpr uint64_t kUnmatchedWarning = 30;  ///< images without a frame before warning
 
   void onFrame(const sensor_msgs::ImageConstPtr& image, const sensor_msgs::CameraInfoConstPtr& info,
                const sensor_msgs::ImageConstPtr& depth);
-  void onImageFrame(const sensor_msgs::ImageConstPtr& image, const sensor_msgs::CameraInfoConstPtr& info);
+  void onImageFrame(const sensor_msgs::ImageConstPtr& image,
+                    const sensor_msgs::CameraInfoConstPtr& info);
   void onRawImage(const sensor_msgs::ImageConstPtr&) { ++raw_images_; }
   void onMapPoints(const sensor_msgs::PointCloud2ConstPtr& cloud);
   void checkUnmatched();
@@ -51,8 +53,10 @@ class FrameInputs {
   image_transport::SubscriberFilter image_sub_, depth_sub_;
   message_filters::Subscriber<sensor_msgs::CameraInfo> info_sub_;
   using SyncDepth =
-      message_filters::sync_policies::ApproximateTime<sensor_msgs::Image, sensor_msgs::CameraInfo, sensor_msgs::Image>;
-  using SyncImage = message_filters::sync_policies::ApproximateTime<sensor_msgs::Image, sensor_msgs::CameraInfo>;
+      message_filters::sync_policies::ApproximateTime<sensor_msgs::Image, sensor_msgs::CameraInfo,
+                                                      sensor_msgs::Image>;
+  using SyncImage =
+      message_filters::sync_policies::ApproximateTime<sensor_msgs::Image, sensor_msgs::CameraInfo>;
   std::unique_ptr<message_filters::Synchronizer<SyncDepth>> sync_depth_;
   std::unique_ptr<message_filters::Synchronizer<SyncImage>> sync_image_;
   ros::Subscriber points_sub_;

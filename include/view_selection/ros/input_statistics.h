@@ -22,7 +22,7 @@ class InputStatistics {
     ros::Time last_error_stamp;
     double last_insertion_seconds = 0.0;
     double max_insertion_seconds = 0.0;
-    ros::WallTime last_insertion;   ///< when the last keyframe was inserted (zero: none yet)
+    ros::WallTime last_insertion;  ///< when the last keyframe was inserted (zero: none yet)
     uint64_t dropped_total() const;
   };
 

@@ -46,7 +46,8 @@ class KeyframeWorker {
   KeyframeWorker(const KeyframeWorker&) = delete;
   KeyframeWorker& operator=(const KeyframeWorker&) = delete;
 
-  /// Queues a frame; when ~max_pending_frames wait already, the oldest is dropped ("worker_behind").
+  /// Queues a frame; when ~max_pending_frames wait already, the oldest is dropped
+  /// ("worker_behind").
   void push(PendingFrame frame);
   /// Forgets every keyframe and waiting frame; a frame in flight is discarded, not inserted.
   /// Returns the number of keyframes forgotten.
@@ -85,8 +86,8 @@ class KeyframeWorker {
   mutable std::mutex state_mutex_;
   std::unique_ptr<core::ViewSelector> selector_;
   std::vector<sensor_msgs::ImageConstPtr> images_;  // by keyframe id, with ~save_keyframe_images
-  std::optional<double> last_stamp_;               // of the last frame offered to the core
-  uint64_t generation_ = 0;                        // bumps on reset(); frames of older ones are discarded
+  std::optional<double> last_stamp_;                // of the last frame offered to the core
+  uint64_t generation_ = 0;  // bumps on reset(); frames of older ones are discarded
   uint64_t version_ = 0;
 
   mutable std::mutex snapshot_mutex_;

@@ -22,11 +22,11 @@ struct NodeConfig {
   std::string world_frame = "world";  ///< frame of every pose and marker (leading '/' removed)
   std::string camera_frame;           ///< optical frame of the camera; "" = the image's frame_id
   PoseSource pose_source = PoseSource::kTf;
-  double pose_timeout = 0.1;          ///< [s, wall] how long a frame waits for its pose
+  double pose_timeout = 0.1;               ///< [s, wall] how long a frame waits for its pose
   double pose_max_time_difference = 0.02;  ///< [s] topic source: nearest pose must be this close
-  int queue_size = 10;                ///< message_filters ApproximateTime queue
-  int max_pending_frames = 30;        ///< frames waiting for the worker before the oldest is dropped
-  bool use_depth = true;              ///< subscribe to `depth` and synchronise it
+  int queue_size = 10;                     ///< message_filters ApproximateTime queue
+  int max_pending_frames = 30;  ///< frames waiting for the worker before the oldest is dropped
+  bool use_depth = true;        ///< subscribe to `depth` and synchronise it
   /// depth | features | map | auto; loadNodeConfig resolves auto (depth with use_depth, else
   /// features, as select_views does by the folder).
   std::string point_source = "auto";
@@ -35,7 +35,7 @@ struct NodeConfig {
   bool save_keyframe_images = false;  ///< keep keyframe images for ~export
   double marker_scale = 0.1;          ///< frustum depth in RViz [m, scene units]
 
-  core::ViewSelectorConfig selector;  ///< keyframe policy, matrix gates, selection
+  core::ViewSelectorConfig selector;       ///< keyframe policy, matrix gates, selection
   points::PointSourceParams point_params;  ///< each point source's parameters
 
   /// The node's own parameters, then the method's, then the point sources'.

@@ -53,7 +53,7 @@ class TfPoseProvider : public PoseProvider {
   std::string describe() const override;
 
  private:
-  static constexpr double kPollPeriod = 0.002;  ///< [s, wall] between canTransform checks
+  static constexpr double kPollPeriod = 0.002;   ///< [s, wall] between canTransform checks
   static constexpr double kCacheSeconds = 30.0;  ///< tf history kept
 
   const NodeConfig& config_;
@@ -74,8 +74,9 @@ class TopicPoseProvider : public PoseProvider {
   std::string describe() const override;
 
  private:
-  static constexpr size_t kMaxPoses = 10000;     ///< poses kept at most ...
-  static constexpr double kHistorySeconds = 30.0;  ///< ... and for at most this long [s]
+  static constexpr uint32_t kSubscriberQueue = 100;  ///< poses buffered by ROS for the spinner
+  static constexpr size_t kMaxPoses = 10000;         ///< poses kept at most ...
+  static constexpr double kHistorySeconds = 30.0;    ///< ... and for at most this long [s]
 
   void onPose(const geometry_msgs::PoseStampedConstPtr& pose);
 

@@ -23,15 +23,18 @@ class SelectionServices {
  public:
   /// `on_reset` runs after a reset (e.g. to publish the empty selection at once).
   SelectionServices(const NodeConfig& config, ros::NodeHandle private_nh, KeyframeWorker& worker,
-                    InputStatistics& statistics, PoseProvider& poses, std::function<void()> on_reset);
+                    InputStatistics& statistics, PoseProvider& poses,
+                    std::function<void()> on_reset);
   ~SelectionServices();
 
   /// The callback queue the services run on (shared with dynamic_reconfigure's).
   ros::CallbackQueue& queue() { return queue_; }
 
  private:
-  bool getNextViews(view_selection::GetNextViews::Request& req, view_selection::GetNextViews::Response& res);
-  bool getSelection(view_selection::GetSelection::Request& req, view_selection::GetSelection::Response& res);
+  bool getNextViews(view_selection::GetNextViews::Request& req,
+                    view_selection::GetNextViews::Response& res);
+  bool getSelection(view_selection::GetSelection::Request& req,
+                    view_selection::GetSelection::Response& res);
   bool exportSelection(view_selection::Export::Request& req, view_selection::Export::Response& res);
   bool reset(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
 

@@ -4,8 +4,8 @@
 // default input and the tests' source of exact ground truth (analytic surfaces, exact poses).
 #pragma once
 
-#include "view_selection/io/tum_dataset.h"
 #include "view_selection/core/types.h"
+#include "view_selection/io/tum_dataset.h"
 
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
@@ -70,7 +70,8 @@ class SyntheticScene {
                                     double max_t, const std::vector<int>& among) const;
   /// Boxes that may appear in the image of a camera at `pose` (bounding spheres against the
   /// view frustum; conservative), in ascending order. Rendering casts only against these.
-  std::vector<int> boxesInView(const core::CameraPose& pose, const core::PinholeIntrinsics& intrinsics) const;
+  std::vector<int> boxesInView(const core::CameraPose& pose,
+                               const core::PinholeIntrinsics& intrinsics) const;
   /// Exact Euclidean distance from `p` to the nearest surface of any box (room walls included).
   double distanceToSurface(const Eigen::Vector3d& p) const;
   /// True when `p` is inside the room and outside every object, at least `margin` from all.
@@ -117,10 +118,10 @@ struct SyntheticSequenceConfig {
 };
 
 struct SyntheticFrame {
-  double stamp = 0.0;  ///< [s], a whole number of microseconds (written exactly in TUM lists)
-  core::CameraPose pose;     ///< camera-to-world, optical frame (z forward, x right, y down)
-  cv::Mat colour;      ///< CV_8UC3, BGR (cv::imwrite stores it as an RGB PNG)
-  cv::Mat depth;       ///< CV_16UC1, TUM units: 5000 per metre of z-depth, 0 = no surface
+  double stamp = 0.0;     ///< [s], a whole number of microseconds (written exactly in TUM lists)
+  core::CameraPose pose;  ///< camera-to-world, optical frame (z forward, x right, y down)
+  cv::Mat colour;         ///< CV_8UC3, BGR (cv::imwrite stores it as an RGB PNG)
+  cv::Mat depth;          ///< CV_16UC1, TUM units: 5000 per metre of z-depth, 0 = no surface
 };
 
 /// Progress callback: frames done, frames in total.

@@ -119,7 +119,8 @@ ros::Time toRosTime(double stamp, const std::string& what) {
   return ros::Time(sec, static_cast<uint32_t>(nsec));
 }
 
-sensor_msgs::CameraInfo cameraInfo(const core::PinholeIntrinsics& k, const std_msgs::Header& header) {
+sensor_msgs::CameraInfo cameraInfo(const core::PinholeIntrinsics& k,
+                                   const std_msgs::Header& header) {
   sensor_msgs::CameraInfo info;
   info.header = header;
   info.width = static_cast<uint32_t>(k.width);
@@ -173,7 +174,8 @@ int run(const Options& o) {
     std::error_code ec;
     fs::create_directories(out.parent_path(), ec);
     if (ec)
-      throw core::IoError("cannot create folder '" + out.parent_path().string() + "': " + ec.message());
+      throw core::IoError("cannot create folder '" + out.parent_path().string() +
+                          "': " + ec.message());
   }
   rosbag::Bag bag;
   try {
@@ -196,12 +198,11 @@ int run(const Options& o) {
       const core::Frame frame = loadTumFrame(dataset, tum, {true, true});
       const cv::Mat image = points::matOf(frame.image), depth_m = points::matOf(frame.depth);
       const std::string what = "frame " + std::to_string(q) + " (" + tum.rgb_path + ")";
-      if (image.cols != dataset.intrinsics.width ||
-          image.rows != dataset.intrinsics.height)
+      if (image.cols != dataset.intrinsics.width || image.rows != dataset.intrinsics.height)
         throw core::InvalidInput(what + ": image is " + std::to_string(image.cols) + "x" +
-                           std::to_string(image.rows) + " but the intrinsics say " +
-                           std::to_string(dataset.intrinsics.width) + "x" +
-                           std::to_string(dataset.intrinsics.height));
+                                 std::to_string(image.rows) + " but the intrinsics say " +
+                                 std::to_string(dataset.intrinsics.width) + "x" +
+                                 std::to_string(dataset.intrinsics.height));
       const ros::Time stamp = toRosTime(tum.stamp, what);
 
       std_msgs::Header header;
@@ -241,7 +242,7 @@ int run(const Options& o) {
         cv::cvtColor(image, rgb, cv::COLOR_BGR2RGB);
       } else {
         throw core::InvalidInput(what + ": expected a colour image, got " +
-                           std::to_string(image.channels()) + " channel(s)");
+                                 std::to_string(image.channels()) + " channel(s)");
       }
       bag.write("/camera/rgb/camera_info", stamp, cameraInfo(dataset.intrinsics, header));
       bag.write("/camera/rgb/image_color", stamp,

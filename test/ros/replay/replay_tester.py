@@ -121,7 +121,10 @@ class Replay(unittest.TestCase):
                     raise AssertionError('%s/%s was not advertised within %.0f s' % (node, name, cls.timeout))
         cls.wait_for_subscribers()
 
-        play = ['rosbag', 'play', '--clock', '-q', '-r', str(cls.rate), '-d', '1', cls.bag]
+        # -d: rosbag play waits after advertising so that both nodes connect (the master has them
+        # subscribed already, but the TCP connections follow); 1 s lost the first frame on a loaded
+        # machine.
+        play = ['rosbag', 'play', '--clock', '-q', '-r', str(cls.rate), '-d', '3', cls.bag]
         play_timeout = 30.0 + 2.0 * (cls.frames / 30.0) / cls.rate
         run(play, play_timeout, 'rosbag play')
         cls.wait_until_processed()
