@@ -20,6 +20,13 @@ namespace {
 using test::lookAt;
 using test::vgaIntrinsics;
 
+/// The paper's gate (METHOD.md version 1): every visible point counts, max(10, 0.1 |X_i|).
+ErrorResistanceConfig paperGate() {
+  ErrorResistanceConfig config;
+  config.gate = Gate::kPaper;
+  return config;
+}
+
 /// METHOD.md's matchable test written out with angles, independent of the optimised form.
 bool naiveMatchable(const Eigen::Vector3d& x, const Keyframe& i, const Keyframe& j,
                     const ErrorResistanceConfig& config) {
@@ -172,6 +179,7 @@ TEST(ErrorResistanceMatrix, CullsAreConservativeUnderEveryGate) {
   // the per-point test would reject: every entry equals the naive one, for tight and loose gates.
   const Scene scene = makeScene(17, 18, true);
   std::vector<ErrorResistanceConfig> configs(8);
+  for (auto& c : configs) c.min_covisible_ratio = 0.1;  // enough finite entries to compare
   configs[0].gate = Gate::kPaper;
   configs[1].max_parallax_deg = 10.0;
   configs[2].max_parallax_deg = 20.0;
@@ -311,7 +319,7 @@ TEST(ErrorResistanceMatrix, MatchableGateCountsOnlyMatchablePoints) {
 }
 
 TEST(ErrorResistanceMatrix, CovisibilityGate) {
-  ErrorResistanceConfig config;  // max(10, 0.1 |X_i|)
+  const ErrorResistanceConfig config = paperGate();  // max(10, 0.1 |X_i|)
   {
     auto [a, b] = twoViews(10);
     EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, config)));
@@ -339,30 +347,34 @@ TEST(ErrorResistanceMatrix, OcclusionAgainstTheOtherViewsDepthMap) {
   wall->cell_width = wall->cell_height = 8.0;
   wall->depth.assign(80 * 60, 1.0f);  // b sees a surface 1 m away everywhere: points hidden
   b.depth = wall;
-  EXPECT_EQ(computeErrorResistance(a, b, {}), kInfinity);
+  EXPECT_EQ(computeErrorResistance(a, b, paperGate()), kInfinity);
   // A surface at the points' depth in b (within 3 %) keeps them visible.
   auto same = std::make_shared<DepthMap>(*wall);
   const double z = b.pose.worldToCamera(a.points.col(0)).z();
   same->depth.assign(80 * 60, static_cast<float>(z * 1.02));
   b.depth = same;
-  EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, {})));
+  EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, paperGate())));
   // Unknown depth (0) cannot occlude.
   auto unknown = std::make_shared<DepthMap>(*wall);
   unknown->depth.assign(80 * 60, 0.0f);
   b.depth = unknown;
-  EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, {})));
+  EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, paperGate())));
 }
 
 TEST(ErrorResistanceMatrix, ViewAngleGateAndDiagonal) {
   auto [a, b] = twoViews(30);
   const double angle = std::acos(a.pose.opticalAxis().dot(b.pose.opticalAxis())) * 180.0 / M_PI;
-  ErrorResistanceConfig config;
+  ErrorResistanceConfig config = paperGate();
+  config.gate = Gate::kMatchable;  // the paper's preset would switch the view-angle gate off
+  config.max_parallax_deg = 0.0;
+  config.max_scale_ratio = 0.0;
+  config.min_covisible_ratio = 0.1;
   config.max_view_angle_deg = angle + 0.5;
   EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, config)));
   config.max_view_angle_deg = angle - 0.5;
   EXPECT_EQ(computeErrorResistance(a, b, config), kInfinity);
 
-  ErrorResistanceMatrix matrix;
+  ErrorResistanceMatrix matrix(paperGate());
   matrix.addKeyframe(a);
   matrix.addKeyframe(b);
   EXPECT_EQ(matrix.at(0, 0), kInfinity);
@@ -378,7 +390,7 @@ TEST(ErrorResistanceMatrix, MedianOfEvenCountIsMeanOfMiddleValues) {
     r.push_back(pointErrorResistance(a.points.col(q), a.pose.position, b.intrinsics, b.pose));
   std::sort(r.begin(), r.end());
   ASSERT_LT(r[5], r[6]);  // distinct middle values, so the rule matters
-  EXPECT_DOUBLE_EQ(computeErrorResistance(a, b, {}), 0.5 * (r[5] + r[6]));
+  EXPECT_DOUBLE_EQ(computeErrorResistance(a, b, paperGate()), 0.5 * (r[5] + r[6]));
 }
 
 TEST(ErrorResistanceMatrix, RejectsUnusableKeyframesAndKeepsState) {

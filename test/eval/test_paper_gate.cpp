@@ -1,4 +1,4 @@
-// `--gate paper` keeps the paper's behaviour exactly: on the built-in sequence, select_views with
+// `--gate paper --completion paper` keeps the paper's behaviour exactly: on the built-in sequence, select_views with
 // it gives bit for bit the matrix and selection that select_views gave before the matchable gate
 // existed (test/data/paper_gate_sequence.json, written by that version). And the default gate,
 // matchable, gives another selection on the same frames.
@@ -38,7 +38,7 @@ class PaperGate : public ::testing::Test {
                   dir_ / "generate.log"),
               0);
     ASSERT_EQ(run(tools + "/select_views --dataset " + (dir_ / "seq").string() + " --out " +
-                      (dir_ / "paper").string() + " --gate paper --quiet --print-sets 0",
+                      (dir_ / "paper").string() + " --gate paper --completion paper --quiet --print-sets 0",
                   dir_ / "paper.log"),
               0);
     ASSERT_EQ(run(tools + "/select_views --dataset " + (dir_ / "seq").string() + " --out " +
