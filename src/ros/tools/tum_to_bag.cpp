@@ -1,8 +1,11 @@
-// tum_to_bag: a TUM RGB-D folder (rgb.txt, depth.txt, groundtruth.txt) to a bag in the TUM
-// benchmark's own topic layout, so that the node can be tested on a replay exactly as users run
-// it on the benchmark's bags. Stamps are the TUM stamps; frame ids carry the leading '/' that the
-// TUM bags write.
+// tum_to_bag: a TUM RGB-D folder (rgb.txt, depth.txt, groundtruth.txt) to a bag with the TUM
+// benchmark's topics, so that the node can be tested on a replay exactly as users run it on the
+// benchmark's bags. --layout simple (the default): one pose per frame at the image stamp, the
+// TUM stamps as they are; --layout tum: as the benchmark's own bags are recorded
+// (tum_benchmark_layout.h). Frame ids carry the leading '/' that the TUM bags write.
 #include "../../tools/command_line.h"
+#include "bag_messages.h"
+#include "tum_benchmark_layout.h"
 
 #include "view_selection/core/exceptions.h"
 #include "view_selection/io/tum_frames.h"
@@ -27,6 +30,7 @@
 #include <filesystem>
 #include <iostream>
 #include <limits>
+#include <vector>
 
 namespace fs = std::filesystem;
 using namespace view_selection::io;
@@ -35,34 +39,55 @@ namespace ros_node = view_selection::ros_node;
 namespace core = view_selection::core;
 using view_selection::tools::CommandLine;
 using view_selection::tools::UsageError;
+using namespace view_selection::tum_to_bag;
 
 namespace {
 
 const char* kUsage = R"(usage: tum_to_bag --dataset DIR --out BAG [options]
 
 Writes a TUM RGB-D layout folder (rgb.txt, depth.txt, groundtruth.txt, camera.yaml) as a bag
-with the TUM benchmark's topics, stamped with the TUM stamps:
+with the TUM benchmark's topics:
   /camera/rgb/image_color     sensor_msgs/Image, rgb8
-  /camera/rgb/camera_info     sensor_msgs/CameraInfo
+  /camera/rgb/camera_info     sensor_msgs/CameraInfo (plumb_bob, D = 0)
   /camera/depth/image         sensor_msgs/Image, 32FC1 metres, NaN where depth is missing
   /camera/depth/camera_info   sensor_msgs/CameraInfo (depth is registered to the colour camera)
-  /tf                         ground truth, world frame -> camera frame, at each image's stamp
-  /camera/pose                geometry_msgs/PoseStamped, the same pose (for ~pose_source topic)
-Each frame carries the ground-truth pose associated with its colour image (nearest within the
-association tolerance, as select_views uses it), so the node sees exactly select_views's frames.
+  /tf                         the ground truth (see the layouts)
+
+--layout simple (default): stamps are the TUM stamps and bag time = stamp; /tf (tf2_msgs) holds
+  world frame -> camera frame at each image's stamp, and /camera/pose (PoseStamped) the same
+  pose. Each frame carries the ground truth associated with its colour image (nearest within
+  the association tolerance, as select_views uses it), so the node sees select_views's frames.
+--layout tum: as the benchmark's own bags are recorded: /tf of type tf/tfMessage, no
+  /tf_static, the chain /world -> /kinect (motion capture at --mocap-rate from the ground truth,
+  starting --mocap-lead s before the first image) -> /openni_camera -> /openni_rgb_frame ->
+  /openni_rgb_optical_frame, the fixed links re-sent every --static-period s stamped that far
+  ahead; depth stamped --depth-offset (+- --depth-jitter) from colour; bag time 20 ms after each
+  image's stamp; stamps moved by --stamp-offset; bz2 by default.
 
 options:
   --dataset DIR             TUM layout folder (required)
   --out BAG                 bag to write (required; overwritten)
+  --layout MODE             simple | tum (default simple)
   --max-frames N            only the first N associated frames (as select_views --max-frames)
   --every N                 only every Nth of those frames (default 1: all)
   --max-time-difference S   rgb/depth/pose association tolerance [s] (default 0.02)
   --world-frame NAME        default /world
   --camera-frame NAME       default /openni_rgb_optical_frame
-  --compression MODE        none | lz4 | bz2 (default lz4)
+  --compression MODE        none | lz4 | bz2 (default lz4; bz2 with --layout tum)
+  --stamp-offset N          tum: whole seconds added to every stamp (default: 1305030000 when
+                            the folder's stamps are below 1e9, as the redkitchen's 1000 s, else 0)
+  --depth-offset S          tum: depth stamp minus colour stamp [s] (default -0.015)
+  --depth-jitter S          tum: plus a fixed per-frame jitter within +-S [s] (default 0.002)
+  --mocap-rate HZ           tum: motion-capture rate (default 100)
+  --mocap-lead S            tum: motion capture starts S before the first image (default 3)
+  --static-period S         tum: period of the fixed links (default 0.1)
   --quiet                   no progress lines
   --help                    this text
 )";
+
+/// Where --layout tum puts a folder whose stamps are not Unix times (the redkitchen's 1000 s):
+/// 1000 s becomes 1305031000 s, the days of the freiburg1 recordings.
+constexpr long long kTumStampOffset = 1305030000LL;
 
 struct Options {
   std::string dataset;
@@ -73,14 +98,19 @@ struct Options {
   std::string world_frame = "/world";
   std::string camera_frame = "/openni_rgb_optical_frame";
   std::string compression = "lz4";
+  std::string layout = "simple";
+  bool stamp_offset_given = false;
+  BenchmarkLayoutOptions tum;
   bool quiet = false;
 };
 
 Options parse(int argc, char** argv) {
-  const CommandLine cli(argc, argv,
-                        {"dataset", "out", "max-frames", "every", "max-time-difference",
-                         "world-frame", "camera-frame", "compression"},
-                        {"quiet", "help"});
+  const CommandLine cli(
+      argc, argv,
+      {"dataset", "out", "layout", "max-frames", "every", "max-time-difference", "world-frame",
+       "camera-frame", "compression", "stamp-offset", "depth-offset", "depth-jitter", "mocap-rate",
+       "mocap-lead", "static-period"},
+      {"quiet", "help"});
   if (cli.flag("help")) {
     std::cout << kUsage;
     std::exit(0);
@@ -99,53 +129,25 @@ Options parse(int argc, char** argv) {
     throw UsageError("frame names must not be empty");
   if (o.world_frame == o.camera_frame)
     throw UsageError("--world-frame and --camera-frame must differ");
-  o.compression = cli.choice("compression", o.compression, {"none", "lz4", "bz2"});
+  o.layout = cli.choice("layout", o.layout, {"simple", "tum"});
+  o.compression =
+      cli.choice("compression", o.layout == "tum" ? "bz2" : o.compression, {"none", "lz4", "bz2"});
+  for (const char* name : {"stamp-offset", "depth-offset", "depth-jitter", "mocap-rate",
+                           "mocap-lead", "static-period"})
+    if (cli.has(name) && o.layout != "tum")
+      throw UsageError(std::string("--") + name + " is an option of --layout tum");
+  o.stamp_offset_given = cli.has("stamp-offset");
+  o.tum.stamp_offset = cli.integer("stamp-offset", 0, -2000000000L, 4000000000L);
+  o.tum.depth_offset = cli.real("depth-offset", o.tum.depth_offset, -1.0, 1.0);
+  o.tum.depth_jitter = cli.real("depth-jitter", o.tum.depth_jitter, 0.0, 0.1);
+  o.tum.mocap_rate = cli.real("mocap-rate", o.tum.mocap_rate, 1.0, 10000.0);
+  o.tum.mocap_lead = cli.real("mocap-lead", o.tum.mocap_lead, 0.0, 3600.0);
+  o.tum.static_period = cli.real("static-period", o.tum.static_period, 0.001, 10.0);
+  o.tum.world_frame = o.world_frame;
+  o.tum.camera_frame = o.camera_frame;
   o.quiet = cli.flag("quiet");
+  o.tum.quiet = o.quiet;
   return o;
-}
-
-ros::Time toRosTime(double stamp, const std::string& what) {
-  // ros::Time holds unsigned 32-bit seconds; TUM stamps are Unix seconds.
-  if (!std::isfinite(stamp) || stamp < 0.0 || stamp >= 4294967295.0)
-    throw core::InvalidInput(what + ": stamp " + std::to_string(stamp) + " cannot be a ROS time");
-  // Round to the nanosecond (the TUM lists have 6 decimals), not ros::Time(double)'s truncation.
-  const double whole = std::floor(stamp);
-  long long nsec = std::llround((stamp - whole) * 1e9);
-  auto sec = static_cast<uint32_t>(whole);
-  if (nsec >= 1000000000LL) {
-    ++sec;
-    nsec -= 1000000000LL;
-  }
-  return ros::Time(sec, static_cast<uint32_t>(nsec));
-}
-
-sensor_msgs::CameraInfo cameraInfo(const core::PinholeIntrinsics& k,
-                                   const std_msgs::Header& header) {
-  sensor_msgs::CameraInfo info;
-  info.header = header;
-  info.width = static_cast<uint32_t>(k.width);
-  info.height = static_cast<uint32_t>(k.height);
-  info.distortion_model = "plumb_bob";
-  info.D.assign(5, 0.0);  // TUM's images are used as they are; the benchmark lists no undistortion
-  info.K = {k.fx, 0.0, k.cx, 0.0, k.fy, k.cy, 0.0, 0.0, 1.0};
-  info.R = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
-  info.P = {k.fx, 0.0, k.cx, 0.0, 0.0, k.fy, k.cy, 0.0, 0.0, 0.0, 1.0, 0.0};
-  return info;
-}
-
-sensor_msgs::Image imageMessage(const cv::Mat& mat, const std::string& encoding,
-                                const std_msgs::Header& header) {
-  sensor_msgs::Image msg;
-  msg.header = header;
-  msg.height = static_cast<uint32_t>(mat.rows);
-  msg.width = static_cast<uint32_t>(mat.cols);
-  msg.encoding = encoding;
-  msg.is_bigendian = 0;
-  msg.step = static_cast<uint32_t>(mat.cols * mat.elemSize());
-  msg.data.resize(static_cast<size_t>(msg.step) * mat.rows);
-  for (int r = 0; r < mat.rows; ++r)
-    std::memcpy(msg.data.data() + static_cast<size_t>(r) * msg.step, mat.ptr(r), msg.step);
-  return msg;
 }
 
 void discard(rosbag::Bag& bag, const fs::path& path) {
@@ -157,17 +159,95 @@ void discard(rosbag::Bag& bag, const fs::path& path) {
   fs::remove(path, ec);
 }
 
-int run(const Options& o) {
+/// --layout simple: per frame, the pose at the image stamp on /tf and /camera/pose, then depth
+/// and colour; bag time = stamp.
+WrittenFrames writeSimpleLayout(rosbag::Bag& bag, const TumDataset& dataset,
+                                const std::vector<size_t>& frames, const Options& o) {
+  const bool tty = isatty(fileno(stderr));
+  WrittenFrames written;
+  uint32_t seq = 0;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (const size_t q : frames) {
+    const TumFrame& tum = dataset.frames[q];
+    const core::Frame frame = loadTumFrame(dataset, tum, {true, true});
+    const cv::Mat image = points::matOf(frame.image), depth_m = points::matOf(frame.depth);
+    const std::string what = "frame " + std::to_string(q) + " (" + tum.rgb_path + ")";
+    if (image.cols != dataset.intrinsics.width || image.rows != dataset.intrinsics.height)
+      throw core::InvalidInput(what + ": image is " + std::to_string(image.cols) + "x" +
+                               std::to_string(image.rows) + " but the intrinsics say " +
+                               std::to_string(dataset.intrinsics.width) + "x" +
+                               std::to_string(dataset.intrinsics.height));
+    const ros::Time stamp = toRosTime(tum.stamp, what);
+
+    std_msgs::Header header;
+    header.seq = seq++;
+    header.stamp = stamp;
+    header.frame_id = o.camera_frame;
+
+    // Ground truth first, so that a pose is in the tf buffer when its image arrives.
+    geometry_msgs::TransformStamped t;
+    t.header.seq = header.seq;
+    t.header.stamp = stamp;
+    t.header.frame_id = o.world_frame;
+    t.child_frame_id = o.camera_frame;
+    t.transform = ros_node::transformToMsg(tum.pose);
+    tf2_msgs::TFMessage tf;
+    tf.transforms.push_back(t);
+    bag.write("/tf", stamp, tf);
+
+    geometry_msgs::PoseStamped pose;
+    pose.header = t.header;
+    pose.pose = ros_node::poseToMsg(tum.pose);
+    bag.write("/camera/pose", stamp, pose);
+
+    if (!depth_m.empty()) {
+      std_msgs::Header depth_header = header;
+      depth_header.stamp = toRosTime(tum.depth_stamp, what + " depth");
+      cv::Mat depth = depth_m.clone();
+      depth.setTo(nan, depth == 0.0f);  // TUM's 32FC1 bags mark missing depth with NaN
+      bag.write("/camera/depth/camera_info", depth_header.stamp,
+                cameraInfo(dataset.intrinsics, depth_header));
+      bag.write("/camera/depth/image", depth_header.stamp,
+                imageMessage(depth, sensor_msgs::image_encodings::TYPE_32FC1, depth_header));
+    }
+
+    if (image.channels() != 3)
+      throw core::InvalidInput(what + ": expected a colour image, got " +
+                               std::to_string(image.channels()) + " channel(s)");
+    cv::Mat rgb;
+    cv::cvtColor(image, rgb, cv::COLOR_BGR2RGB);
+    bag.write("/camera/rgb/camera_info", stamp, cameraInfo(dataset.intrinsics, header));
+    bag.write("/camera/rgb/image_color", stamp,
+              imageMessage(rgb, sensor_msgs::image_encodings::RGB8, header));
+
+    if (written.frames == 0) written.first = tum.stamp;
+    written.last = tum.stamp;
+    ++written.frames;
+    if (!o.quiet && (written.frames % 50 == 0 || written.frames == frames.size())) {
+      std::fprintf(stderr, "%s  frame %zu/%zu%s", tty ? "\r" : "", written.frames, frames.size(),
+                   tty ? "" : "\n");
+      if (tty && written.frames == frames.size()) std::fprintf(stderr, "\n");
+    }
+  }
+  return written;
+}
+
+int run(Options o) {
   TumDatasetOptions dataset_options;
   dataset_options.max_time_difference = o.max_time_difference;
   const TumDataset dataset = loadTumDataset(o.dataset, dataset_options);
   const size_t total =
       o.max_frames > 0 ? std::min<size_t>(dataset.frames.size(), static_cast<size_t>(o.max_frames))
                        : dataset.frames.size();
+  std::vector<size_t> frames;
+  for (size_t q = 0; q < total; q += static_cast<size_t>(o.every)) frames.push_back(q);
   if (!dataset.has_depth)
     std::fprintf(stderr,
                  "tum_to_bag: warning: '%s' has no depth.txt; the bag has no depth topics\n",
                  o.dataset.c_str());
+  // The benchmark's stamps are Unix times (~1.3e9 s); folders with small stamps are moved there.
+  if (o.layout == "tum" && !o.stamp_offset_given && dataset.frames.front().stamp < 1e9)
+    o.tum.stamp_offset = kTumStampOffset;
 
   const fs::path out(o.out);
   if (out.has_parent_path()) {
@@ -186,76 +266,10 @@ int run(const Options& o) {
   bag.setCompression(o.compression == "lz4"   ? rosbag::compression::LZ4
                      : o.compression == "bz2" ? rosbag::compression::BZ2
                                               : rosbag::compression::Uncompressed);
-
-  const bool tty = isatty(fileno(stderr));
-  size_t written = 0;
-  double first = 0.0, last = 0.0;
-  uint32_t seq = 0;
-  const float nan = std::numeric_limits<float>::quiet_NaN();
+  WrittenFrames written;
   try {
-    for (size_t q = 0; q < total; q += static_cast<size_t>(o.every)) {
-      const TumFrame& tum = dataset.frames[q];
-      const core::Frame frame = loadTumFrame(dataset, tum, {true, true});
-      const cv::Mat image = points::matOf(frame.image), depth_m = points::matOf(frame.depth);
-      const std::string what = "frame " + std::to_string(q) + " (" + tum.rgb_path + ")";
-      if (image.cols != dataset.intrinsics.width || image.rows != dataset.intrinsics.height)
-        throw core::InvalidInput(what + ": image is " + std::to_string(image.cols) + "x" +
-                                 std::to_string(image.rows) + " but the intrinsics say " +
-                                 std::to_string(dataset.intrinsics.width) + "x" +
-                                 std::to_string(dataset.intrinsics.height));
-      const ros::Time stamp = toRosTime(tum.stamp, what);
-
-      std_msgs::Header header;
-      header.seq = seq++;
-      header.stamp = stamp;
-      header.frame_id = o.camera_frame;
-
-      // Ground truth first, so that a pose is in the tf buffer when its image arrives.
-      geometry_msgs::TransformStamped t;
-      t.header.seq = header.seq;
-      t.header.stamp = stamp;
-      t.header.frame_id = o.world_frame;
-      t.child_frame_id = o.camera_frame;
-      t.transform = ros_node::transformToMsg(tum.pose);
-      tf2_msgs::TFMessage tf;
-      tf.transforms.push_back(t);
-      bag.write("/tf", stamp, tf);
-
-      geometry_msgs::PoseStamped pose;
-      pose.header = t.header;
-      pose.pose = ros_node::poseToMsg(tum.pose);
-      bag.write("/camera/pose", stamp, pose);
-
-      if (!depth_m.empty()) {
-        std_msgs::Header depth_header = header;
-        depth_header.stamp = toRosTime(tum.depth_stamp, what + " depth");
-        cv::Mat depth = depth_m.clone();
-        depth.setTo(nan, depth == 0.0f);  // TUM's 32FC1 bags mark missing depth with NaN
-        bag.write("/camera/depth/camera_info", depth_header.stamp,
-                  cameraInfo(dataset.intrinsics, depth_header));
-        bag.write("/camera/depth/image", depth_header.stamp,
-                  imageMessage(depth, sensor_msgs::image_encodings::TYPE_32FC1, depth_header));
-      }
-
-      cv::Mat rgb;
-      if (image.channels() == 3) {
-        cv::cvtColor(image, rgb, cv::COLOR_BGR2RGB);
-      } else {
-        throw core::InvalidInput(what + ": expected a colour image, got " +
-                                 std::to_string(image.channels()) + " channel(s)");
-      }
-      bag.write("/camera/rgb/camera_info", stamp, cameraInfo(dataset.intrinsics, header));
-      bag.write("/camera/rgb/image_color", stamp,
-                imageMessage(rgb, sensor_msgs::image_encodings::RGB8, header));
-
-      if (written == 0) first = tum.stamp;
-      last = tum.stamp;
-      ++written;
-      if (!o.quiet && (written % 50 == 0 || q + static_cast<size_t>(o.every) >= total)) {
-        std::fprintf(stderr, "%s  frame %zu/%zu%s", tty ? "\r" : "", q + 1, total, tty ? "" : "\n");
-        if (tty && q + static_cast<size_t>(o.every) >= total) std::fprintf(stderr, "\n");
-      }
-    }
+    written = o.layout == "tum" ? writeBenchmarkLayout(bag, dataset, frames, o.tum)
+                                : writeSimpleLayout(bag, dataset, frames, o);
   } catch (const rosbag::BagException& e) {
     discard(bag, out);
     throw core::IoError("writing bag '" + o.out + "': " + e.what());
@@ -265,10 +279,13 @@ int run(const Options& o) {
   }
   bag.close();
   std::printf(
-      "tum_to_bag: wrote %s: %zu frames (%.3f s to %.3f s) of %zu associated in %s, depth %s, "
-      "intrinsics from %s\n",
-      o.out.c_str(), written, first, last, dataset.frames.size(), o.dataset.c_str(),
-      dataset.has_depth ? "yes" : "no", dataset.intrinsics_source.c_str());
+      "tum_to_bag: wrote %s (layout %s): %zu frames (%.3f s to %.3f s) of %zu associated in %s, "
+      "depth %s, intrinsics from %s%s\n",
+      o.out.c_str(), o.layout.c_str(), written.frames, written.first, written.last,
+      dataset.frames.size(), o.dataset.c_str(), dataset.has_depth ? "yes" : "no",
+      dataset.intrinsics_source.c_str(),
+      o.layout == "tum" ? (", stamps moved by " + std::to_string(o.tum.stamp_offset) + " s").c_str()
+                        : "");
   return 0;
 }
 
