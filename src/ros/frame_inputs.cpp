@@ -1,6 +1,7 @@
 #include "view_selection/ros/frame_inputs.h"
 
 #include "view_selection/core/exceptions.h"
+#include "view_selection/core/parameters.h"
 
 #include <sensor_msgs/point_cloud2_iterator.h>
 
@@ -8,59 +9,118 @@
 
 namespace view_selection::ros_node {
 
+namespace {
+ros::NodeHandle onQueue(ros::NodeHandle nh, ros::CallbackQueue* queue) {
+  nh.setCallbackQueue(queue);
+  return nh;
+}
+}  // namespace
+
+namespace {
+SynchroniserConfig synchroniserConfig(const NodeConfig& c) {
+  SynchroniserConfig s;
+  s.use_depth = c.use_depth;
+  s.max_spread = c.max_stamp_spread;
+  s.timeout = c.sync_timeout;
+  s.max_waiting = static_cast<size_t>(c.queue_size);
+  s.max_partners = static_cast<size_t>(std::max(c.queue_size, c.subscriber_queue_size));
+  return s;
+}
+double wallNow() { return ros::WallTime::now().toSec(); }
+}  // namespace
+
 FrameInputs::FrameInputs(const NodeConfig& config, ros::NodeHandle nh, ros::NodeHandle private_nh,
                          KeyframeWorker& worker, InputStatistics& statistics)
-    : config_(config), nh_(nh), worker_(worker), statistics_(statistics), it_(nh) {
+    : config_(config),
+      nh_(nh),
+      worker_(worker),
+      statistics_(statistics),
+      sync_(synchroniserConfig(config)),
+      input_nh_(onQueue(nh, &input_queue_)),
+      it_(input_nh_),
+      input_spinner_(1, &input_queue_) {
   if (config_.point_source == "map")
     points_sub_ = nh_.subscribe("points", kMapQueue, &FrameInputs::onMapPoints, this);
-  const uint32_t q = static_cast<uint32_t>(config_.queue_size);
-  image_sub_.subscribe(it_, "image", q,
-                       image_transport::TransportHints("raw", ros::TransportHints(), private_nh));
-  image_sub_.registerCallback(&FrameInputs::onRawImage, this);
-  info_sub_.subscribe(nh_, "camera_info", q);
-  if (config_.use_depth) {
-    depth_sub_.subscribe(it_, "depth", q,
-                         image_transport::TransportHints("raw", ros::TransportHints(), private_nh,
-                                                         "depth_image_transport"));
-    sync_depth_ = std::make_unique<message_filters::Synchronizer<SyncDepth>>(
-        SyncDepth(q), image_sub_, info_sub_, depth_sub_);
-    sync_depth_->registerCallback(&FrameInputs::onFrame, this);
-  } else {
-    sync_image_ = std::make_unique<message_filters::Synchronizer<SyncImage>>(SyncImage(q),
-                                                                             image_sub_, info_sub_);
-    sync_image_->registerCallback(&FrameInputs::onImageFrame, this);
-  }
+  // The roscpp queues hold what arrives while the input thread is busy.
+  const uint32_t q = static_cast<uint32_t>(config_.subscriber_queue_size);
+  image_sub_ =
+      it_.subscribe("image", q, &FrameInputs::onImage, this,
+                    image_transport::TransportHints("raw", ros::TransportHints(), private_nh));
+  info_sub_ = input_nh_.subscribe("camera_info", q, &FrameInputs::onCameraInfo, this);
+  if (config_.use_depth)
+    depth_sub_ =
+        it_.subscribe("depth", q, &FrameInputs::onDepth, this,
+                      image_transport::TransportHints("raw", ros::TransportHints(), private_nh,
+                                                      "depth_image_transport"));
+  poll_timer_ =
+      input_nh_.createWallTimer(ros::WallDuration(kPollPeriod), [this](const ros::WallTimerEvent&) {
+        std::lock_guard<std::mutex> lock(sync_mutex_);
+        deliver(sync_.poll(wallNow()));
+      });
   check_timer_ = private_nh.createWallTimer(
       ros::WallDuration(kCheckPeriod), [this](const ros::WallTimerEvent&) { checkUnmatched(); });
+  input_spinner_.start();
 }
 
 FrameInputs::~FrameInputs() {
+  input_spinner_.stop();  // no input callback runs from here on
+  poll_timer_.stop();
   check_timer_.stop();
-  sync_depth_.reset();
-  sync_image_.reset();
-  image_sub_.unsubscribe();
-  depth_sub_.unsubscribe();
-  info_sub_.unsubscribe();
+  image_sub_.shutdown();
+  depth_sub_.shutdown();
+  info_sub_.shutdown();
   points_sub_.shutdown();
 }
 
-void FrameInputs::onFrame(const sensor_msgs::ImageConstPtr& image,
-                          const sensor_msgs::CameraInfoConstPtr& info,
-                          const sensor_msgs::ImageConstPtr& depth) {
-  statistics_.frameReceived();
-  worker_.push({image, info, depth});
+void FrameInputs::onImage(const sensor_msgs::ImageConstPtr& image) {
+  statistics_.arrived(InputStatistics::Input::kImage);
+  std::lock_guard<std::mutex> lock(sync_mutex_);
+  const uint32_t seq = image->header.seq;
+  // Publishers that number their images (rosbag play of a recording, camera drivers): a gap is
+  // images that never reached this callback. Publishers that leave seq at 0 show no gap.
+  if (last_seq_ && seq > *last_seq_ + 1 && seq - *last_seq_ <= kMaxSeqGap) {
+    const uint32_t lost = seq - *last_seq_ - 1;
+    for (uint32_t n = 0; n < lost; ++n)
+      statistics_.drop("lost_before_node",
+                       "the image after seq " + std::to_string(*last_seq_) + " is seq " +
+                           std::to_string(seq) + ": " + std::to_string(lost) + " image(s) on '" +
+                           nh_.resolveName("image") +
+                           "' never reached the node (a queue before it was full; raise "
+                           "~subscriber_queue_size, or the publisher dropped them)",
+                       image->header.stamp);
+  }
+  last_seq_ = seq;
+  deliver(sync_.addImage(image, wallNow()));
 }
 
-void FrameInputs::onImageFrame(const sensor_msgs::ImageConstPtr& image,
-                               const sensor_msgs::CameraInfoConstPtr& info) {
-  onFrame(image, info, nullptr);
+void FrameInputs::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& info) {
+  statistics_.arrived(InputStatistics::Input::kCameraInfo);
+  std::lock_guard<std::mutex> lock(sync_mutex_);
+  deliver(sync_.addCameraInfo(info, wallNow()));
+}
+
+void FrameInputs::onDepth(const sensor_msgs::ImageConstPtr& depth) {
+  statistics_.arrived(InputStatistics::Input::kDepth);
+  std::lock_guard<std::mutex> lock(sync_mutex_);
+  deliver(sync_.addDepth(depth, wallNow()));
+}
+
+void FrameInputs::deliver(SynchronisedFrames decided) {
+  for (const auto& drop : decided.drops)
+    statistics_.drop("unsynchronised", drop.message, drop.stamp);
+  for (PendingFrame& frame : decided.frames) {
+    statistics_.frameReceived();
+    worker_.push(std::move(frame));
+  }
+  statistics_.setImagesInSynchroniser(sync_.waiting());
 }
 
 void FrameInputs::checkUnmatched() {
   // Images arrive but never become frames: the synchroniser finds no partner for them.
-  if (raw_images_.load() < kUnmatchedWarning || statistics_.counts().frames_received > 0) return;
+  const InputStatistics::Counts counts = statistics_.counts();
+  if (counts.images_arrived < kUnmatchedWarning || counts.frames_received > 0) return;
   ROS_WARN_STREAM("view_selection: "
-                  << raw_images_.load() << " images arrived on '" << nh_.resolveName("image")
+                  << counts.images_arrived << " images arrived on '" << nh_.resolveName("image")
                   << "' but none was matched with camera_info"
                   << (config_.use_depth ? " and '" + nh_.resolveName("depth") + "'" : std::string())
                   << "; check the remaps"

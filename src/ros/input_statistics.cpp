@@ -20,6 +20,29 @@ uint64_t InputStatistics::Counts::dropped_total() const {
   return total;
 }
 
+void InputStatistics::arrived(Input input) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  switch (input) {
+    case Input::kImage:
+      ++counts_.images_arrived;
+      break;
+    case Input::kCameraInfo:
+      ++counts_.camera_infos_arrived;
+      break;
+    case Input::kDepth:
+      ++counts_.depths_arrived;
+      break;
+  }
+  ++version_;
+}
+
+void InputStatistics::setImagesInSynchroniser(uint64_t images) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (counts_.images_in_synchroniser == images) return;
+  counts_.images_in_synchroniser = images;
+  ++version_;
+}
+
 void InputStatistics::frameReceived() {
   std::lock_guard<std::mutex> lock(mutex_);
   ++counts_.frames_received;
@@ -86,7 +109,11 @@ view_selection::InputStatistics InputStatistics::toMsg(uint32_t keyframes) const
   msg.header.stamp = ros::Time::now();
   msg.keyframes = keyframes;
   std::lock_guard<std::mutex> lock(mutex_);
+  msg.images_arrived = counts_.images_arrived;
+  msg.camera_infos_arrived = counts_.camera_infos_arrived;
+  msg.depths_arrived = counts_.depths_arrived;
   msg.frames_received = counts_.frames_received;
+  msg.images_in_synchroniser = counts_.images_in_synchroniser;
   msg.frames_offered = counts_.frames_offered;
   for (const auto& [reason, count] : counts_.dropped) {
     msg.drop_reasons.push_back(reason);

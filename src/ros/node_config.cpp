@@ -26,7 +26,19 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
                   "topic: the nearest pose must be this close to the image stamp [s]");
   v.section("Input");
   core::visitInteger(v, "queue_size", queue_size, 1, 10000,
-                     "message_filters ApproximateTime queue (image, camera_info, depth)");
+                     "images waiting for their camera_info and depth; beyond, the oldest is "
+                     "matched with what has arrived");
+  core::visitInteger(v, "subscriber_queue_size", subscriber_queue_size, 1, 100000,
+                     "roscpp queue of each input (image, camera_info, depth): what arrives while "
+                     "the input thread is busy waits here; a full queue loses the oldest "
+                     "(counted as lost_before_node from the images' header.seq)");
+  core::visitReal(v, "max_stamp_spread", max_stamp_spread, 0.0, 10.0,
+                  "each image takes the camera_info and the depth nearest to its stamp, when "
+                  "they are at most this far from it; else it is dropped (unsynchronised); 0: "
+                  "any [s]");
+  core::visitReal(v, "sync_timeout", sync_timeout, 0.0, 60.0,
+                  "an image waits for a camera_info and a depth at or after its stamp (then the "
+                  "nearest is known) at most this long, then takes the nearest so far [s, wall]");
   core::visitInteger(
       v, "max_pending_frames", max_pending_frames, 1, 100000,
       "frames waiting for the worker; beyond, the oldest is dropped (worker_behind)");

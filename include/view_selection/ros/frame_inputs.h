@@ -1,24 +1,34 @@
-// The node's inputs: `image`, `camera_info` and (with ~use_depth) `depth`, through image_transport
-// and synchronised by message_filters' ApproximateTime; and, for the "map" point source, map
-// points on `points`. Frames go to the worker; bad clouds are counted as drops.
+// The node's inputs: `image`, `camera_info` and (with ~use_depth) `depth`, through image_transport,
+// matched by stamp (FrameSynchroniser: nearest camera_info and depth within ~max_stamp_spread);
+// and, for the "map" point source, map points on `points`. Frames go to the worker; bad clouds
+// are counted as drops.
+//
+// No image is lost without a count: the three inputs have a callback queue and a thread of their
+// own (nothing else on the node's spinner delays them), roscpp queues of ~subscriber_queue_size,
+// every arrival is counted, every image becomes a frame or an "unsynchronised" drop, and images
+// missing from the sequence numbers of `image` (lost in a full queue before the node) are counted
+// as "lost_before_node".
 #pragma once
 
 #include "view_selection/ros/input_statistics.h"
 #include "view_selection/ros/keyframe_worker.h"
 #include "view_selection/ros/node_config.h"
 
+#include "view_selection/ros/frame_synchroniser.h"
+
 #include <image_transport/image_transport.h>
-#include <image_transport/subscriber_filter.h>
-#include <message_filters/subscriber.h>
-#include <message_filters/sync_policies/approximate_time.h>
-#include <message_filters/synchronizer.h>
 #include <ros/ros.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/PointCloud2.h>
 
-#include <atomic>
+#include <ros/callback_queue.h>
+
+#include <cstdint>
+#include <deque>
 #include <memory>
+#include <mutex>
+#include <optional>
 
 namespace view_selection::ros_node {
 
@@ -33,13 +43,17 @@ class FrameInputs {
  private:
   static constexpr uint32_t kMapQueue = 2;      ///< map clouds: each replaces the last, keep few
   static constexpr double kCheckPeriod = 10.0;  ///< [s, wall] between checks for unmatched images
+  static constexpr double kPollPeriod = 0.05;   ///< [s, wall] between synchroniser timeout checks
   static constexpr uint64_t kUnmatchedWarning = 30;  ///< images without a frame before warning
+  /// A jump in header.seq larger than this is a restarted publisher, not lost images.
+  static constexpr uint32_t kMaxSeqGap = 1000;
 
-  void onFrame(const sensor_msgs::ImageConstPtr& image, const sensor_msgs::CameraInfoConstPtr& info,
-               const sensor_msgs::ImageConstPtr& depth);
-  void onImageFrame(const sensor_msgs::ImageConstPtr& image,
-                    const sensor_msgs::CameraInfoConstPtr& info);
-  void onRawImage(const sensor_msgs::ImageConstPtr&) { ++raw_images_; }
+  /// Counts the image, checks its sequence number, and hands it to the synchroniser.
+  void onImage(const sensor_msgs::ImageConstPtr& image);
+  void onCameraInfo(const sensor_msgs::CameraInfoConstPtr& info);
+  void onDepth(const sensor_msgs::ImageConstPtr& depth);
+  /// Frames to the worker, drops to the statistics (under sync_mutex_).
+  void deliver(SynchronisedFrames decided);
   void onMapPoints(const sensor_msgs::PointCloud2ConstPtr& cloud);
   void checkUnmatched();
 
@@ -47,20 +61,20 @@ class FrameInputs {
   ros::NodeHandle nh_;
   KeyframeWorker& worker_;
   InputStatistics& statistics_;
-  std::atomic<uint64_t> raw_images_{0};
 
+  std::mutex sync_mutex_;  // the synchroniser and the sequence check
+  FrameSynchroniser sync_;
+  std::optional<uint32_t> last_seq_;
+
+  ros::CallbackQueue input_queue_;  ///< image, camera_info, depth, the synchroniser's timer
+  ros::NodeHandle input_nh_;
   image_transport::ImageTransport it_;
-  image_transport::SubscriberFilter image_sub_, depth_sub_;
-  message_filters::Subscriber<sensor_msgs::CameraInfo> info_sub_;
-  using SyncDepth =
-      message_filters::sync_policies::ApproximateTime<sensor_msgs::Image, sensor_msgs::CameraInfo,
-                                                      sensor_msgs::Image>;
-  using SyncImage =
-      message_filters::sync_policies::ApproximateTime<sensor_msgs::Image, sensor_msgs::CameraInfo>;
-  std::unique_ptr<message_filters::Synchronizer<SyncDepth>> sync_depth_;
-  std::unique_ptr<message_filters::Synchronizer<SyncImage>> sync_image_;
+  image_transport::Subscriber image_sub_, depth_sub_;
+  ros::Subscriber info_sub_;
+  ros::WallTimer poll_timer_;
   ros::Subscriber points_sub_;
   ros::WallTimer check_timer_;
+  ros::AsyncSpinner input_spinner_;  // last: started once every subscriber exists
 };
 
 }  // namespace view_selection::ros_node

@@ -14,8 +14,15 @@ namespace view_selection::ros_node {
 
 class InputStatistics {
  public:
+  /// The synchroniser's inputs, counted as they arrive.
+  enum class Input { kImage, kCameraInfo, kDepth };
+
   struct Counts {
+    uint64_t images_arrived = 0;
+    uint64_t camera_infos_arrived = 0;
+    uint64_t depths_arrived = 0;
     uint64_t frames_received = 0;
+    uint64_t images_in_synchroniser = 0;  ///< arrived, neither output nor discarded yet
     uint64_t frames_offered = 0;
     std::map<std::string, uint64_t> dropped;
     std::string last_error;
@@ -26,6 +33,10 @@ class InputStatistics {
     uint64_t dropped_total() const;
   };
 
+  /// A message reached the subscriber callback of one of the synchroniser's inputs.
+  void arrived(Input input);
+  /// How many images the synchroniser holds now (the last of a bag waits for a later partner).
+  void setImagesInSynchroniser(uint64_t images);
   /// A synchronised frame reached the node.
   void frameReceived();
   /// A valid frame was offered to the keyframe policy; `insertion_seconds` >= 0 when it became a

@@ -24,9 +24,12 @@ struct NodeConfig {
   PoseSource pose_source = PoseSource::kTf;
   double pose_timeout = 0.1;               ///< [s, wall] how long a frame waits for its pose
   double pose_max_time_difference = 0.02;  ///< [s] topic source: nearest pose must be this close
-  int queue_size = 10;                     ///< message_filters ApproximateTime queue
-  int max_pending_frames = 30;  ///< frames waiting for the worker before the oldest is dropped
-  bool use_depth = true;        ///< subscribe to `depth` and synchronise it
+  int queue_size = 10;                     ///< images waiting for their camera_info and depth
+  int subscriber_queue_size = 100;         ///< roscpp queue of each of image, camera_info, depth
+  double max_stamp_spread = 0.03;  ///< [s] largest |camera_info or depth stamp - image stamp|
+  double sync_timeout = 1.0;       ///< [s, wall] longest wait of an image for its partners
+  int max_pending_frames = 30;     ///< frames waiting for the worker before the oldest is dropped
+  bool use_depth = true;           ///< subscribe to `depth` and synchronise it
   /// depth | features | map | auto; loadNodeConfig resolves auto (depth with use_depth, else
   /// features, as select_views does by the folder).
   std::string point_source = "auto";

@@ -1,0 +1,152 @@
+#include "view_selection/ros/frame_synchroniser.h"
+
+#include "view_selection/core/parameters.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace view_selection::ros_node {
+
+namespace {
+
+template <typename P>
+void insertByStamp(std::deque<P>& messages, P partner) {
+  const auto at =
+      std::upper_bound(messages.begin(), messages.end(), partner.message->header.stamp,
+                       [](const ros::Time& t, const P& m) { return t < m.message->header.stamp; });
+  messages.insert(at, std::move(partner));
+}
+
+/// Whether a later message could still be nearer to `stamp`: not once one at the stamp came, or
+/// one after it that arrived after the image (an input's stamps increase as they arrive; a
+/// message that arrived before the image may be one of an earlier burst).
+template <typename P>
+bool decided(const std::deque<P>& messages, const ros::Time& stamp, uint64_t image_order) {
+  auto it =
+      std::lower_bound(messages.begin(), messages.end(), stamp,
+                       [](const P& m, const ros::Time& t) { return m.message->header.stamp < t; });
+  for (; it != messages.end(); ++it)
+    if (it->message->header.stamp == stamp || it->order > image_order) return true;
+  return false;
+}
+
+/// The message nearest to `stamp` (the earlier of two equally near), or null.
+template <typename P>
+auto nearest(const std::deque<P>& messages, const ros::Time& stamp, double* offset) {
+  decltype(P::message) best;
+  if (messages.empty()) return best;
+  auto after =
+      std::lower_bound(messages.begin(), messages.end(), stamp,
+                       [](const P& m, const ros::Time& t) { return m.message->header.stamp < t; });
+  if (after != messages.end()) best = after->message;
+  if (after != messages.begin()) {
+    const auto& before = (after - 1)->message;
+    if (!best || (stamp - before->header.stamp).toSec() <= (best->header.stamp - stamp).toSec())
+      best = before;
+  }
+  *offset = (best->header.stamp - stamp).toSec();
+  return best;
+}
+
+std::string seconds(double s) { return core::formatNumber(std::round(s * 1e6) / 1e6) + " s"; }
+
+}  // namespace
+
+SynchronisedFrames FrameSynchroniser::addImage(const sensor_msgs::ImageConstPtr& image,
+                                               double now) {
+  waiting_.push_back({image, now, ++arrivals_});
+  SynchronisedFrames out;
+  release(now, out);
+  return out;
+}
+
+SynchronisedFrames FrameSynchroniser::addCameraInfo(const sensor_msgs::CameraInfoConstPtr& info,
+                                                    double now) {
+  insertByStamp(infos_, Partner<sensor_msgs::CameraInfoConstPtr>{info, ++arrivals_});
+  SynchronisedFrames out;
+  release(now, out);
+  return out;
+}
+
+SynchronisedFrames FrameSynchroniser::addDepth(const sensor_msgs::ImageConstPtr& depth,
+                                               double now) {
+  if (!config_.use_depth) return {};
+  insertByStamp(depths_, Partner<sensor_msgs::ImageConstPtr>{depth, ++arrivals_});
+  SynchronisedFrames out;
+  release(now, out);
+  return out;
+}
+
+SynchronisedFrames FrameSynchroniser::poll(double now) {
+  SynchronisedFrames out;
+  release(now, out);
+  return out;
+}
+
+void FrameSynchroniser::clear() {
+  waiting_.clear();
+  infos_.clear();
+  depths_.clear();
+  last_released_ = ros::Time();
+}
+
+void FrameSynchroniser::release(double now, SynchronisedFrames& out) {
+  while (!waiting_.empty()) {
+    const Waiting& head = waiting_.front();
+    const ros::Time stamp = head.image->header.stamp;
+    const bool ready = decided(infos_, stamp, head.order) &&
+                       (!config_.use_depth || decided(depths_, stamp, head.order));
+    if (!ready && now - head.arrived < config_.timeout && waiting_.size() <= config_.max_waiting)
+      break;
+    double info_offset = 0.0, depth_offset = 0.0;
+    const sensor_msgs::CameraInfoConstPtr info = nearest(infos_, stamp, &info_offset);
+    const sensor_msgs::ImageConstPtr depth =
+        config_.use_depth ? nearest(depths_, stamp, &depth_offset) : sensor_msgs::ImageConstPtr();
+    const auto tooFar = [&](double offset) {
+      return config_.max_spread > 0.0 && std::abs(offset) > config_.max_spread;
+    };
+    std::string missing;
+    if (!info)
+      missing = "no camera_info has arrived";
+    else if (tooFar(info_offset))
+      missing = "the nearest camera_info is " + seconds(info_offset) + " from it";
+    else if (config_.use_depth && !depth)
+      missing = "no depth image has arrived";
+    else if (config_.use_depth && tooFar(depth_offset))
+      missing = "the nearest depth image is " + seconds(depth_offset) + " from it";
+    if (missing.empty()) {
+      out.frames.push_back({head.image, info, depth});
+    } else {
+      out.drops.push_back({stamp, "no partner for the image within " + seconds(config_.max_spread) +
+                                      " (~max_stamp_spread): " + missing +
+                                      (ready ? std::string()
+                                             : " (after waiting " + seconds(now - head.arrived) +
+                                                   ", or " + std::to_string(config_.max_waiting) +
+                                                   " images waiting: ~queue_size)")});
+    }
+    last_released_ = std::max(last_released_, stamp);
+    waiting_.pop_front();
+  }
+  prune();
+}
+
+void FrameSynchroniser::prune() {
+  // Partners of released images may still serve the next one, and every waiting image keeps
+  // what could be its partner; older ones cannot serve anything, unless they arrived recently
+  // (the partner of an out-of-order image may come before the image).
+  if (last_released_.isZero()) return;
+  ros::Time oldest = last_released_;
+  for (const Waiting& w : waiting_) oldest = std::min(oldest, w.image->header.stamp);
+  const double keep = config_.max_spread > 0.0 ? config_.max_spread : 1.0;
+  const uint64_t recent = 3 * static_cast<uint64_t>(config_.max_waiting) + 6;
+  const auto old = [&](const auto& partner) {
+    return (oldest - partner.message->header.stamp).toSec() > keep &&
+           partner.order + recent < arrivals_;
+  };
+  while (infos_.size() > 1 && old(infos_[0]) && old(infos_[1])) infos_.pop_front();
+  while (depths_.size() > 1 && old(depths_[0]) && old(depths_[1])) depths_.pop_front();
+  while (infos_.size() > config_.max_partners) infos_.pop_front();
+  while (depths_.size() > config_.max_partners) depths_.pop_front();
+}
+
+}  // namespace view_selection::ros_node
