@@ -18,12 +18,19 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
   core::visitText(v, "camera_frame", camera_frame, {},
                   "optical frame (z forward) of the camera; \"\" = the image's frame_id");
   core::visitChoice(v, "pose_source", pose_source, kPoseSourceNames,
-                    "tf: look up world_frame <- camera frame at the image stamp; topic: "
-                    "geometry_msgs/PoseStamped on `pose`");
+                    "tf: look up world_frame <- camera frame at the image stamp; on `pose`, "
+                    "interpolated at the image stamp: topic (geometry_msgs/PoseStamped), odometry "
+                    "(nav_msgs/Odometry), pose_with_covariance "
+                    "(geometry_msgs/PoseWithCovarianceStamped)");
+  core::visitText(v, "body_frame", body_frame, {},
+                  "topic sources: the frame the poses are of (ORB-SLAM2 camera_link, VINS body, "
+                  "RTAB-Map base_link); its fixed transform to the optical frame is looked up "
+                  "once from tf; \"\" = Odometry's child_frame_id, else the optical frame itself");
   core::visitReal(v, "pose_timeout", pose_timeout, 0.0, 60.0,
                   "how long a frame waits for its pose before it is dropped [s, wall]");
   core::visitReal(v, "pose_max_time_difference", pose_max_time_difference, 0.0, 10.0,
-                  "topic: the nearest pose must be this close to the image stamp [s]");
+                  "topic sources: the poses on either side of the image stamp must each be this "
+                  "close to it to be interpolated (a pose at the stamp is taken as it is) [s]");
   v.section("Input");
   core::visitInteger(v, "queue_size", queue_size, 1, 10000,
                      "images waiting for their camera_info and depth; beyond, the oldest is "
@@ -128,6 +135,7 @@ NodeConfig loadNodeConfig(const ros::NodeHandle& nh) {
     throw core::InvalidArgument("parameter " + nh.resolveName("world_frame") +
                                 " must name a frame");
   c.camera_frame = normaliseFrameId(c.camera_frame);
+  c.body_frame = normaliseFrameId(c.body_frame);
   // As select_views: auto is depth when there is depth, features otherwise.
   if (c.point_source == "auto") c.point_source = c.use_depth ? "depth" : "features";
   if (c.point_source == "depth" && !c.use_depth)

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <sstream>
 
 namespace view_selection::ros_node {
 
@@ -65,13 +66,50 @@ PoseLookup TfPoseProvider::lookup(const std::string& image_frame, const ros::Tim
 // ---------------------------------------------------------------------------------------------
 // Topic
 
+namespace {
+
+ReceivedPose fromPoseStamped(const geometry_msgs::PoseStamped& m) {
+  return {m.header.stamp, normaliseFrameId(m.header.frame_id), "", poseFromMsg(m.pose)};
+}
+ReceivedPose fromOdometry(const nav_msgs::Odometry& m) {
+  return {m.header.stamp, normaliseFrameId(m.header.frame_id), normaliseFrameId(m.child_frame_id),
+          poseFromMsg(m.pose.pose)};
+}
+ReceivedPose fromPoseWithCovariance(const geometry_msgs::PoseWithCovarianceStamped& m) {
+  return {m.header.stamp, normaliseFrameId(m.header.frame_id), "", poseFromMsg(m.pose.pose)};
+}
+
+const char* typeName(PoseSource source) {
+  switch (source) {
+    case PoseSource::kOdometry:
+      return "nav_msgs/Odometry";
+    case PoseSource::kPoseWithCovariance:
+      return "geometry_msgs/PoseWithCovarianceStamped";
+    default:
+      return "geometry_msgs/PoseStamped";
+  }
+}
+
+}  // namespace
+
 TopicPoseProvider::TopicPoseProvider(const NodeConfig& config, ros::NodeHandle nh)
-    : config_(config), nh_(nh), spinner_(1, &queue_) {
-  ros::SubscribeOptions options = ros::SubscribeOptions::create<geometry_msgs::PoseStamped>(
-      "pose", kSubscriberQueue, [this](const geometry_msgs::PoseStampedConstPtr& p) { onPose(p); },
-      ros::VoidPtr(), &queue_);
-  subscriber_ = nh_.subscribe(options);
+    : config_(config), nh_(nh), extrinsic_(nh), spinner_(1, &queue_) {
+  if (config_.pose_source == PoseSource::kOdometry)
+    subscribe<nav_msgs::Odometry>(&fromOdometry);
+  else if (config_.pose_source == PoseSource::kPoseWithCovariance)
+    subscribe<geometry_msgs::PoseWithCovarianceStamped>(&fromPoseWithCovariance);
+  else
+    subscribe<geometry_msgs::PoseStamped>(&fromPoseStamped);
   spinner_.start();
+}
+
+template <typename M>
+void TopicPoseProvider::subscribe(ReceivedPose (*convert)(const M&)) {
+  ros::SubscribeOptions options = ros::SubscribeOptions::create<M>(
+      "pose", kSubscriberQueue,
+      [this, convert](const boost::shared_ptr<const M>& m) { onPose(convert(*m)); }, ros::VoidPtr(),
+      &queue_);
+  subscriber_ = nh_.subscribe(options);
 }
 
 TopicPoseProvider::~TopicPoseProvider() {
@@ -80,21 +118,22 @@ TopicPoseProvider::~TopicPoseProvider() {
   subscriber_.shutdown();
 }
 
-std::string TopicPoseProvider::describe() const { return "'" + nh_.resolveName("pose") + "'"; }
+std::string TopicPoseProvider::describe() const {
+  return "'" + nh_.resolveName("pose") + "' (" + typeName(config_.pose_source) + ", of " +
+         (config_.body_frame.empty() ? std::string("the optical frame") : config_.body_frame) + ")";
+}
 
-void TopicPoseProvider::onPose(const geometry_msgs::PoseStampedConstPtr& pose) {
+void TopicPoseProvider::onPose(ReceivedPose pose) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    auto at = std::upper_bound(poses_.begin(), poses_.end(), pose->header.stamp,
-                               [](const ros::Time& t, const geometry_msgs::PoseStampedConstPtr& p) {
-                                 return t < p->header.stamp;
-                               });
-    poses_.insert(at, pose);
+    auto at =
+        std::upper_bound(poses_.begin(), poses_.end(), pose.stamp,
+                         [](const ros::Time& t, const ReceivedPose& p) { return t < p.stamp; });
+    poses_.insert(at, std::move(pose));
     // Frames older than the history are long dropped.
-    const ros::Time newest = poses_.back()->header.stamp;
+    const ros::Time newest = poses_.back().stamp;
     while (poses_.size() > kMaxPoses ||
-           (poses_.size() > 1 &&
-            newest.toSec() - poses_.front()->header.stamp.toSec() > kHistorySeconds))
+           (poses_.size() > 1 && newest.toSec() - poses_.front().stamp.toSec() > kHistorySeconds))
       poses_.pop_front();
   }
   arrived_.notify_all();
@@ -110,49 +149,104 @@ void TopicPoseProvider::stop() {
     std::lock_guard<std::mutex> lock(mutex_);
     stopping_ = true;
   }
+  extrinsic_.stop();
   arrived_.notify_all();
 }
 
-PoseLookup TopicPoseProvider::lookup(const std::string&, const ros::Time& stamp) {
+std::optional<ReceivedPose> TopicPoseProvider::bodyPoseAt(const std::deque<ReceivedPose>& poses,
+                                                          const ros::Time& stamp,
+                                                          double max_difference, PoseLookup& out) {
+  const auto after =
+      std::lower_bound(poses.begin(), poses.end(), stamp,
+                       [](const ReceivedPose& p, const ros::Time& t) { return p.stamp < t; });
+  if (after != poses.end() && after->stamp == stamp) return *after;  // exact: as it is
+  const ReceivedPose* before = after == poses.begin() ? nullptr : &*(after - 1);
+  const ReceivedPose* next = after == poses.end() ? nullptr : &*after;
+  const auto far = [&](const ReceivedPose* p) {
+    return !p || std::abs((p->stamp - stamp).toSec()) > max_difference;
+  };
+  if (far(before) || far(next)) {
+    out.reason = "no_pose";
+    std::ostringstream s;
+    s << "no poses within " << seconds(max_difference) << " (~pose_max_time_difference) on both "
+      << "sides of " << stampText(stamp) << " to interpolate between (nearest before: "
+      << (before ? stampText(before->stamp) : std::string("none"))
+      << ", after: " << (next ? stampText(next->stamp) : std::string("none")) << ")";
+    out.message = s.str();
+    return std::nullopt;
+  }
+  if (before->frame != next->frame || before->child_frame != next->child_frame) {
+    out.reason = "bad_pose";
+    out.message = "the poses around " + stampText(stamp) + " are in different frames ('" +
+                  before->frame + "' and '" + next->frame + "')";
+    return std::nullopt;
+  }
+  ReceivedPose p = *before;
+  p.stamp = stamp;
+  // Times relative to the first pose: at ~1.3e9 s a double resolves only 0.24 us.
+  p.pose = core::interpolatePose({0.0, before->pose},
+                                 {(next->stamp - before->stamp).toSec(), next->pose},
+                                 (stamp - before->stamp).toSec());
+  return p;
+}
+
+PoseLookup TopicPoseProvider::lookup(const std::string& image_frame, const ros::Time& stamp) {
   PoseLookup out;
   const auto deadline =
       std::chrono::steady_clock::now() + std::chrono::duration<double>(config_.pose_timeout);
-  std::unique_lock<std::mutex> lock(mutex_);
-  // Wait until a pose at or after the stamp is there (or the timeout), then take the nearest.
-  arrived_.wait_until(lock, deadline, [&] {
-    return stopping_ || (!poses_.empty() && poses_.back()->header.stamp >= stamp);
-  });
-  geometry_msgs::PoseStampedConstPtr best;
-  double best_dt = 0.0;
-  for (const auto& p : poses_) {
-    const double dt = std::abs((p->header.stamp - stamp).toSec());
-    if (!best || dt < best_dt) {
-      best = p;
-      best_dt = dt;
-    }
+  std::optional<ReceivedPose> body;
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    // Wait until a pose at or after the stamp is there (or the timeout).
+    arrived_.wait_until(lock, deadline, [&] {
+      return stopping_ || (!poses_.empty() && poses_.back().stamp >= stamp);
+    });
+    body = bodyPoseAt(poses_, stamp, config_.pose_max_time_difference, out);
   }
-  if (!best || best_dt > config_.pose_max_time_difference) {
-    out.reason = "no_pose";
-    out.message = "no pose on '" + nh_.resolveName("pose") + "' within " +
-                  seconds(config_.pose_max_time_difference) + " of " + stampText(stamp) +
-                  " (~pose_max_time_difference) after waiting " + seconds(config_.pose_timeout) +
-                  " (~pose_timeout)";
+  if (!body) {
+    if (out.reason == "no_pose")
+      out.message = "on '" + nh_.resolveName("pose") + "': " + out.message + " after waiting " +
+                    seconds(config_.pose_timeout) + " (~pose_timeout)";
     return out;
   }
-  if (normaliseFrameId(best->header.frame_id) != config_.world_frame) {
+  if (body->frame != config_.world_frame) {
     out.reason = "bad_pose";
-    out.message = "the pose is in frame '" + best->header.frame_id + "', not ~world_frame '" +
+    out.message = "the pose is in frame '" + body->frame + "', not ~world_frame '" +
                   config_.world_frame + "'";
     return out;
   }
-  out.pose = poseFromMsg(best->pose);
+  if (!body->pose.isValid()) {
+    out.reason = "bad_pose";
+    out.message = "the pose on '" + nh_.resolveName("pose") + "' is not finite";
+    return out;
+  }
+  const std::string camera = config_.camera_frame.empty() ? image_frame : config_.camera_frame;
+  const std::string body_frame = !config_.body_frame.empty()  ? config_.body_frame
+                                 : !body->child_frame.empty() ? body->child_frame
+                                                              : camera;
+  if (body_frame == camera) {
+    out.pose = body->pose;
+    return out;
+  }
+  std::string error;
+  const auto remaining =
+      std::chrono::duration<double>(deadline - std::chrono::steady_clock::now()).count();
+  const std::optional<core::CameraPose> extrinsic =
+      extrinsic_.lookup(body_frame, camera, std::max(remaining, 0.0), &error);
+  if (!extrinsic) {
+    out.reason = "no_pose";
+    out.message = "the poses are of '" + body_frame + "', but tf has no transform " + body_frame +
+                  " <- " + camera + " (the camera's optical frame; ~camera_frame) within " +
+                  seconds(config_.pose_timeout) + ": " + error;
+    return out;
+  }
+  out.pose = core::composePoses(body->pose, *extrinsic);
   return out;
 }
 
 std::unique_ptr<PoseProvider> makePoseProvider(const NodeConfig& config, ros::NodeHandle nh) {
-  if (config.pose_source == PoseSource::kTopic)
-    return std::make_unique<TopicPoseProvider>(config, nh);
-  return std::make_unique<TfPoseProvider>(config, nh);
+  if (config.pose_source == PoseSource::kTf) return std::make_unique<TfPoseProvider>(config, nh);
+  return std::make_unique<TopicPoseProvider>(config, nh);
 }
 
 }  // namespace view_selection::ros_node

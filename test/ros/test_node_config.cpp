@@ -104,7 +104,7 @@ TEST(NodeConfig, BadValuesNameTheParameter) {
       {"completion", XmlRpc::XmlRpcValue("best"), "is not one of: paper, reachable"},
       {"keyframe_policy", XmlRpc::XmlRpcValue("sometimes"),
        "is not one of: every_frame, every_nth, motion"},
-      {"pose_source", XmlRpc::XmlRpcValue("gps"), "is not one of: tf, topic"},
+      {"pose_source", XmlRpc::XmlRpcValue("gps"), "is not one of: tf, topic, odometry, pose_with_covariance"},
       {"occlusion_test", XmlRpc::XmlRpcValue("yes"), "must be true or false"},
       {"world_frame", XmlRpc::XmlRpcValue("/"), "must name a frame"},
       {"point_source", XmlRpc::XmlRpcValue("lidar"), "is not one of: auto, depth, features, map"},

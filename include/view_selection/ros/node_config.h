@@ -14,13 +14,19 @@
 
 namespace view_selection::ros_node {
 
-enum class PoseSource { kTf, kTopic };
-inline constexpr core::EnumNames<PoseSource, 2> kPoseSourceNames{
-    {{PoseSource::kTf, "tf"}, {PoseSource::kTopic, "topic"}}};
+/// tf, or a topic of geometry_msgs/PoseStamped ("topic"), nav_msgs/Odometry or
+/// geometry_msgs/PoseWithCovarianceStamped.
+enum class PoseSource { kTf, kTopic, kOdometry, kPoseWithCovariance };
+inline constexpr core::EnumNames<PoseSource, 4> kPoseSourceNames{
+    {{PoseSource::kTf, "tf"},
+     {PoseSource::kTopic, "topic"},
+     {PoseSource::kOdometry, "odometry"},
+     {PoseSource::kPoseWithCovariance, "pose_with_covariance"}}};
 
 struct NodeConfig {
   std::string world_frame = "world";  ///< frame of every pose and marker (leading '/' removed)
   std::string camera_frame;           ///< optical frame of the camera; "" = the image's frame_id
+  std::string body_frame;  ///< topic sources: frame the poses are of; "" = see visitParameters
   PoseSource pose_source = PoseSource::kTf;
   double pose_timeout = 0.1;               ///< [s, wall] how long a frame waits for its pose
   double pose_max_time_difference = 0.02;  ///< [s] topic source: nearest pose must be this close

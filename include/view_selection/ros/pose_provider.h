@@ -1,12 +1,18 @@
 // Where a frame's camera pose comes from: tf (world_frame <- camera frame at the image stamp) or
-// a geometry_msgs/PoseStamped topic. Each receives poses on a thread of its own, so poses keep
-// arriving while the worker waits for one.
+// a topic of the messages SLAM systems publish (geometry_msgs/PoseStamped, nav_msgs/Odometry,
+// geometry_msgs/PoseWithCovarianceStamped), interpolated at the image stamp, of a body frame
+// whose fixed transform to the optical frame comes from tf once. Each receives poses on a thread
+// of its own, so poses keep arriving while the worker waits for one.
 #pragma once
 
+#include "view_selection/core/pose_interpolation.h"
 #include "view_selection/core/types.h"
+#include "view_selection/ros/camera_extrinsic.h"
 #include "view_selection/ros/node_config.h"
 
 #include <geometry_msgs/PoseStamped.h>
+#include <geometry_msgs/PoseWithCovarianceStamped.h>
+#include <nav_msgs/Odometry.h>
 #include <ros/callback_queue.h>
 #include <ros/ros.h>
 #include <tf2_ros/buffer.h>
@@ -62,8 +68,20 @@ class TfPoseProvider : public PoseProvider {
   tf2_ros::TransformListener listener_;  // spins a thread of its own
 };
 
-/// geometry_msgs/PoseStamped on `pose` (camera-to-world of the optical frame, in world_frame):
-/// the nearest pose within ~pose_max_time_difference of the stamp.
+/// One pose as a topic source received it: of `child_frame` (empty: unknown, see ~body_frame)
+/// in `frame`, at `stamp`.
+struct ReceivedPose {
+  ros::Time stamp;
+  std::string frame;
+  std::string child_frame;
+  core::CameraPose pose;
+};
+
+/// Poses on `pose` (PoseStamped, Odometry or PoseWithCovarianceStamped by ~pose_source), in
+/// world_frame, of the body frame (~body_frame; else Odometry's child_frame_id; else the optical
+/// frame itself). The optical frame's pose at an image stamp: the body poses on either side,
+/// each within ~pose_max_time_difference, interpolated (translation linear, rotation slerp), then
+/// the fixed body <- optical transform from tf; a pose at the very stamp is taken as it is.
 class TopicPoseProvider : public PoseProvider {
  public:
   TopicPoseProvider(const NodeConfig& config, ros::NodeHandle nh);
@@ -73,19 +91,28 @@ class TopicPoseProvider : public PoseProvider {
   void stop() override;
   std::string describe() const override;
 
- private:
-  static constexpr uint32_t kSubscriberQueue = 100;  ///< poses buffered by ROS for the spinner
-  static constexpr size_t kMaxPoses = 10000;         ///< poses kept at most ...
-  static constexpr double kHistorySeconds = 30.0;    ///< ... and for at most this long [s]
+  /// The interpolation step alone, for tests: the body pose at `stamp` from `poses` (ascending
+  /// stamp), or the drop reason in `out`.
+  static std::optional<ReceivedPose> bodyPoseAt(const std::deque<ReceivedPose>& poses,
+                                                const ros::Time& stamp, double max_difference,
+                                                PoseLookup& out);
 
-  void onPose(const geometry_msgs::PoseStampedConstPtr& pose);
+ private:
+  static constexpr uint32_t kSubscriberQueue = 1000;  ///< poses buffered by ROS for the spinner
+  static constexpr size_t kMaxPoses = 10000;          ///< poses kept at most ...
+  static constexpr double kHistorySeconds = 30.0;     ///< ... and for at most this long [s]
+
+  template <typename M>
+  void subscribe(ReceivedPose (*convert)(const M&));
+  void onPose(ReceivedPose pose);
 
   const NodeConfig& config_;
   ros::NodeHandle nh_;
   std::mutex mutex_;
   std::condition_variable arrived_;
-  std::deque<geometry_msgs::PoseStampedConstPtr> poses_;  // ascending stamp
+  std::deque<ReceivedPose> poses_;  // ascending stamp
   bool stopping_ = false;
+  CameraExtrinsic extrinsic_;
   ros::CallbackQueue queue_;
   ros::Subscriber subscriber_;
   ros::AsyncSpinner spinner_;

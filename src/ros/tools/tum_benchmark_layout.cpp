@@ -7,6 +7,9 @@
 #include "view_selection/points/image_conversion.h"
 #include "view_selection/ros/conversions.h"
 
+#include <geometry_msgs/PoseStamped.h>
+#include <geometry_msgs/PoseWithCovarianceStamped.h>
+#include <nav_msgs/Odometry.h>
 #include <sensor_msgs/image_encodings.h>
 
 #include <opencv2/imgproc.hpp>
@@ -135,6 +138,21 @@ WrittenFrames writeBenchmarkLayout(rosbag::Bag& bag, const io::TumDataset& datas
       LegacyTfMessage msg;
       msg.message.transforms.push_back(tf);
       bag.write("/tf", bag_time, msg);
+      if (o.pose_topics) {
+        geometry_msgs::PoseStamped pose;
+        pose.header = tf.header;
+        pose.pose = ros_node::poseToMsg(ros_node::poseFromTransform(tf.transform));
+        bag.write("/mocap/pose", bag_time, pose);
+        nav_msgs::Odometry odometry;
+        odometry.header = tf.header;
+        odometry.child_frame_id = tf.child_frame_id;
+        odometry.pose.pose = pose.pose;
+        bag.write("/mocap/odometry", bag_time, odometry);
+        geometry_msgs::PoseWithCovarianceStamped with_covariance;
+        with_covariance.header = tf.header;
+        with_covariance.pose.pose = pose.pose;
+        bag.write("/mocap/pose_with_covariance", bag_time, with_covariance);
+      }
     } else if (e.kind == Kind::kFixedLink) {
       const FixedLink& l = links[e.link];
       geometry_msgs::TransformStamped tf;

@@ -29,6 +29,10 @@ struct BenchmarkLayoutOptions {
   double image_latency = 0.02;   ///< [s] bag time of an image minus its stamp
   std::string world_frame = "/world";
   std::string camera_frame = "/openni_rgb_optical_frame";
+  /// Also the motion capture as the topics SLAM systems publish (not in the benchmark's bags):
+  /// /mocap/pose (PoseStamped), /mocap/odometry (Odometry, child /kinect) and
+  /// /mocap/pose_with_covariance, all of /kinect in the world frame.
+  bool pose_topics = false;
   bool quiet = false;
 };
 

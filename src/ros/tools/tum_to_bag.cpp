@@ -81,6 +81,9 @@ options:
   --mocap-rate HZ           tum: motion-capture rate (default 100)
   --mocap-lead S            tum: motion capture starts S before the first image (default 3)
   --static-period S         tum: period of the fixed links (default 0.1)
+  --pose-topics             tum: also the motion capture (/kinect in the world frame) as
+                            /mocap/pose (PoseStamped), /mocap/odometry (Odometry) and
+                            /mocap/pose_with_covariance, for the node's topic pose sources
   --quiet                   no progress lines
   --help                    this text
 )";
@@ -110,7 +113,7 @@ Options parse(int argc, char** argv) {
       {"dataset", "out", "layout", "max-frames", "every", "max-time-difference", "world-frame",
        "camera-frame", "compression", "stamp-offset", "depth-offset", "depth-jitter", "mocap-rate",
        "mocap-lead", "static-period"},
-      {"quiet", "help"});
+      {"quiet", "help", "pose-topics"});
   if (cli.flag("help")) {
     std::cout << kUsage;
     std::exit(0);
@@ -143,6 +146,9 @@ Options parse(int argc, char** argv) {
   o.tum.mocap_rate = cli.real("mocap-rate", o.tum.mocap_rate, 1.0, 10000.0);
   o.tum.mocap_lead = cli.real("mocap-lead", o.tum.mocap_lead, 0.0, 3600.0);
   o.tum.static_period = cli.real("static-period", o.tum.static_period, 0.001, 10.0);
+  if (cli.flag("pose-topics") && o.layout != "tum")
+    throw UsageError("--pose-topics is an option of --layout tum");
+  o.tum.pose_topics = cli.flag("pose-topics");
   o.tum.world_frame = o.world_frame;
   o.tum.camera_frame = o.camera_frame;
   o.quiet = cli.flag("quiet");
