@@ -154,7 +154,8 @@ class MatchableTest {
     if (!(dj_lo > 0.0) || !(di_lo > 0.0)) return true;  // a camera may be inside: no bound
     if (scale_) {
       const double s_lo = dj_lo / di_hi * focal_ratio_, s_hi = dj_hi / di_lo * focal_ratio_;
-      if (s_lo * (1.0 - 1e-12) > max_ratio_ || s_hi * (1.0 + 1e-12) * max_ratio_ < 1.0) return false;
+      if (s_lo * (1.0 - 1e-12) > max_ratio_ || s_hi * (1.0 + 1e-12) * max_ratio_ < 1.0)
+        return false;
     }
     if (parallax_) {
       // cos(gamma) = (rho + 1/rho) / 2 - B^2 / (2 d_i d_j), rho = d_i / d_j: bounded above by
@@ -348,6 +349,51 @@ void ErrorResistanceMatrix::setConfig(const ErrorResistanceConfig& requested) {
       if (std::isfinite(value)) row.push_back({static_cast<ViewId>(j), value});
     }
     table_.replaceRow(static_cast<ViewId>(i), std::move(row));
+  }
+}
+
+Keyframe movedKeyframe(Keyframe keyframe, CameraPose pose) {
+  pose.orientation.normalize();
+  CameraPose old = keyframe.pose;
+  old.orientation.normalize();
+  // world' = R' R^T (world - c) + c': the camera-frame coordinates stay.
+  const Eigen::Matrix3d relative = pose.rotation() * old.rotation().transpose();
+  for (Eigen::Index c = 0; c < keyframe.points.cols(); ++c)
+    keyframe.points.col(c) = relative * (keyframe.points.col(c) - old.position) + pose.position;
+  keyframe.pose = pose;
+  return keyframe;
+}
+
+void ErrorResistanceMatrix::setPoses(const std::vector<std::pair<ViewId, CameraPose>>& poses) {
+  std::vector<char> moved(views_.size(), 0);
+  for (const auto& [id, pose] : poses) {
+    if (id < 0 || static_cast<size_t>(id) >= views_.size())
+      throw InvalidArgument("setPoses: unknown view id " + std::to_string(id));
+    if (moved[static_cast<size_t>(id)])
+      throw InvalidArgument("setPoses: view " + std::to_string(id) + " given twice");
+    if (!pose.isValid())
+      throw InvalidInput("setPoses: invalid pose for view " + std::to_string(id));
+    moved[static_cast<size_t>(id)] = 1;
+  }
+  for (const auto& [id, pose] : poses) {
+    View& view = views_[static_cast<size_t>(id)];
+    view = makeView(movedKeyframe(std::move(view.keyframe), pose));
+  }
+  // Rows of the moved keyframes in full; of the others, only the moved keyframes' columns.
+  for (const auto& [id, pose] : poses) {
+    const View& changed = views_[static_cast<size_t>(id)];
+    std::vector<TableEntry> row;
+    for (size_t j = 0; j < views_.size(); ++j) {
+      if (static_cast<ViewId>(j) == id) continue;
+      const double value = entry(changed, views_[j]);
+      if (std::isfinite(value)) row.push_back({static_cast<ViewId>(j), value});
+    }
+    table_.replaceRow(id, std::move(row));
+  }
+  for (size_t i = 0; i < views_.size(); ++i) {
+    if (moved[i]) continue;
+    for (const auto& [id, pose] : poses)
+      table_.set(static_cast<ViewId>(i), id, entry(views_[i], views_[static_cast<size_t>(id)]));
   }
 }
 

@@ -125,6 +125,13 @@ std::vector<ViewId> ViewSelector::applyPointUpdates() {
   return rows;
 }
 
+void ViewSelector::correctPoses(const std::vector<std::pair<ViewId, CameraPose>>& poses) {
+  matrix_.setPoses(poses);
+  const ViewId last = static_cast<ViewId>(matrix_.size()) - 1;
+  for (const auto& [id, pose] : poses)
+    if (id == last) policy_.keyframeAccepted(matrix_.keyframe(id).pose);
+}
+
 Selection ViewSelector::select() const { return selectViews(matrix_.table(), config_.selection); }
 
 SelectionSnapshot ViewSelector::snapshot() const {

@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <limits>
 #include <numeric>
 #include <random>
 #include "support/layers.h"
@@ -32,7 +33,8 @@ bool naiveMatchable(const Eigen::Vector3d& x, const Keyframe& i, const Keyframe&
                     const ErrorResistanceConfig& config) {
   const Eigen::Vector3d to_i = i.pose.position - x, to_j = j.pose.position - x;
   if (config.max_parallax_deg > 0.0) {
-    const double angle = std::acos(std::clamp(to_i.dot(to_j) / (to_i.norm() * to_j.norm()), -1.0, 1.0));
+    const double angle =
+        std::acos(std::clamp(to_i.dot(to_j) / (to_i.norm() * to_j.norm()), -1.0, 1.0));
     if (angle * 180.0 / M_PI > config.max_parallax_deg) return false;
   }
   if (config.max_scale_ratio > 0.0) {
@@ -235,6 +237,113 @@ TEST(ErrorResistanceMatrix, IncrementalEqualsFromScratchInAnyInsertionOrder) {
     }
     EXPECT_GT(matrix.table().finiteCount(), n);
   }
+}
+
+/// A rigid nudge: up to `metres` of translation and `degrees` of rotation about a random axis.
+CameraPose nudged(const CameraPose& pose, std::mt19937& rng, double metres, double degrees) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  CameraPose out = pose;
+  out.position += metres * Eigen::Vector3d(u(rng), u(rng), u(rng));
+  const Eigen::Vector3d axis = Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized();
+  out.orientation =
+      (Eigen::AngleAxisd(degrees * M_PI / 180.0 * u(rng), axis) * pose.orientation).normalized();
+  return out;
+}
+
+// The property of loop-closure corrections: after any sequence of insertions and corrections,
+// the matrix equals one computed from scratch on the corrected keyframes, whose points kept
+// their camera-frame coordinates.
+TEST(ErrorResistanceMatrix, AfterInsertionsAndCorrectionsEqualsFromScratchOnCorrectedPoses) {
+  for (const bool paper : {false, true}) {
+    const Scene scene = makeScene(paper ? 21 : 17, 22, true);
+    ErrorResistanceConfig config = paper ? paperGate() : ErrorResistanceConfig{};
+    if (!paper) {  // wide random baselines: a looser matchable gate, so that entries exist
+      config.max_parallax_deg = 40.0;
+      config.min_covisible_ratio = 0.1;
+    }
+    std::mt19937 rng(paper ? 5 : 3);
+    std::uniform_real_distribution<double> uni(0.0, 1.0);
+    ErrorResistanceMatrix matrix(config);
+    std::vector<Eigen::Matrix3Xd> in_camera;  // X_i in camera i's frame, at insertion
+    std::vector<CameraPose> poses;            // the poses of record
+    size_t next = 0, corrections = 0;
+    for (int step = 0; step < 40; ++step) {
+      if (next < scene.keyframes.size() && (matrix.size() < 3 || uni(rng) < 0.5)) {
+        const Keyframe& k = scene.keyframes[next++];
+        Eigen::Matrix3Xd c(3, k.points.cols());
+        for (Eigen::Index q = 0; q < k.points.cols(); ++q)
+          c.col(q) = k.pose.worldToCamera(k.points.col(q));
+        in_camera.push_back(c);
+        poses.push_back(k.pose);
+        matrix.addKeyframe(k);
+      } else {
+        // Some keyframes, a contiguous run or scattered, moved by small corrections.
+        std::vector<std::pair<ViewId, CameraPose>> moves;
+        const size_t n = matrix.size();
+        const size_t first = static_cast<size_t>(uni(rng) * n);
+        for (size_t i = 0; i < n; ++i) {
+          const bool run = i >= first && i < first + 1 + n / 4;
+          if (run || uni(rng) < 0.1) {
+            moves.emplace_back(static_cast<ViewId>(i), nudged(poses[i], rng, 0.1, 3.0));
+            poses[i] = moves.back().second;
+          }
+        }
+        matrix.setPoses(moves);
+        ++corrections;
+      }
+      // From scratch on the keyframes as corrected: the same matrix (the same finite entries,
+      // values to rounding: adding a stored keyframe again normalises its unit quaternion again).
+      ErrorResistanceMatrix fresh(config);
+      for (size_t i = 0; i < matrix.size(); ++i)
+        fresh.addKeyframe(matrix.keyframe(static_cast<ViewId>(i)));
+      ASSERT_EQ(fresh.table().finiteCount(), matrix.table().finiteCount()) << "step " << step;
+      for (size_t a = 0; a < matrix.size(); ++a)
+        for (const TableEntry& e : matrix.table().row(static_cast<ViewId>(a)))
+          ASSERT_NEAR(fresh.at(static_cast<ViewId>(a), e.view), e.value, 1e-12 * e.value)
+              << "step " << step << " E[" << a << "][" << e.view << "]";
+      // And the corrected keyframes are what the corrections say: poses of record, points
+      // that kept their camera-frame coordinates; E against keyframes rebuilt independently.
+      std::vector<Keyframe> rebuilt;
+      for (size_t i = 0; i < matrix.size(); ++i) {
+        const Keyframe& k = matrix.keyframe(static_cast<ViewId>(i));
+        EXPECT_LT((k.pose.position - poses[i].position).norm(), 1e-12);
+        EXPECT_LT(k.pose.orientation.angularDistance(poses[i].orientation), 1e-9);
+        Keyframe r = k;
+        for (Eigen::Index q = 0; q < k.points.cols(); ++q) {
+          ASSERT_LT((k.pose.worldToCamera(k.points.col(q)) - in_camera[i].col(q)).norm(), 1e-9);
+          r.points.col(q) = poses[i].position + poses[i].rotation() * in_camera[i].col(q);
+        }
+        rebuilt.push_back(std::move(r));
+      }
+      for (size_t a = 0; a < rebuilt.size(); ++a)
+        for (size_t b = 0; b < rebuilt.size(); ++b) {
+          if (a == b) continue;
+          const double want = computeErrorResistance(rebuilt[a], rebuilt[b], config);
+          const double got = matrix.at(static_cast<ViewId>(a), static_cast<ViewId>(b));
+          ASSERT_EQ(std::isfinite(got), std::isfinite(want))
+              << "step " << step << " " << a << "," << b;
+          if (std::isfinite(want)) {
+            ASSERT_NEAR(got, want, 1e-9 * want);
+          }
+        }
+    }
+    EXPECT_GE(corrections, 8u);
+    EXPECT_GT(matrix.table().finiteCount(), matrix.size());
+  }
+}
+
+TEST(ErrorResistanceMatrix, SetPosesRejectsBadInputAndKeepsState) {
+  const Scene scene = makeScene(5, 4, true);
+  ErrorResistanceMatrix matrix;
+  for (const auto& k : scene.keyframes) matrix.addKeyframe(k);
+  const ErrorResistanceTable before = matrix.table();
+  CameraPose bad;
+  bad.position.x() = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(matrix.setPoses({{9, CameraPose{}}}), InvalidArgument);
+  EXPECT_THROW(matrix.setPoses({{1, CameraPose{}}, {1, CameraPose{}}}), InvalidArgument);
+  EXPECT_THROW(matrix.setPoses({{0, matrix.keyframe(0).pose}, {1, bad}}), InvalidInput);
+  EXPECT_TRUE(matrix.table() == before);
+  EXPECT_EQ(matrix.keyframe(1).pose.position, scene.keyframes[1].pose.position);
 }
 
 TEST(ErrorResistanceMatrix, ChangingPointsRecomputesOnlyThatRow) {

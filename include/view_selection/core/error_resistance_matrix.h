@@ -10,6 +10,7 @@
 
 #include <Eigen/Core>
 
+#include <utility>
 #include <vector>
 
 namespace view_selection::core {
@@ -70,6 +71,11 @@ class ErrorResistanceMatrix {
   ViewId addKeyframe(Keyframe keyframe);
   /// Replaces X_id (finite points; throws InvalidInput) and recomputes row id only.
   void setPoints(ViewId id, Eigen::Matrix3Xd points);
+  /// New poses for some keyframes (a loop closure corrected them): each keyframe's points move
+  /// with it (they keep their camera-frame coordinates, as its depth map does), and the rows and
+  /// columns of exactly those keyframes are recomputed, each pair once. Throws InvalidArgument
+  /// for an unknown or repeated id and InvalidInput for an invalid pose; nothing changes then.
+  void setPoses(const std::vector<std::pair<ViewId, CameraPose>>& poses);
   /// Forgets every keyframe.
   void clear();
   /// New parameters (throws InvalidArgument; nothing changes then); when they differ from the
@@ -131,5 +137,9 @@ double computeErrorResistance(const ErrorResistanceMatrix::View& view_i,
 
 /// Throws InvalidInput when a keyframe cannot enter the matrix (bad intrinsics, pose or points).
 void validateKeyframe(const Keyframe& keyframe);
+
+/// `keyframe` at `pose`: its points moved with it (same camera-frame coordinates), the pose's
+/// quaternion normalised.
+Keyframe movedKeyframe(Keyframe keyframe, CameraPose pose);
 
 }  // namespace view_selection::core

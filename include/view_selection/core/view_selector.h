@@ -75,6 +75,10 @@ class ViewSelector {
   /// recomputes exactly those rows and returns their ids. Throws InvalidInput for an update of
   /// an unknown keyframe or with non-finite points; nothing changes then.
   std::vector<ViewId> applyPointUpdates();
+  /// New poses for keyframes (loop closure; see ErrorResistanceMatrix::setPoses, whose
+  /// exceptions it passes on). When the last keyframe moves, the keyframe policy measures motion
+  /// from its new pose.
+  void correctPoses(const std::vector<std::pair<ViewId, CameraPose>>& poses);
   /// Every parameter that shapes the result, as written to selection.json's "params": the
   /// method's, then "point_source" and the group "point_source_params".
   Params params() const;
