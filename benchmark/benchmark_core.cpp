@@ -13,10 +13,11 @@
 
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <map>
-#include <tuple>
 #include <memory>
 #include <random>
+#include <tuple>
 
 namespace view_selection::core {
 namespace {
@@ -206,6 +207,65 @@ void BM_InsertKeyframeObject(benchmark::State& state) { insertion(state, objectK
 BENCHMARK(BM_InsertKeyframeObject)
     ->ArgsProduct({{100, 1000, 2000}, {0, 1}})
     ->ArgNames({"n", "matchable"})
+    ->Unit(benchmark::kMillisecond);
+
+// --- loop-closure corrections ------------------------------------------------------------------
+
+// A correction of `fraction` of the keyframes, as a loop closure gives: the most recent ones
+// (contiguous: 1) or scattered at random (0), each moved by a drift growing to 5 cm and 0.5 deg.
+std::vector<std::pair<ViewId, CameraPose>> correction(const ErrorResistanceMatrix& m,
+                                                      double fraction, bool contiguous) {
+  const int n = static_cast<int>(m.size());
+  const int moved = static_cast<int>(fraction * n + 0.5);
+  std::vector<ViewId> ids;
+  if (contiguous) {
+    for (int q = n - moved; q < n; ++q) ids.push_back(q);
+  } else {
+    std::mt19937 rng(3);
+    std::vector<ViewId> all(static_cast<size_t>(n));
+    for (int q = 0; q < n; ++q) all[static_cast<size_t>(q)] = q;
+    std::shuffle(all.begin(), all.end(), rng);
+    ids.assign(all.begin(), all.begin() + moved);
+    std::sort(ids.begin(), ids.end());
+  }
+  std::vector<std::pair<ViewId, CameraPose>> out;
+  for (size_t q = 0; q < ids.size(); ++q) {
+    const double s = (q + 1.0) / static_cast<double>(ids.size());
+    CameraPose p = m.keyframe(ids[q]).pose;
+    p.position += Eigen::Vector3d(0.05 * s, 0.0, -0.03 * s);
+    p.orientation =
+        (Eigen::AngleAxisd(0.5 * s * M_PI / 180.0, Eigen::Vector3d::UnitY()) * p.orientation)
+            .normalized();
+    out.emplace_back(ids[q], p);
+  }
+  return out;
+}
+
+// Arguments: n, percent of the keyframes moved (100: recomputing everything), contiguous,
+// gate (0: paper, 1: matchable). docs/node.md compares 10% against 100%.
+void BM_CorrectPosesCorridor(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  const Gate gate = state.range(3) ? Gate::kMatchable : Gate::kPaper;
+  const ErrorResistanceMatrix& base = cachedMatrix(corridorKeyframe, n, gate);
+  const auto moves = correction(base, state.range(1) / 100.0, state.range(2) != 0);
+  std::unique_ptr<ErrorResistanceMatrix> copy;
+  size_t evaluated = 0;
+  for (auto _ : state) {
+    state.PauseTiming();
+    copy = std::make_unique<ErrorResistanceMatrix>(base);
+    const size_t before = copy->pairsEvaluated();
+    state.ResumeTiming();
+    copy->setPoses(moves);
+    state.PauseTiming();
+    evaluated = copy->pairsEvaluated() - before;
+    state.ResumeTiming();
+  }
+  state.counters["moved"] = static_cast<double>(moves.size());
+  state.counters["pairs_projected"] = static_cast<double>(evaluated);
+}
+BENCHMARK(BM_CorrectPosesCorridor)
+    ->ArgsProduct({{2000}, {10, 100}, {1, 0}, {1, 0}})
+    ->ArgNames({"n", "percent", "contiguous", "matchable"})
     ->Unit(benchmark::kMillisecond);
 
 // --- selection ----------------------------------------------------------------------------------

@@ -220,14 +220,14 @@ double computeErrorResistance(const ErrorResistanceMatrix::View& view_i,
 
   const Eigen::Matrix3d& r_cw = view_j.world_to_camera;
   const Eigen::Vector3d& o_j = kf_j.pose.position;
+  // Pair-level culls: no point can count when X_i's bounding sphere is outside j's frustum (the
+  // cheap test, first: most pairs of a long sequence end here), or when no point in it can be
+  // matchable.
+  const Eigen::Vector3d sphere_cam = r_cw * (view_i.sphere_centre - o_j);
+  if (outsideFrustum(view_j.frustum_normals, sphere_cam, view_i.sphere_radius)) return kInfinity;
   const MatchableTest matchable(config, r_cw * (kf_i.pose.position - o_j), kf_i.intrinsics,
                                 kf_j.intrinsics);
-  // Pair-level culls: no point can count when X_i's bounding sphere is outside j's frustum, or
-  // when no point in it can be matchable.
-  const Eigen::Vector3d sphere_cam = r_cw * (view_i.sphere_centre - o_j);
-  if (outsideFrustum(view_j.frustum_normals, sphere_cam, view_i.sphere_radius) ||
-      !matchable.mayPass(sphere_cam, view_i.sphere_radius))
-    return kInfinity;
+  if (!matchable.mayPass(sphere_cam, view_i.sphere_radius)) return kInfinity;
   // Group-level cull: keep the groups that may count; stop early when they cannot hold
   // enough points to pass the co-visibility gate.
   auto& candidates = scratch.groups;
@@ -390,10 +390,18 @@ void ErrorResistanceMatrix::setPoses(const std::vector<std::pair<ViewId, CameraP
     }
     table_.replaceRow(id, std::move(row));
   }
-  for (size_t i = 0; i < views_.size(); ++i) {
-    if (moved[i]) continue;
-    for (const auto& [id, pose] : poses)
-      table_.set(static_cast<ViewId>(i), id, entry(views_[i], views_[static_cast<size_t>(id)]));
+  for (const auto& [id, pose] : poses) {
+    // Most entries are +inf before and after: the table is touched only where one is finite.
+    const std::vector<TableEntry> before = table_.column(id);  // ascending row
+    size_t k = 0;
+    const View& changed = views_[static_cast<size_t>(id)];
+    for (size_t i = 0; i < views_.size(); ++i) {
+      if (moved[i]) continue;
+      const double value = entry(views_[i], changed);
+      while (k < before.size() && before[k].view < static_cast<ViewId>(i)) ++k;
+      const bool was_finite = k < before.size() && before[k].view == static_cast<ViewId>(i);
+      if (was_finite || std::isfinite(value)) table_.set(static_cast<ViewId>(i), id, value);
+    }
   }
 }
 
