@@ -43,6 +43,13 @@ void InputStatistics::setImagesInSynchroniser(uint64_t images) {
   ++version_;
 }
 
+void InputStatistics::pathApplied(uint64_t keyframes) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++counts_.paths_applied;
+  counts_.keyframes_corrected += keyframes;
+  ++version_;
+}
+
 void InputStatistics::frameReceived() {
   std::lock_guard<std::mutex> lock(mutex_);
   ++counts_.frames_received;
@@ -114,6 +121,8 @@ view_selection::InputStatistics InputStatistics::toMsg(uint32_t keyframes) const
   msg.depths_arrived = counts_.depths_arrived;
   msg.frames_received = counts_.frames_received;
   msg.images_in_synchroniser = counts_.images_in_synchroniser;
+  msg.paths_applied = counts_.paths_applied;
+  msg.keyframes_corrected = counts_.keyframes_corrected;
   msg.frames_offered = counts_.frames_offered;
   for (const auto& [reason, count] : counts_.dropped) {
     msg.drop_reasons.push_back(reason);

@@ -92,6 +92,28 @@ void KeyframeWorker::reconfigure(const core::ViewSelectorConfig& config) {
   publishSnapshotLocked();
 }
 
+size_t KeyframeWorker::correctPoses(const std::vector<core::TimedPose>& trajectory,
+                                    const core::PoseCorrectionConfig& config) {
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  const core::ErrorResistanceMatrix& m = selector_->matrix();
+  std::vector<core::TimedPose> keyframes;
+  keyframes.reserve(m.size());
+  for (size_t i = 0; i < m.size(); ++i) {
+    const core::Keyframe& k = m.keyframe(static_cast<core::ViewId>(i));
+    keyframes.push_back({k.stamp, k.pose});
+  }
+  const auto moves = core::matchCorrections(keyframes, trajectory, config);
+  if (moves.empty()) return 0;
+  selector_->correctPoses(moves);
+  publishSnapshotLocked();
+  return moves.size();
+}
+
+std::string KeyframeWorker::cameraFrame() const {
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  return camera_frame_;
+}
+
 std::shared_ptr<const NodeSnapshot> KeyframeWorker::snapshot() const {
   std::lock_guard<std::mutex> lock(snapshot_mutex_);
   return snapshot_;
@@ -168,6 +190,7 @@ void KeyframeWorker::process(const Queued& queued) {
   {
     std::lock_guard<std::mutex> lock(state_mutex_);
     if (queued.generation != generation_) return;  // queued before a reset
+    camera_frame_ = normaliseFrameId(frame.image->header.frame_id);
     if (last_stamp_ && !(stamp.toSec() > *last_stamp_)) {
       const bool duplicate = stamp.toSec() == *last_stamp_;
       std::ostringstream s;

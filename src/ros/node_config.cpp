@@ -55,6 +55,18 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
                   "where sample points come from; auto = depth with use_depth, else features");
   core::visitReal(v, "depth_16u_metres_per_unit", depth_16u_metres_per_unit, 1e-9, 1e3,
                   "scale of 16UC1 depth (0.001: millimetres)");
+  v.section("Loop-closure corrections");
+  core::visitFlag(v, "use_path_corrections", use_path_corrections,
+                  "subscribe to `path` (nav_msgs/Path: the corrected trajectory of ~body_frame in "
+                  "world_frame, e.g. VINS pose_graph_path, RTAB-Map mapPath) and move keyframes "
+                  "to it");
+  core::visitReal(v, "correction_stamp_tolerance", corrections.stamp_tolerance, 0.0, 10.0,
+                  "a keyframe takes the path pose nearest its stamp, when this close [s]");
+  core::visitReal(v, "correction_min_translation", corrections.min_translation, 0.0, 1e6,
+                  "a keyframe is moved (its row and column recomputed) when its centre moves "
+                  "more than this [m] ...");
+  core::visitReal(v, "correction_min_rotation_deg", corrections.min_rotation_deg, 0.0, 180.0,
+                  "... or it turns more than this [deg]");
   v.section("Output");
   core::visitReal(v, "publish_period", publish_period, 0.0, 3600.0,
                   "~selection and ~markers at most this often, when changed [s, wall]");

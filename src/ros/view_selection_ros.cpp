@@ -11,6 +11,10 @@ NodeConfig loadAndCheck(const ros::NodeHandle& private_nh) {
         "view_selection: unknown parameter "
         << private_nh.resolveName(name)
         << " is ignored (misspelled? every parameter is in config/view_selection.yaml)");
+  if (config.use_path_corrections && config.point_source == "features")
+    ROS_WARN("view_selection: ~use_path_corrections with ~point_source features: corrected "
+             "keyframes keep their triangulated points (moved with them), but later keyframes "
+             "are triangulated against the feature tracks' uncorrected poses");
   return config;
 }
 
@@ -28,6 +32,7 @@ ViewSelectionRos::ViewSelectionRos(ros::NodeHandle nh, ros::NodeHandle private_n
       outputs_(config_, nh, private_nh, worker_, statistics_),
       services_(config_, private_nh, worker_, statistics_, *poses_, [this] { outputs_.update(); }),
       reconfigure_(config_, withQueue(private_nh, services_.queue()), worker_, outputs_),
+      corrections_(config_, nh, worker_, statistics_),
       inputs_(config_, nh, private_nh, worker_, statistics_) {
   const auto& s = config_.selector;
   ROS_INFO_STREAM("view_selection_node: "

@@ -23,6 +23,8 @@ class InputStatistics {
     uint64_t depths_arrived = 0;
     uint64_t frames_received = 0;
     uint64_t images_in_synchroniser = 0;  ///< arrived, neither output nor discarded yet
+    uint64_t paths_applied = 0;           ///< loop-closure paths applied
+    uint64_t keyframes_corrected = 0;     ///< keyframe pose corrections, over all paths
     uint64_t frames_offered = 0;
     std::map<std::string, uint64_t> dropped;
     std::string last_error;
@@ -37,6 +39,8 @@ class InputStatistics {
   void arrived(Input input);
   /// How many images the synchroniser holds now (the last of a bag waits for a later partner).
   void setImagesInSynchroniser(uint64_t images);
+  /// A loop-closure path was applied and moved `keyframes` keyframes.
+  void pathApplied(uint64_t keyframes);
   /// A synchronised frame reached the node.
   void frameReceived();
   /// A valid frame was offered to the keyframe policy; `insertion_seconds` >= 0 when it became a

@@ -4,6 +4,7 @@
 // without waiting for an insertion.
 #pragma once
 
+#include "view_selection/core/pose_correction.h"
 #include "view_selection/core/selection_snapshot.h"
 #include "view_selection/core/view_selector.h"
 #include "view_selection/ros/input_statistics.h"
@@ -58,6 +59,13 @@ class KeyframeWorker {
   /// New method parameters, live: the selection is redone; the matrix is recomputed when its
   /// gates changed; the keyframe policy keeps its place.
   void reconfigure(const core::ViewSelectorConfig& config);
+  /// Loop closure: each keyframe takes the pose of `trajectory` (optical-frame poses, ascending
+  /// stamp) at its stamp, when it moved more than the thresholds (core::matchCorrections); their
+  /// rows and columns are recomputed and a new snapshot published. Returns how many moved.
+  size_t correctPoses(const std::vector<core::TimedPose>& trajectory,
+                      const core::PoseCorrectionConfig& config);
+  /// The (normalised) frame_id of the images so far; "" before the first.
+  std::string cameraFrame() const;
 
   /// The last snapshot; never null.
   std::shared_ptr<const NodeSnapshot> snapshot() const;
@@ -87,6 +95,7 @@ class KeyframeWorker {
   std::unique_ptr<core::ViewSelector> selector_;
   std::vector<sensor_msgs::ImageConstPtr> images_;  // by keyframe id, with ~save_keyframe_images
   std::optional<double> last_stamp_;                // of the last frame offered to the core
+  std::string camera_frame_;                        // the images' frame_id, normalised
   uint64_t generation_ = 0;  // bumps on reset(); frames of older ones are discarded
   uint64_t version_ = 0;
 

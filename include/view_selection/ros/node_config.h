@@ -4,6 +4,7 @@
 #pragma once
 
 #include "view_selection/core/parameters.h"
+#include "view_selection/core/pose_correction.h"
 #include "view_selection/core/view_selector.h"
 #include "view_selection/points/point_source_factory.h"
 
@@ -43,6 +44,9 @@ struct NodeConfig {
   double publish_period = 0.5;        ///< [s, wall] minimum interval between ~selection messages
   bool save_keyframe_images = false;  ///< keep keyframe images for ~export
   double marker_scale = 0.1;          ///< frustum depth in RViz [m, scene units]
+
+  bool use_path_corrections = false;       ///< subscribe to `path` (nav_msgs/Path, loop closures)
+  core::PoseCorrectionConfig corrections;  ///< matching a path to keyframes, thresholds
 
   core::ViewSelectorConfig selector;       ///< keyframe policy, matrix gates, selection
   points::PointSourceParams point_params;  ///< each point source's parameters

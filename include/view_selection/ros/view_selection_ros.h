@@ -11,6 +11,7 @@
 #include "view_selection/ros/keyframe_worker.h"
 #include "view_selection/ros/live_reconfigure.h"
 #include "view_selection/ros/node_config.h"
+#include "view_selection/ros/path_corrections.h"
 #include "view_selection/ros/pose_provider.h"
 #include "view_selection/ros/selection_outputs.h"
 #include "view_selection/ros/selection_services.h"
@@ -37,6 +38,7 @@ class ViewSelectionRos {
   SelectionOutputs outputs_;
   SelectionServices services_;
   LiveReconfigure reconfigure_;
+  PathCorrections corrections_;
   FrameInputs inputs_;  // last: no frame arrives before every other part exists
 };
 
