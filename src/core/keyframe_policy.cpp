@@ -10,8 +10,9 @@ namespace view_selection::core {
 void KeyframePolicyConfig::visitParameters(ParameterVisitor& v) {
   v.section("Keyframes (select_views: --every, --min-translation, --min-rotation)");
   visitChoice(v, "keyframe_policy", mode, kKeyframeModeNames,
-              "which frames become keyframes: every_frame, every_nth, or motion (after enough "
-              "translation or rotation)");
+              "which frames become keyframes: every_frame, every_nth, motion (after enough "
+              "translation or rotation), or external (the node only: the stamps on `keyframes`, "
+              "e.g. a SLAM system's keyframe path)");
   visitInteger(v, "every_n", every_n, 1, 1000000, "every_nth: one keyframe every N valid frames");
   visitReal(v, "min_translation", min_translation, 0.0, 1e9,
             "motion: a new keyframe after this much translation [m, scene units] ...");
@@ -23,13 +24,15 @@ KeyframePolicy::KeyframePolicy(KeyframePolicyConfig config) : config_(config) {
   config_.validate();
 }
 
-bool KeyframePolicy::offer(const CameraPose& pose) {
+bool KeyframePolicy::offer(const CameraPose& pose, bool external) {
   const long index = frames_offered_++;
   switch (config_.mode) {
     case KeyframeMode::kEveryFrame:
       return true;
     case KeyframeMode::kEveryNth:
       return index % config_.every_n == 0;
+    case KeyframeMode::kExternal:
+      return external;
     case KeyframeMode::kMotion: {
       if (!last_keyframe_) return true;
       const double moved = (pose.position - last_keyframe_->position).norm();

@@ -63,7 +63,7 @@ FrameResult ViewSelector::addFrame(const Frame& frame) {
 
 FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
   FrameResult result;
-  if (!policy_.offer(pose)) return result;
+  if (!policy_.offer(pose, frame.external_keyframe)) return result;
 
   const auto t_points = std::chrono::steady_clock::now();
   const ViewId id = static_cast<ViewId>(matrix_.size());
@@ -105,9 +105,9 @@ FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
   return result;
 }
 
-bool ViewSelector::wantsFrame(const CameraPose& pose) const {
+bool ViewSelector::wantsFrame(const CameraPose& pose, bool external_keyframe) const {
   KeyframePolicy probe = policy_;
-  return probe.offer(pose);
+  return probe.offer(pose, external_keyframe);
 }
 
 std::vector<ViewId> ViewSelector::applyPointUpdates() {

@@ -13,8 +13,8 @@
 namespace view_selection::ros_node {
 
 KeyframeWorker::KeyframeWorker(const NodeConfig& config, PoseProvider& poses,
-                               InputStatistics& statistics)
-    : config_(config), poses_(poses), statistics_(statistics) {
+                               InputStatistics& statistics, KeyframeVerdicts* verdicts)
+    : config_(config), poses_(poses), statistics_(statistics), verdicts_(verdicts) {
   selector_ = std::make_unique<core::ViewSelector>(
       config_.selector, points::makePointSource(config_.point_source, config_.point_params,
                                                 config_.selector.matrix.occlusion));
@@ -32,6 +32,7 @@ KeyframeWorker::~KeyframeWorker() {
   }
   queue_cv_.notify_all();
   poses_.stop();
+  if (verdicts_) verdicts_->stop();
   if (thread_.joinable()) thread_.join();
 }
 
@@ -200,7 +201,19 @@ void KeyframeWorker::process(const Queued& queued) {
       return;
     }
   }
-  // The wait for the pose holds no lock: services and resets go on meanwhile.
+  // The waits for the verdict and the pose hold no lock: services and resets go on meanwhile.
+  bool external = false;
+  if (verdicts_ && verdicts_->active()) {
+    const KeyframeVerdicts::Verdict verdict = verdicts_->wait(stamp);
+    if (verdict == KeyframeVerdicts::Verdict::kUnknown)
+      return statistics_.drop("no_keyframe_verdict",
+                              "no stamp on " + verdicts_->describe() + " at or after " +
+                                  stampText(stamp) + " within " +
+                                  std::to_string(config_.keyframe_verdict_timeout) +
+                                  " s (~keyframe_verdict_timeout): the frame's verdict is unknown",
+                              stamp);
+    external = verdict == KeyframeVerdicts::Verdict::kKeyframe;
+  }
   const PoseLookup lookup = poses_.lookup(normaliseFrameId(frame.image->header.frame_id), stamp);
   if (!lookup.pose) return statistics_.drop(lookup.reason, lookup.message, stamp);
   if (!lookup.pose->isValid())
@@ -219,11 +232,12 @@ void KeyframeWorker::process(const Queued& queued) {
   core_frame.image_name = keyframeImageName(core_frame.stamp);
   core_frame.intrinsics = intrinsics;
   core_frame.pose = *lookup.pose;
+  core_frame.external_keyframe = external;
   // Normalised here as the TUM reader normalises groundtruth.txt, so that for the same frames the
   // point source sees bit-identical rotations and the matrix equals select_views' exactly.
   core_frame.pose.orientation.normalize();
   // As select_views does: only frames the policy will take get their images converted.
-  const bool wanted = selector_->wantsFrame(core_frame.pose);
+  const bool wanted = selector_->wantsFrame(core_frame.pose, external);
   try {
     core_frame.image = wanted ? colourImageForCore(frame.image) : borrowedImageView(frame.image);
   } catch (const core::InvalidInput& e) {

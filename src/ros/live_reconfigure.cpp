@@ -58,6 +58,10 @@ void LiveReconfigure::onChange(view_selection::ViewSelectionConfig& values, uint
   try {
     fromReconfigure(values, next);
     next.selector.validate();
+    const bool was_external = current_.selector.keyframes.mode == core::KeyframeMode::kExternal;
+    if ((next.selector.keyframes.mode == core::KeyframeMode::kExternal) != was_external)
+      throw core::InvalidArgument(
+          "keyframe_policy external is chosen at start-up (it subscribes to `keyframes`)");
   } catch (const core::InvalidArgument& e) {
     ROS_WARN_STREAM("view_selection: reconfigure refused: " << e.what());
     values = toReconfigure(current_);

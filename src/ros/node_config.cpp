@@ -55,6 +55,13 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
                   "where sample points come from; auto = depth with use_depth, else features");
   core::visitReal(v, "depth_16u_metres_per_unit", depth_16u_metres_per_unit, 1e-9, 1e3,
                   "scale of 16UC1 depth (0.001: millimetres)");
+  v.section("External keyframes (keyframe_policy: external)");
+  core::visitReal(v, "keyframe_verdict_timeout", keyframe_verdict_timeout, 0.0, 60.0,
+                  "a frame waits this long for the stamps on `keyframes` (nav_msgs/Path) to say "
+                  "whether it is a keyframe, then is dropped (no_keyframe_verdict) [s, wall]");
+  core::visitReal(v, "keyframe_stamp_tolerance", keyframe_stamp_tolerance, 0.0, 10.0,
+                  "a frame is a keyframe when a stamp on `keyframes` is this close to its own, "
+                  "and is not once a later stamp came [s]");
   v.section("Loop-closure corrections");
   core::visitFlag(v, "use_path_corrections", use_path_corrections,
                   "subscribe to `path` (nav_msgs/Path: the corrected trajectory of ~body_frame in "

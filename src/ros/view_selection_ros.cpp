@@ -12,9 +12,10 @@ NodeConfig loadAndCheck(const ros::NodeHandle& private_nh) {
         << private_nh.resolveName(name)
         << " is ignored (misspelled? every parameter is in config/view_selection.yaml)");
   if (config.use_path_corrections && config.point_source == "features")
-    ROS_WARN("view_selection: ~use_path_corrections with ~point_source features: corrected "
-             "keyframes keep their triangulated points (moved with them), but later keyframes "
-             "are triangulated against the feature tracks' uncorrected poses");
+    ROS_WARN(
+        "view_selection: ~use_path_corrections with ~point_source features: corrected "
+        "keyframes keep their triangulated points (moved with them), but later keyframes "
+        "are triangulated against the feature tracks' uncorrected poses");
   return config;
 }
 
@@ -28,7 +29,8 @@ ros::NodeHandle withQueue(ros::NodeHandle nh, ros::CallbackQueue& queue) {
 ViewSelectionRos::ViewSelectionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
     : config_(loadAndCheck(private_nh)),
       poses_(makePoseProvider(config_, nh)),
-      worker_(config_, *poses_, statistics_),
+      verdicts_(config_, nh),
+      worker_(config_, *poses_, statistics_, &verdicts_),
       outputs_(config_, nh, private_nh, worker_, statistics_),
       services_(config_, private_nh, worker_, statistics_, *poses_, [this] { outputs_.update(); }),
       reconfigure_(config_, withQueue(private_nh, services_.queue()), worker_, outputs_),

@@ -43,6 +43,16 @@ TEST(KeyframePolicy, MotionNeedsTranslationOrRotationSinceLastKeyframe) {
   EXPECT_TRUE(p.offer(at(0.23)));
 }
 
+TEST(KeyframePolicy, ExternalTakesTheCallersVerdict) {
+  KeyframePolicy p({KeyframeMode::kExternal, 10, 0.1, 10.0});
+  EXPECT_FALSE(p.offer(at(0.0)));  // no verdict: not even the first frame
+  EXPECT_TRUE(p.offer(at(0.0), true));
+  p.keyframeAccepted(at(0.0));
+  EXPECT_TRUE(p.offer(at(0.0), true));          // no motion needed
+  EXPECT_FALSE(p.offer(at(5.0, 90.0), false));  // nor enough
+  EXPECT_EQ(keyframeModeFromString("external"), KeyframeMode::kExternal);
+}
+
 TEST(KeyframePolicy, ParsesAndValidates) {
   EXPECT_EQ(keyframeModeFromString("every_nth"), KeyframeMode::kEveryNth);
   EXPECT_EQ(toString(KeyframeMode::kMotion), "motion");

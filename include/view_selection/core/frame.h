@@ -13,9 +13,10 @@ struct Frame {
   double stamp = 0.0;      ///< [s]
   std::string image_name;  ///< name used in pairs.txt
   PinholeIntrinsics intrinsics;
-  CameraPose pose;    ///< camera-to-world, optical frame
-  DepthImage depth;   ///< metres (0 = invalid), or empty when there is no depth
-  ColourImage image;  ///< colour (BGR) or grey; may be empty for depth-only sources
+  CameraPose pose;                 ///< camera-to-world, optical frame
+  DepthImage depth;                ///< metres (0 = invalid), or empty when there is no depth
+  ColourImage image;               ///< colour (BGR) or grey; may be empty for depth-only sources
+  bool external_keyframe = false;  ///< keyframe_policy external: the outside verdict
 };
 
 /// Throws InvalidInput when a frame cannot be used (stamp, intrinsics, pose, image and depth

@@ -1,4 +1,5 @@
-// Which frames become keyframes: every frame, every Nth frame, or after enough motion.
+// Which frames become keyframes: every frame, every Nth frame, after enough motion, or as an
+// outside decision (the SLAM system's keyframes) says.
 #pragma once
 
 #include "view_selection/core/parameters.h"
@@ -13,12 +14,14 @@ enum class KeyframeMode {
   kEveryFrame,  ///< every frame offered
   kEveryNth,    ///< frames 0, N, 2N, ... of those offered
   kMotion,      ///< the first frame, then one after min_translation OR min_rotation_deg of motion
+  kExternal,    ///< the caller's verdict for each frame (Frame::external_keyframe)
 };
 
-inline constexpr EnumNames<KeyframeMode, 3> kKeyframeModeNames{
+inline constexpr EnumNames<KeyframeMode, 4> kKeyframeModeNames{
     {{KeyframeMode::kEveryFrame, "every_frame"},
      {KeyframeMode::kEveryNth, "every_nth"},
-     {KeyframeMode::kMotion, "motion"}}};
+     {KeyframeMode::kMotion, "motion"},
+     {KeyframeMode::kExternal, "external"}}};
 
 inline std::string toString(KeyframeMode mode) { return nameOf(mode, kKeyframeModeNames); }
 /// "every_frame", "every_nth" or "motion"; throws InvalidArgument otherwise.
@@ -44,7 +47,8 @@ class KeyframePolicy {
   /// Offers the next frame; true when it should become a keyframe. Counts the frame either way.
   /// The policy remembers the pose only once the caller confirms with keyframeAccepted(), so a
   /// frame that is dropped later (no points, bad depth) does not move the reference.
-  bool offer(const CameraPose& pose);
+  /// `external`: the verdict in kExternal mode (ignored otherwise).
+  bool offer(const CameraPose& pose, bool external = false);
   /// The frame offered last did become a keyframe at `pose`.
   void keyframeAccepted(const CameraPose& pose);
   void reset();

@@ -55,7 +55,7 @@ class ViewSelector {
   /// Whether the keyframe policy would take a frame at `pose` next, without changing anything.
   /// Lets callers skip loading depth and images for frames that will not become keyframes
   /// (they still pass those frames to addFrame, without depth, to keep counts and stamps).
-  bool wantsFrame(const CameraPose& pose) const;
+  bool wantsFrame(const CameraPose& pose, bool external_keyframe = false) const;
   /// The selection for the keyframes so far.
   Selection select() const;
   /// The keyframes, E, select() and params() together, for outputs.

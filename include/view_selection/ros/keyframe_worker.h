@@ -8,6 +8,7 @@
 #include "view_selection/core/selection_snapshot.h"
 #include "view_selection/core/view_selector.h"
 #include "view_selection/ros/input_statistics.h"
+#include "view_selection/ros/keyframe_verdicts.h"
 #include "view_selection/ros/node_config.h"
 #include "view_selection/ros/pose_provider.h"
 
@@ -41,7 +42,9 @@ struct NodeSnapshot {
 class KeyframeWorker {
  public:
   /// Makes the selector (throws core::InvalidArgument for bad parameters) and starts the thread.
-  KeyframeWorker(const NodeConfig& config, PoseProvider& poses, InputStatistics& statistics);
+  /// `verdicts`: the external keyframe decisions (~keyframe_policy external), or null.
+  KeyframeWorker(const NodeConfig& config, PoseProvider& poses, InputStatistics& statistics,
+                 KeyframeVerdicts* verdicts = nullptr);
   /// Stops the thread (a frame in flight is abandoned) and joins it.
   ~KeyframeWorker();
   KeyframeWorker(const KeyframeWorker&) = delete;
@@ -89,6 +92,7 @@ class KeyframeWorker {
   const NodeConfig& config_;
   PoseProvider& poses_;
   InputStatistics& statistics_;
+  KeyframeVerdicts* verdicts_;
 
   // The method's state, guarded by state_mutex_.
   mutable std::mutex state_mutex_;

@@ -45,8 +45,10 @@ struct NodeConfig {
   bool save_keyframe_images = false;  ///< keep keyframe images for ~export
   double marker_scale = 0.1;          ///< frustum depth in RViz [m, scene units]
 
-  bool use_path_corrections = false;       ///< subscribe to `path` (nav_msgs/Path, loop closures)
-  core::PoseCorrectionConfig corrections;  ///< matching a path to keyframes, thresholds
+  double keyframe_verdict_timeout = 1.0;  ///< [s, wall] external policy: longest wait for a verdict
+  double keyframe_stamp_tolerance = 0.001;  ///< [s] external policy: stamp match
+  bool use_path_corrections = false;        ///< subscribe to `path` (nav_msgs/Path, loop closures)
+  core::PoseCorrectionConfig corrections;   ///< matching a path to keyframes, thresholds
 
   core::ViewSelectorConfig selector;       ///< keyframe policy, matrix gates, selection
   points::PointSourceParams point_params;  ///< each point source's parameters

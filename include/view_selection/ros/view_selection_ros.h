@@ -8,6 +8,7 @@
 
 #include "view_selection/ros/frame_inputs.h"
 #include "view_selection/ros/input_statistics.h"
+#include "view_selection/ros/keyframe_verdicts.h"
 #include "view_selection/ros/keyframe_worker.h"
 #include "view_selection/ros/live_reconfigure.h"
 #include "view_selection/ros/node_config.h"
@@ -34,6 +35,7 @@ class ViewSelectionRos {
   const NodeConfig config_;
   InputStatistics statistics_;
   std::unique_ptr<PoseProvider> poses_;
+  KeyframeVerdicts verdicts_;
   KeyframeWorker worker_;
   SelectionOutputs outputs_;
   SelectionServices services_;

@@ -1,0 +1,78 @@
+#include "view_selection/ros/keyframe_verdicts.h"
+
+#include <chrono>
+#include <cmath>
+
+namespace view_selection::ros_node {
+
+KeyframeVerdicts::KeyframeVerdicts(const NodeConfig& config, ros::NodeHandle nh)
+    : config_(config), nh_(nh) {
+  active_ = config_.selector.keyframes.mode == core::KeyframeMode::kExternal;
+  if (!active_) return;
+  ros::SubscribeOptions options = ros::SubscribeOptions::create<nav_msgs::Path>(
+      "keyframes", 10, [this](const nav_msgs::PathConstPtr& p) { onPath(p); }, ros::VoidPtr(),
+      &queue_);
+  subscriber_ = nh_.subscribe(options);
+  spinner_ = std::make_unique<ros::AsyncSpinner>(1, &queue_);
+  spinner_->start();
+}
+
+KeyframeVerdicts::~KeyframeVerdicts() {
+  stop();
+  if (spinner_) spinner_->stop();
+  subscriber_.shutdown();
+}
+
+std::string KeyframeVerdicts::describe() const {
+  return "the stamps on '" + nh_.resolveName("keyframes") + "'";
+}
+
+void KeyframeVerdicts::onPath(const nav_msgs::PathConstPtr& path) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (const auto& p : path->poses) stamps_.insert(p.header.stamp);
+    while (stamps_.size() > kMaxStamps) stamps_.erase(stamps_.begin());
+  }
+  arrived_.notify_all();
+}
+
+KeyframeVerdicts::Verdict KeyframeVerdicts::verdictLocked(const ros::Time& stamp) const {
+  const ros::Duration tolerance(config_.keyframe_stamp_tolerance);
+  const ros::Time lo = stamp > ros::Time(0) + tolerance ? stamp - tolerance : ros::Time(0);
+  const auto it = stamps_.lower_bound(lo);
+  if (it != stamps_.end() && *it <= stamp + tolerance) return Verdict::kKeyframe;
+  if (!stamps_.empty() && *stamps_.rbegin() > stamp + tolerance) return Verdict::kNotKeyframe;
+  return Verdict::kUnknown;
+}
+
+KeyframeVerdicts::Verdict KeyframeVerdicts::now(const ros::Time& stamp) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return verdictLocked(stamp);
+}
+
+KeyframeVerdicts::Verdict KeyframeVerdicts::wait(const ros::Time& stamp) {
+  const auto deadline = std::chrono::steady_clock::now() +
+                        std::chrono::duration<double>(config_.keyframe_verdict_timeout);
+  std::unique_lock<std::mutex> lock(mutex_);
+  Verdict verdict = verdictLocked(stamp);
+  arrived_.wait_until(lock, deadline, [&] {
+    verdict = verdictLocked(stamp);
+    return stopping_ || verdict != Verdict::kUnknown;
+  });
+  return verdict;
+}
+
+void KeyframeVerdicts::reset() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  stamps_.clear();
+}
+
+void KeyframeVerdicts::stop() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stopping_ = true;
+  }
+  arrived_.notify_all();
+}
+
+}  // namespace view_selection::ros_node
