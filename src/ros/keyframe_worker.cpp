@@ -149,7 +149,7 @@ void KeyframeWorker::loop() {
   }
 }
 
-bool KeyframeWorker::convert(const PendingFrame& frame, core::PinholeIntrinsics& intrinsics) {
+bool KeyframeWorker::convert(const PendingFrame& frame, CameraModel& camera) {
   const sensor_msgs::Image& image = *frame.image;
   const ros::Time stamp = image.header.stamp;
   try {
@@ -166,17 +166,36 @@ bool KeyframeWorker::convert(const PendingFrame& frame, core::PinholeIntrinsics&
       statistics_.drop("bad_depth", e.what(), stamp);
       return false;
     }
+    // Depth sampled at colour pixels must be registered to the colour camera.
+    const std::string depth_frame = normaliseFrameId(frame.depth->header.frame_id);
+    const std::string image_frame = normaliseFrameId(image.header.frame_id);
+    if (!depth_frame.empty() && !image_frame.empty() && depth_frame != image_frame) {
+      statistics_.drop("bad_depth",
+                       "the depth image is in frame '" + depth_frame +
+                           "', not the colour "
+                           "image's '" +
+                           image_frame +
+                           "': use depth registered to the colour camera (e.g. "
+                           "depth_registered, aligned_depth_to_color)",
+                       stamp);
+      return false;
+    }
   }
   try {
-    intrinsics = intrinsicsFromCameraInfo(*frame.info);
+    camera = cameraModelFromInfo(*frame.info);
   } catch (const core::InvalidInput& e) {
     statistics_.drop("bad_camera_info", e.what(), stamp);
     return false;
   }
-  if (image.width != frame.info->width || image.height != frame.info->height) {
+  const core::PinholeIntrinsics& k = camera.intrinsics;
+  if (image.width != static_cast<uint32_t>(k.width) ||
+      image.height != static_cast<uint32_t>(k.height)) {
     std::ostringstream s;
-    s << "image is " << image.width << "x" << image.height << " but camera_info says "
-      << frame.info->width << "x" << frame.info->height;
+    s << "image is " << image.width << "x" << image.height << " but camera_info says " << k.width
+      << "x" << k.height
+      << (frame.info->binning_x > 1 || frame.info->binning_y > 1 || frame.info->roi.width > 0
+              ? " (with its binning and ROI)"
+              : "");
     statistics_.drop("bad_camera_info", s.str(), stamp);
     return false;
   }
@@ -186,8 +205,8 @@ bool KeyframeWorker::convert(const PendingFrame& frame, core::PinholeIntrinsics&
 void KeyframeWorker::process(const Queued& queued) {
   const PendingFrame& frame = queued.frame;
   const ros::Time stamp = frame.image->header.stamp;
-  core::PinholeIntrinsics intrinsics;
-  if (!convert(frame, intrinsics)) return;
+  CameraModel camera;
+  if (!convert(frame, camera)) return;
   {
     std::lock_guard<std::mutex> lock(state_mutex_);
     if (queued.generation != generation_) return;  // queued before a reset
@@ -230,7 +249,7 @@ void KeyframeWorker::process(const Queued& queued) {
   core::Frame core_frame;
   core_frame.stamp = stamp.toSec();
   core_frame.image_name = keyframeImageName(core_frame.stamp);
-  core_frame.intrinsics = intrinsics;
+  core_frame.intrinsics = camera.intrinsics;
   core_frame.pose = *lookup.pose;
   core_frame.external_keyframe = external;
   // Normalised here as the TUM reader normalises groundtruth.txt, so that for the same frames the
@@ -240,14 +259,19 @@ void KeyframeWorker::process(const Queued& queued) {
   const bool wanted = selector_->wantsFrame(core_frame.pose, external);
   try {
     core_frame.image = wanted ? colourImageForCore(frame.image) : borrowedImageView(frame.image);
+    // Distortion applied: the core's pinhole model holds for the rectified image only.
+    if (wanted && camera.rectify)
+      core_frame.image =
+          points::colourImageOf(rectifiedImage(camera, points::matOf(core_frame.image)));
   } catch (const core::InvalidInput& e) {
     return statistics_.drop("bad_image", e.what(), stamp);
   }
   // Feature points use the image alone (as select_views --points features reads no depth).
   if (wanted && frame.depth && config_.point_source != "features") {
     try {
-      core_frame.depth =
-          points::depthImageOf(depthToMetres(*frame.depth, config_.depth_16u_metres_per_unit));
+      cv::Mat metres = depthToMetres(*frame.depth, config_.depth_16u_metres_per_unit);
+      if (camera.rectify) metres = rectifiedDepth(camera, metres);
+      core_frame.depth = points::depthImageOf(metres);
     } catch (const core::InvalidInput& e) {
       return statistics_.drop("bad_depth", e.what(), stamp);
     }

@@ -7,6 +7,7 @@
 #include "view_selection/core/pose_correction.h"
 #include "view_selection/core/selection_snapshot.h"
 #include "view_selection/core/view_selector.h"
+#include "view_selection/ros/camera_model.h"
 #include "view_selection/ros/input_statistics.h"
 #include "view_selection/ros/keyframe_verdicts.h"
 #include "view_selection/ros/node_config.h"
@@ -85,7 +86,7 @@ class KeyframeWorker {
   void loop();
   void process(const Queued& queued);
   /// Checks and converts a frame; false (after counting the drop) when it is unusable.
-  bool convert(const PendingFrame& frame, core::PinholeIntrinsics& intrinsics);
+  bool convert(const PendingFrame& frame, CameraModel& camera);
   /// Under state_mutex_: a new snapshot of the selector's state.
   void publishSnapshotLocked();
 
