@@ -12,7 +12,9 @@
 #include "view_selection/eval/reference_error_resistance.h"
 
 #include <benchmark/benchmark.h>
+#include <unistd.h>
 
+#include <fstream>
 #include <map>
 #include <tuple>
 #include <memory>
@@ -151,6 +153,26 @@ void BM_ErrorResistanceClosedForm(benchmark::State& state) {
 }
 BENCHMARK(BM_ErrorResistanceClosedForm);
 
+void BM_ErrorResistanceBatched(benchmark::State& state) {
+  // The form the matrix uses: one pair's points as arrays, vectorised.
+  const PointSet s = pointSet();
+  const PairErrorResistance pair(s.pose_i.position, s.k, s.pose_j);
+  std::vector<double> x, y, z, out(s.world.size());
+  for (const auto& p : s.world) {
+    const Eigen::Vector3d c = s.pose_j.worldToCamera(p);
+    x.push_back(c.x());
+    y.push_back(c.y());
+    z.push_back(c.z());
+  }
+  for (auto _ : state) {
+    pair.evaluate(x.data(), y.data(), z.data(), x.size(), out.data());
+    benchmark::DoNotOptimize(out.data());
+    benchmark::ClobberMemory();
+  }
+  state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(x.size()));
+}
+BENCHMARK(BM_ErrorResistanceBatched);
+
 void BM_ErrorResistanceClosedFormPerCall(benchmark::State& state) {
   // Including the per-pair set-up and the world-to-camera transform on every call.
   const PointSet s = pointSet();
@@ -206,6 +228,62 @@ void BM_InsertKeyframeObject(benchmark::State& state) { insertion(state, objectK
 BENCHMARK(BM_InsertKeyframeObject)
     ->ArgsProduct({{100, 1000, 2000}, {0, 1}})
     ->ArgNames({"n", "matchable"})
+    ->Unit(benchmark::kMillisecond);
+
+// --- at scale: 10k to 100k keyframes ----------------------------------------------------------
+
+/// Resident memory of this process [bytes] (/proc/self/statm).
+double residentBytes() {
+  std::ifstream statm("/proc/self/statm");
+  double pages = 0.0, resident = 0.0;
+  statm >> pages >> resident;
+  return resident * static_cast<double>(sysconf(_SC_PAGESIZE));
+}
+
+/// The matrix grown to n keyframes once per n (the default, matchable gate), with the resident
+/// memory it added.
+struct Grown {
+  std::unique_ptr<ErrorResistanceMatrix> matrix;
+  std::mt19937 rng{42};
+  double bytes = 0.0;
+};
+Grown& grownCorridor(int n) {
+  static std::map<int, Grown> cache;
+  Grown& g = cache[n];
+  if (!g.matrix) {
+    const double before = residentBytes();
+    g.matrix = std::make_unique<ErrorResistanceMatrix>();
+    for (int q = 0; q < n; ++q) g.matrix->addKeyframe(corridorKeyframe(q, g.rng));
+    g.bytes = residentBytes() - before;
+  }
+  return g;
+}
+
+// Each iteration inserts the next keyframe of the walk into the grown matrix (n grows by the
+// iterations, a fraction of a percent). Counters: memory a keyframe (points, occlusion map,
+// matrix entries, per-view data), finite entries a row, pairs projected per insertion.
+void BM_InsertKeyframeCorridorAtScale(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  Grown& g = grownCorridor(n);
+  ErrorResistanceMatrix& m = *g.matrix;
+  const size_t keyframes_before = m.size();
+  const size_t evaluated_before = m.pairsEvaluated();
+  for (auto _ : state) {
+    state.PauseTiming();
+    Keyframe next = corridorKeyframe(static_cast<int>(m.size()), g.rng);
+    state.ResumeTiming();
+    m.addKeyframe(std::move(next));
+  }
+  const double inserted = static_cast<double>(m.size() - keyframes_before);
+  state.counters["bytes_per_keyframe"] = g.bytes / n;
+  state.counters["finite_per_row"] = static_cast<double>(m.table().finiteCount()) / static_cast<double>(m.size());
+  state.counters["pairs_projected"] = static_cast<double>(m.pairsEvaluated() - evaluated_before) / inserted;
+}
+BENCHMARK(BM_InsertKeyframeCorridorAtScale)
+    ->Arg(10000)
+    ->Arg(50000)
+    ->Arg(100000)
+    ->Iterations(200)
     ->Unit(benchmark::kMillisecond);
 
 // --- selection ----------------------------------------------------------------------------------

@@ -2,6 +2,8 @@
 // insertion order, row-only recomputation, gates, occlusion, median, against a naive reference.
 #include "view_selection/core/error_resistance_matrix.h"
 
+#include "view_selection/core/camera_grid.h"
+
 #include "view_selection/core/error_resistance.h"
 #include "view_selection/core/exceptions.h"
 
@@ -235,6 +237,78 @@ TEST(ErrorResistanceMatrix, IncrementalEqualsFromScratchInAnyInsertionOrder) {
     }
     EXPECT_GT(matrix.table().finiteCount(), n);
   }
+}
+
+TEST(ErrorResistanceMatrix, SpatialIndexSkipsOnlyPairsTheFootprintGateRejects) {
+  // Rooms side by side at growing distances, cameras of different focal lengths: with the
+  // footprint-ratio gate on, insertion looks only at the keyframes the camera grid returns.
+  // Every entry must still equal the naive definition, including pairs across rooms that are
+  // just within the reach bound, under tight and loose ratios.
+  std::vector<Keyframe> keyframes;
+  const double offsets[] = {0.0, 7.0, 15.0, 40.0, 41.5, 200.0};
+  unsigned seed = 31;
+  for (const double dx : offsets) {
+    Scene room = makeScene(seed++, 6, true);
+    for (auto& kf : room.keyframes) {
+      kf.pose.position.x() += dx;
+      kf.points.row(0).array() += dx;
+      keyframes.push_back(std::move(kf));
+    }
+  }
+  const size_t n = keyframes.size();
+  for (const double ratio : {1.2, 1.6, 3.0, 20.0}) {
+    ErrorResistanceConfig config;
+    config.max_scale_ratio = ratio;
+    config.max_parallax_deg = 0.0;  // the footprint gate alone bounds the distance
+    config.min_covisible_ratio = 0.05;
+    ErrorResistanceMatrix matrix(config);
+    for (const auto& kf : keyframes) matrix.addKeyframe(kf);
+    int finite = 0;
+    for (size_t a = 0; a < n; ++a)
+      for (size_t b = 0; b < n; ++b) {
+        if (a == b) continue;
+        const double expected = naiveEntry(keyframes[a], keyframes[b], config);
+        const double got = matrix.at(static_cast<ViewId>(a), static_cast<ViewId>(b));
+        if (std::isfinite(expected)) {
+          ++finite;
+          ASSERT_NEAR(got, expected, 1e-12 * expected) << "ratio " << ratio << " at " << a << "," << b;
+        } else {
+          ASSERT_EQ(got, kInfinity) << "ratio " << ratio << " at " << a << "," << b;
+        }
+      }
+    EXPECT_GT(finite, static_cast<int>(n) / 2) << "ratio " << ratio;
+    // The far room (200 m away) is never evaluated against the others under a tight ratio.
+    if (ratio <= 1.6) {
+      EXPECT_LT(matrix.pairsEvaluated(), n * (n - 1) - 2 * 6 * (n - 6));
+    }
+  }
+}
+
+TEST(CameraGrid, QueryEqualsBruteForceAtEveryRadius) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> uni(-50.0, 50.0);
+  std::vector<Eigen::Vector3d> centres;
+  CameraGrid grid;
+  for (int q = 0; q < 600; ++q) {
+    // Clusters and a spread, so some cells hold many centres and some none.
+    const Eigen::Vector3d c = q % 3 ? Eigen::Vector3d(uni(rng), uni(rng), 0.01 * uni(rng))
+                                    : Eigen::Vector3d(0.02 * uni(rng), 0.02 * uni(rng), 0.0);
+    grid.insert(static_cast<ViewId>(q), c);
+    centres.push_back(c);
+  }
+  std::vector<ViewId> got;
+  // Radii that start small (fine cells) then grow past the regrid limit, and shrink again.
+  for (const double radius : {0.5, 2.0, 0.1, 10.0, 40.0, 1.0, 120.0, 0.01}) {
+    for (int trial = 0; trial < 20; ++trial) {
+      const Eigen::Vector3d at(uni(rng), uni(rng), uni(rng) * 0.01);
+      grid.query(at, radius, got);
+      std::vector<ViewId> expected;
+      for (size_t q = 0; q < centres.size(); ++q)
+        if ((centres[q] - at).norm() <= radius) expected.push_back(static_cast<ViewId>(q));
+      ASSERT_EQ(got, expected) << "radius " << radius << " trial " << trial;
+    }
+  }
+  EXPECT_EQ(grid.size(), centres.size());
 }
 
 TEST(ErrorResistanceMatrix, ChangingPointsRecomputesOnlyThatRow) {

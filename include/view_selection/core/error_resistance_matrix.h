@@ -3,6 +3,7 @@
 // depends on X_a, camera i and i's depth map, never on X_i).
 #pragma once
 
+#include "view_selection/core/camera_grid.h"
 #include "view_selection/core/error_resistance_table.h"
 #include "view_selection/core/occlusion_map.h"
 #include "view_selection/core/parameters.h"
@@ -10,6 +11,7 @@
 
 #include <Eigen/Core>
 
+#include <cstdint>
 #include <vector>
 
 namespace view_selection::core {
@@ -88,37 +90,50 @@ class ErrorResistanceMatrix {
   struct PointGroup {
     Eigen::Vector3d centre;
     double radius = 0.0;
-    Eigen::Index begin = 0, end = 0;  // columns of View::grouped_points
+    std::uint32_t begin = 0, end = 0;  // range of View::point_order
   };
 
-  /// Per-keyframe data computed once (rotation, frustum, points grouped for culling).
+  /// Per-keyframe data computed once (rotation, frustum, points grouped for culling). The
+  /// points are the keyframe's own, held once; the groups index them through point_order.
   struct View {
     Keyframe keyframe;
     Eigen::Matrix3d world_to_camera;              // R^T
     Eigen::Vector3d sphere_centre;                // of all of X_i, world
     double sphere_radius = -1.0;                  // < 0: no points
+    double reach = 0.0;                           // farthest point from the camera centre
+    double focal = 0.0;                           // sqrt(fx fy)
     Eigen::Matrix<double, 3, 5> frustum_normals;  // camera frame, inward unit normals
-    Eigen::Matrix3Xd grouped_points;              // X_i reordered so each group is contiguous
+    std::vector<std::uint32_t> point_order;       // columns of keyframe.points, groups contiguous
     std::vector<PointGroup> groups;               // kd-tree leaves of at most kGroupSize points
   };
-  static constexpr Eigen::Index kGroupSize = 16;
+  static constexpr std::uint32_t kGroupSize = 16;
   static View makeView(Keyframe keyframe);
 
   /// Reused storage for one pair's visible points and their r values.
   struct Scratch {
-    std::vector<Eigen::Vector3d> points_cam;
+    std::vector<double> x, y, z;  // the counted points in camera-j coordinates (arrays, for r())
     std::vector<double> values;
     std::vector<const PointGroup*> groups;
   };
 
  private:
   double entry(const View& view_i, const View& view_j);
+  /// The views whose pair with `view` (either direction, as `row` says) can be finite: by the
+  /// footprint-ratio gate's reach bound through the camera grid, or every view without it.
+  /// Ascending ids, `view`'s own excluded.
+  void candidates(ViewId id, bool row, std::vector<ViewId>& out);
+  /// The row of `id` from scratch, over its candidates.
+  std::vector<TableEntry> computeRow(ViewId id);
 
   ErrorResistanceConfig config_;
   std::vector<View> views_;
   ErrorResistanceTable table_;
   Scratch scratch_;
   size_t pairs_evaluated_ = 0;
+  CameraGrid grid_;                 // camera centres, for candidates()
+  double max_reach_ = 0.0;          // of every view so far
+  double min_focal_ = 0.0, max_focal_ = 0.0;
+  std::vector<ViewId> candidates_;  // reused
 };
 
 /// The pair computation behind both computeErrorResistance and the matrix, with `config` as it
