@@ -286,6 +286,37 @@ BENCHMARK(BM_InsertKeyframeCorridorAtScale)
     ->Iterations(200)
     ->Unit(benchmark::kMillisecond);
 
+// Selection after each insertion, at scale: the incremental cache that ViewSelector keeps (each
+// iteration inserts one keyframe untimed, then updates the selection), and the plain
+// definition over the same matrix for comparison.
+void BM_SelectAfterInsertionAtScale(benchmark::State& state) {
+  Grown& g = grownCorridor(static_cast<int>(state.range(0)));
+  ErrorResistanceMatrix& m = *g.matrix;
+  const SelectionConfig config;
+  SelectionCache cache;
+  cache.update(m.table(), config);
+  for (auto _ : state) {
+    state.PauseTiming();
+    m.addKeyframe(corridorKeyframe(static_cast<int>(m.size()), g.rng));
+    state.ResumeTiming();
+    benchmark::DoNotOptimize(cache.update(m.table(), config).pairs.data());
+  }
+  state.counters["pairs"] = static_cast<double>(cache.selection().pairs.size());
+  state.counters["completed"] = static_cast<double>(cache.selection().completed.size());
+}
+BENCHMARK(BM_SelectAfterInsertionAtScale)
+    ->Arg(10000)
+    ->Arg(50000)
+    ->Arg(100000)
+    ->Iterations(50)
+    ->Unit(benchmark::kMillisecond);
+
+void BM_SelectFullAtScale(benchmark::State& state) {
+  Grown& g = grownCorridor(static_cast<int>(state.range(0)));
+  for (auto _ : state) benchmark::DoNotOptimize(selectViews(g.matrix->table(), {}).pairs.data());
+}
+BENCHMARK(BM_SelectFullAtScale)->Arg(10000)->Arg(100000)->Iterations(5)->Unit(benchmark::kMillisecond);
+
 // --- selection ----------------------------------------------------------------------------------
 
 void selection(benchmark::State& state, Maker make, CompletionMode mode) {

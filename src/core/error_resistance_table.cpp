@@ -4,6 +4,7 @@
 #include "view_selection/core/exceptions.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <string>
 
@@ -36,12 +37,19 @@ void ErrorResistanceTable::resize(size_t size) {
   rows_.resize(size);
   cols_.resize(size);
   top_.resize(size);
+  row_version_.resize(size, 0);
+}
+
+void ErrorResistanceTable::touch(size_t i) {
+  static std::atomic<std::uint64_t> next_version{1};
+  row_version_[i] = next_version.fetch_add(1, std::memory_order_relaxed);
 }
 
 void ErrorResistanceTable::clear() {
   rows_.clear();
   cols_.clear();
   top_.clear();
+  row_version_.clear();
   finite_count_ = 0;
 }
 
@@ -83,10 +91,12 @@ void ErrorResistanceTable::set(ViewId i, ViewId j, double value) {
     upsert(col, i, value);
     finite_count_ += row.size() - before;
     updateTop(static_cast<size_t>(i), j, value);
+    touch(static_cast<size_t>(i));
   } else if (erase(row, j)) {
     erase(col, i);
     --finite_count_;
     updateTop(static_cast<size_t>(i), j, kInfinity);
+    touch(static_cast<size_t>(i));
   }
 }
 
@@ -148,6 +158,7 @@ void ErrorResistanceTable::replaceRow(ViewId i, std::vector<TableEntry> entries)
   }
   finite_count_ += row.size();
   rescanTop(static_cast<size_t>(i));
+  touch(static_cast<size_t>(i));
 }
 
 std::vector<std::vector<double>> ErrorResistanceTable::dense() const {

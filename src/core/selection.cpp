@@ -1,8 +1,10 @@
 #include "view_selection/core/selection.h"
 
+#include "view_selection/core/error_resistance.h"
 #include "view_selection/core/exceptions.h"
 
 #include <algorithm>
+#include <cmath>
 #include <set>
 
 namespace view_selection::core {
@@ -214,6 +216,166 @@ Selection selectViews(const ErrorResistanceTable& e, const SelectionConfig& conf
   else
     completeReachable(e, visited, out);
   out.pairs = pairsFromSets(out.final_next_views);
+  return out;
+}
+
+
+// --- SelectionCache -----------------------------------------------------------------------------
+
+void SelectionCache::clear() {
+  configured_ = false;
+  selection_ = Selection{};
+  seen_.clear();
+  first_value_.clear();
+  extended_rows_.clear();
+}
+
+void SelectionCache::refreshSets(const ErrorResistanceTable& e) {
+  const size_t n = e.size();
+  auto& next = selection_.next_views;
+  auto& final_sets = selection_.final_next_views;
+  // Completion appended to some final sets last time: back to the plain C_i first.
+  for (const ViewId a : extended_rows_)
+    if (static_cast<size_t>(a) < n) final_sets[static_cast<size_t>(a)] = next[static_cast<size_t>(a)];
+  extended_rows_.clear();
+  next.resize(n);
+  final_sets.resize(n);
+  seen_.resize(n, 0);
+  first_value_.resize(n, kInfinity);
+  const size_t keep = static_cast<size_t>(config_.k);
+  std::vector<TableEntry> best;
+  for (size_t i = 0; i < n; ++i) {
+    const std::uint64_t version = e.rowVersion(static_cast<ViewId>(i));
+    if (version != 0 && seen_[i] == version) continue;  // unchanged since last time
+    seen_[i] = version;
+    auto& set = next[i];
+    set.clear();
+    if (keep <= ErrorResistanceTable::kTopCapacity) {
+      const auto& top = e.top(static_cast<ViewId>(i));
+      const size_t take = std::min(keep, top.size());
+      for (size_t q = 0; q < take; ++q) set.push_back(top[q].view);
+      first_value_[i] = take ? top.front().value : kInfinity;
+    } else {
+      best.assign(e.row(static_cast<ViewId>(i)).begin(), e.row(static_cast<ViewId>(i)).end());
+      const size_t take = std::min(keep, best.size());
+      std::partial_sort(best.begin(), best.begin() + static_cast<std::ptrdiff_t>(take), best.end(),
+                        [](const TableEntry& a, const TableEntry& b) {
+                          return better(a.value, a.view, b.value, b.view);
+                        });
+      for (size_t q = 0; q < take; ++q) set.push_back(best[q].view);
+      first_value_[i] = take ? best.front().value : kInfinity;
+    }
+    final_sets[i] = set;
+  }
+}
+
+void SelectionCache::completePaper(const ErrorResistanceTable& e) {
+  Selection& out = selection_;
+  for (size_t x = 0; x < e.size(); ++x) {
+    if (visited_[x]) continue;
+    const ViewId a = bestPredecessor(e, static_cast<ViewId>(x), nullptr);
+    if (a < 0) {
+      out.isolated.push_back(static_cast<ViewId>(x));
+      continue;
+    }
+    auto& set = out.final_next_views[static_cast<size_t>(a)];
+    if (std::find(set.begin(), set.end(), static_cast<ViewId>(x)) == set.end()) {
+      set.push_back(static_cast<ViewId>(x));
+      extended_rows_.push_back(a);
+    }
+    out.completed.push_back({static_cast<ViewId>(x), a});
+  }
+}
+
+void SelectionCache::completeReachable(const ErrorResistanceTable& e) {
+  Selection& out = selection_;
+  // The same candidates as the plain definition (unvisited views with a finite entry from a
+  // visited one), found from the unvisited side: a column of each view the traversal missed.
+  std::set<ViewId> candidates;
+  for (size_t x = 0; x < e.size(); ++x) {
+    if (visited_[x]) continue;
+    for (const TableEntry& entry : e.column(static_cast<ViewId>(x)))
+      if (visited_[static_cast<size_t>(entry.view)]) {
+        candidates.insert(static_cast<ViewId>(x));
+        break;
+      }
+  }
+  while (!candidates.empty()) {
+    const ViewId x = *candidates.begin();
+    candidates.erase(candidates.begin());
+    if (visited_[static_cast<size_t>(x)]) continue;
+    const ViewId a = bestPredecessor(e, x, &visited_);
+    out.final_next_views[static_cast<size_t>(a)].push_back(x);
+    extended_rows_.push_back(a);
+    out.completed.push_back({x, a});
+    const size_t scanned = out.order.size();
+    traverse(out.final_next_views, x, visited_, out.order);
+    for (size_t q = scanned; q < out.order.size(); ++q)
+      for (const TableEntry& entry : e.row(out.order[q]))
+        if (!visited_[static_cast<size_t>(entry.view)]) candidates.insert(entry.view);
+  }
+  for (size_t x = 0; x < e.size(); ++x)
+    if (!visited_[x]) out.isolated.push_back(static_cast<ViewId>(x));
+}
+
+void SelectionCache::buildPairs() {
+  const auto& sets = selection_.final_next_views;
+  const size_t n = sets.size();
+  bucket_begin_.assign(n + 1, 0);
+  for (size_t i = 0; i < n; ++i)
+    for (const ViewId j : sets[i]) ++bucket_begin_[std::min(i, static_cast<size_t>(j)) + 1];
+  for (size_t i = 0; i < n; ++i) bucket_begin_[i + 1] += bucket_begin_[i];
+  bucket_.resize(bucket_begin_[n]);
+  std::vector<std::size_t>& fill = bucket_begin_;  // advanced while filling, then restored
+  for (size_t i = 0; i < n; ++i)
+    for (const ViewId j : sets[i]) {
+      const size_t lo = std::min(i, static_cast<size_t>(j));
+      bucket_[fill[lo]++] = static_cast<ViewId>(std::max(i, static_cast<size_t>(j)));
+    }
+  // fill[lo] is now the end of bucket lo, which is the begin of lo + 1.
+  auto& pairs = selection_.pairs;
+  pairs.clear();
+  size_t begin = 0;
+  for (size_t lo = 0; lo < n; ++lo) {
+    const size_t end = fill[lo];
+    std::sort(bucket_.begin() + static_cast<std::ptrdiff_t>(begin),
+              bucket_.begin() + static_cast<std::ptrdiff_t>(end));
+    for (size_t q = begin; q < end; ++q)
+      if (q == begin || bucket_[q] != bucket_[q - 1])
+        pairs.emplace_back(static_cast<ViewId>(lo), bucket_[q]);
+    begin = end;
+  }
+}
+
+const Selection& SelectionCache::update(const ErrorResistanceTable& e,
+                                        const SelectionConfig& config) {
+  config.validate();
+  if (!configured_ || config.k != config_.k || config.completion != config_.completion ||
+      e.size() < seen_.size())
+    clear();
+  config_ = config;
+  configured_ = true;
+  refreshSets(e);
+  Selection& out = selection_;
+  const size_t n = e.size();
+  // s: the best C_i[0] by (value, row); rows ascend, so a tie keeps the smaller row.
+  out.start_view = -1;
+  double best_value = kInfinity;
+  for (size_t i = 0; i < n; ++i)
+    if (first_value_[i] < best_value) {
+      best_value = first_value_[i];
+      out.start_view = static_cast<ViewId>(i);
+    }
+  visited_.assign(n, 0);
+  out.order.clear();
+  out.completed.clear();
+  out.isolated.clear();
+  if (out.start_view >= 0) traverse(out.next_views, out.start_view, visited_, out.order);
+  if (config_.completion == CompletionMode::kPaper)
+    completePaper(e);
+  else
+    completeReachable(e);
+  buildPairs();
   return out;
 }
 

@@ -125,7 +125,7 @@ std::vector<ViewId> ViewSelector::applyPointUpdates() {
   return rows;
 }
 
-Selection ViewSelector::select() const { return selectViews(matrix_.table(), config_.selection); }
+Selection ViewSelector::select() const { return selection_.update(matrix_.table(), config_.selection); }
 
 SelectionSnapshot ViewSelector::snapshot() const {
   return makeSnapshot(matrix_, select(), config_.selection, params());

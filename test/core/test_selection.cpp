@@ -282,5 +282,86 @@ TEST(Selection, TableKeepsEachRowsBestEntriesThroughEveryKindOfChange) {
   }
 }
 
+void expectSameSelection(const Selection& got, const Selection& want, const std::string& where) {
+  EXPECT_EQ(got.next_views, want.next_views) << where;
+  EXPECT_EQ(got.final_next_views, want.final_next_views) << where;
+  EXPECT_EQ(got.start_view, want.start_view) << where;
+  EXPECT_EQ(got.order, want.order) << where;
+  EXPECT_EQ(got.completed, want.completed) << where;
+  EXPECT_EQ(got.isolated, want.isolated) << where;
+  EXPECT_EQ(got.pairs, want.pairs) << where;
+}
+
+TEST(Selection, CacheEqualsFullSelectionAfterAnySequenceOfChanges) {
+  // The incremental path against the plain definition, after every step of a random evolution:
+  // keyframes added (growing tables, entries toward and from the new view), entries changed and
+  // removed (rows recomputed), whole rows replaced, parameters changed, a reset. Sparse tables
+  // leave views unreached, so completion runs in both modes; ties are frequent on purpose.
+  std::mt19937 rng(2024);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  int completed_seen = 0, isolated_seen = 0;
+  for (const int k : {1, 2, 5, 20}) {
+    for (const CompletionMode mode : {CompletionMode::kPaper, CompletionMode::kReachable}) {
+      const SelectionConfig config{k, mode};
+      ErrorResistanceTable e;
+      SelectionCache cache;
+      for (int step = 0; step < 400; ++step) {
+        const double op = uni(rng);
+        const size_t n = e.size();
+        if (n < 3 || op < 0.3) {  // a new keyframe with a few entries each way
+          e.resize(n + 1);
+          const auto added = static_cast<ViewId>(n);
+          for (size_t q = 0; q < n; ++q) {
+            if (uni(rng) < 0.15) e.set(added, static_cast<ViewId>(q), std::round(uni(rng) * 20) / 20);
+            if (uni(rng) < 0.15) e.set(static_cast<ViewId>(q), added, std::round(uni(rng) * 20) / 20);
+          }
+        } else if (op < 0.75) {
+          const auto i = static_cast<ViewId>(uni(rng) * n), j = static_cast<ViewId>(uni(rng) * n);
+          e.set(i, j, uni(rng) < 0.7 ? std::round(uni(rng) * 20) / 20 : kInfinity);
+        } else if (op < 0.95) {
+          std::vector<TableEntry> entries;
+          for (size_t q = 0; q < n; ++q)
+            if (uni(rng) < 0.1) entries.push_back({static_cast<ViewId>(q), std::round(uni(rng) * 20) / 20});
+          e.replaceRow(static_cast<ViewId>(uni(rng) * n), entries);
+        } else if (op < 0.98) {  // the same table under other parameters and back
+          const SelectionConfig other{k == 1 ? 3 : 1, mode};
+          expectSameSelection(cache.update(e, other), selectViews(e, other), "other config");
+        } else {
+          e.clear();
+        }
+        const Selection& got = cache.update(e, config);
+        const Selection want = selectViews(e, config);
+        expectSameSelection(got, want,
+                            "k " + std::to_string(k) + " mode " + toString(mode) + " step " +
+                                std::to_string(step) + " n " + std::to_string(e.size()));
+        if (::testing::Test::HasFailure()) return;
+        completed_seen += static_cast<int>(!want.completed.empty());
+        isolated_seen += static_cast<int>(!want.isolated.empty());
+      }
+    }
+  }
+  // Both completion paths and isolated views must have been exercised.
+  EXPECT_GT(completed_seen, 100);
+  EXPECT_GT(isolated_seen, 100);
+}
+
+TEST(Selection, CacheFollowsACopiedTable) {
+  // Row versions are unique across tables: a cache fed a copy, then the original changed in
+  // another way, still gives the definition's answer.
+  ErrorResistanceTable a(4);
+  a.set(0, 1, 1.0);
+  a.set(1, 2, 2.0);
+  a.set(2, 3, 3.0);
+  ErrorResistanceTable b = a;
+  SelectionCache cache;
+  const SelectionConfig config{2, CompletionMode::kReachable};
+  cache.update(a, config);
+  b.set(0, 1, kInfinity);
+  b.set(0, 3, 0.5);
+  expectSameSelection(cache.update(b, config), selectViews(b, config), "copy changed");
+  a.set(3, 0, 0.25);
+  expectSameSelection(cache.update(a, config), selectViews(a, config), "original changed");
+}
+
 }  // namespace
 }  // namespace view_selection

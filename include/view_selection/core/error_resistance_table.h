@@ -6,6 +6,7 @@
 #include "view_selection/core/types.h"
 
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 namespace view_selection::core {
@@ -47,6 +48,9 @@ class ErrorResistanceTable {
   /// to date on every change, so next view sets with k <= kTopCapacity cost O(k) a row.
   static constexpr size_t kTopCapacity = 16;
   const std::vector<TableEntry>& top(ViewId i) const { return top_[static_cast<size_t>(i)]; }
+  /// Changes whenever row i changes, to a value no other row of any table ever had: equal
+  /// versions mean equal rows, also across copies (SelectionCache keys on it). 0: never set.
+  std::uint64_t rowVersion(ViewId i) const { return row_version_[static_cast<size_t>(i)]; }
   /// Dense copy, +inf for absent entries.
   std::vector<std::vector<double>> dense() const;
 
@@ -63,6 +67,8 @@ class ErrorResistanceTable {
   std::vector<std::vector<TableEntry>> rows_;
   std::vector<std::vector<TableEntry>> cols_;
   std::vector<std::vector<TableEntry>> top_;
+  std::vector<std::uint64_t> row_version_;
+  void touch(size_t i);
   size_t finite_count_ = 0;
 };
 

@@ -56,7 +56,7 @@ class ViewSelector {
   /// Lets callers skip loading depth and images for frames that will not become keyframes
   /// (they still pass those frames to addFrame, without depth, to keep counts and stamps).
   bool wantsFrame(const CameraPose& pose) const;
-  /// The selection for the keyframes so far.
+  /// The selection for the keyframes so far (selectViews, kept current incrementally).
   Selection select() const;
   /// The keyframes, E, select() and params() together, for outputs.
   SelectionSnapshot snapshot() const;
@@ -87,6 +87,9 @@ class ViewSelector {
   KeyframePolicy policy_;
   ErrorResistanceMatrix matrix_;
   std::optional<double> last_stamp_;  // of the last valid frame offered
+  // What select() last returned, updated from the rows that changed since. Not shared between
+  // threads: like every other member, one thread at a time drives a ViewSelector.
+  mutable SelectionCache selection_;
 };
 
 }  // namespace view_selection::core
