@@ -302,7 +302,13 @@ void BM_SelectAfterInsertionAtScale(benchmark::State& state) {
     benchmark::DoNotOptimize(cache.update(m.table(), config).pairs.data());
   }
   state.counters["pairs"] = static_cast<double>(cache.selection().pairs.size());
-  state.counters["completed"] = static_cast<double>(cache.selection().completed.size());
+  const Selection& last = cache.selection();
+  state.counters["completed"] = static_cast<double>(last.completed.size());
+  // How much of the order the plain traversal reached before completion took over.
+  const auto first = last.completed.empty()
+                         ? last.order.end()
+                         : std::find(last.order.begin(), last.order.end(), last.completed.front().view);
+  state.counters["traversed"] = static_cast<double>(first - last.order.begin());
 }
 BENCHMARK(BM_SelectAfterInsertionAtScale)
     ->Arg(10000)

@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
+#include <queue>
 #include <set>
 
 namespace view_selection::core {
@@ -291,18 +293,26 @@ void SelectionCache::completeReachable(const ErrorResistanceTable& e) {
   Selection& out = selection_;
   // The same candidates as the plain definition (unvisited views with a finite entry from a
   // visited one), found from the unvisited side: a column of each view the traversal missed.
-  std::set<ViewId> candidates;
+  // A min-heap with a flag per view instead of a set: each view enters at most once, since a
+  // candidate stays a candidate until completion visits it.
+  std::priority_queue<ViewId, std::vector<ViewId>, std::greater<ViewId>> candidates;
+  queued_.assign(e.size(), 0);
+  auto offer = [&](ViewId x) {
+    if (visited_[static_cast<size_t>(x)] || queued_[static_cast<size_t>(x)]) return;
+    queued_[static_cast<size_t>(x)] = 1;
+    candidates.push(x);
+  };
   for (size_t x = 0; x < e.size(); ++x) {
     if (visited_[x]) continue;
     for (const TableEntry& entry : e.column(static_cast<ViewId>(x)))
       if (visited_[static_cast<size_t>(entry.view)]) {
-        candidates.insert(static_cast<ViewId>(x));
+        offer(static_cast<ViewId>(x));
         break;
       }
   }
   while (!candidates.empty()) {
-    const ViewId x = *candidates.begin();
-    candidates.erase(candidates.begin());
+    const ViewId x = candidates.top();
+    candidates.pop();
     if (visited_[static_cast<size_t>(x)]) continue;
     const ViewId a = bestPredecessor(e, x, &visited_);
     out.final_next_views[static_cast<size_t>(a)].push_back(x);
@@ -311,8 +321,7 @@ void SelectionCache::completeReachable(const ErrorResistanceTable& e) {
     const size_t scanned = out.order.size();
     traverse(out.final_next_views, x, visited_, out.order);
     for (size_t q = scanned; q < out.order.size(); ++q)
-      for (const TableEntry& entry : e.row(out.order[q]))
-        if (!visited_[static_cast<size_t>(entry.view)]) candidates.insert(entry.view);
+      for (const TableEntry& entry : e.row(out.order[q])) offer(entry.view);
   }
   for (size_t x = 0; x < e.size(); ++x)
     if (!visited_[x]) out.isolated.push_back(static_cast<ViewId>(x));

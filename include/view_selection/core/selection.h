@@ -106,6 +106,7 @@ class SelectionCache {
   std::vector<double> first_value_;    ///< E[i][C_i[0]], +inf when C_i is empty
   std::vector<ViewId> extended_rows_;  ///< rows whose final set completion lengthened last time
   std::vector<char> visited_;
+  std::vector<char> queued_;  ///< offered to reachable completion
   std::vector<std::size_t> bucket_begin_;  ///< pairs by smaller id (CSR)
   std::vector<ViewId> bucket_;
 };
