@@ -26,6 +26,19 @@ from view_selection.srv import Export, ExportRequest, GetSelection
 PKG = 'view_selection'
 
 
+def dense_error_resistance(selection):
+    """selection.json's error_resistance as rows of n values (None = +inf), from either format:
+    view_selection/1 (dense rows) or view_selection/2 (each row's finite [j, E] entries)."""
+    rows = selection['error_resistance']
+    if selection['format'] == 'view_selection/1':
+        return rows
+    dense = [[None] * len(rows) for _ in rows]
+    for i, row in enumerate(rows):
+        for j, value in row:
+            dense[i][j] = value
+    return dense
+
+
 def find_tool(name):
     """Path of an executable of this package as rosrun finds it (devel space or install), or None."""
     try:
@@ -240,7 +253,7 @@ class Replay(unittest.TestCase):
                 self.assertClose(a, b, tolerance, what + ' position ' + c)
             for a, b, c in zip((q.x, q.y, q.z, q.w), x['orientation_xyzw'], 'xyzw'):
                 self.assertClose(a, b, tolerance, what + ' orientation ' + c)
-        matrix = e['error_resistance']
+        matrix = dense_error_resistance(e)
         self.assertEqual(len(s.next_view_sets), n)
         for i, v in enumerate(s.next_view_sets):
             what = '%s C_%d' % (node, i)
