@@ -9,6 +9,7 @@
 #include "view_selection/core/error_resistance.h"
 #include "view_selection/core/error_resistance_matrix.h"
 #include "view_selection/core/selection.h"
+#include "view_selection/core/selection_snapshot.h"
 #include "view_selection/eval/reference_error_resistance.h"
 
 #include <benchmark/benchmark.h>
@@ -316,6 +317,47 @@ BENCHMARK(BM_SelectAfterInsertionAtScale)
     ->Arg(100000)
     ->Iterations(50)
     ->Unit(benchmark::kMillisecond);
+
+// What the node does after each insertion: a snapshot of keyframes, E and the selection for the
+// outputs (ViewSelector::snapshot). E's lists are shared with the live table (copy on write), so
+// the copy costs a pointer a list; the keyframe summaries and the selection are copied.
+void BM_SnapshotAtScale(benchmark::State& state) {
+  Grown& g = grownCorridor(static_cast<int>(state.range(0)));
+  ErrorResistanceMatrix& m = *g.matrix;
+  SelectionCache cache;
+  const SelectionConfig config;
+  cache.update(m.table(), config);
+  std::vector<SelectionSnapshot> held;  // readers still hold the previous ones
+  for (auto _ : state) {
+    state.PauseTiming();
+    m.addKeyframe(corridorKeyframe(static_cast<int>(m.size()), g.rng));
+    const Selection selection = cache.update(m.table(), config);
+    if (held.size() == 2) held.erase(held.begin());
+    state.ResumeTiming();
+    held.push_back(makeSnapshot(m, selection, config));
+  }
+}
+BENCHMARK(BM_SnapshotAtScale)->Arg(10000)->Arg(100000)->Iterations(30)->Unit(benchmark::kMillisecond);
+
+// For comparison, what a copy of E cost before its lists were shared: every row, column and
+// best-entries list copied.
+void BM_DeepCopyOfTheTableAtScale(benchmark::State& state) {
+  Grown& g = grownCorridor(static_cast<int>(state.range(0)));
+  const ErrorResistanceTable& e = g.matrix->table();
+  for (auto _ : state) {
+    std::vector<std::vector<TableEntry>> rows, cols, tops;
+    rows.reserve(e.size());
+    cols.reserve(e.size());
+    tops.reserve(e.size());
+    for (size_t i = 0; i < e.size(); ++i) {
+      rows.push_back(e.row(static_cast<ViewId>(i)));
+      cols.push_back(e.column(static_cast<ViewId>(i)));
+      tops.push_back(e.top(static_cast<ViewId>(i)));
+    }
+    benchmark::DoNotOptimize(rows.data());
+  }
+}
+BENCHMARK(BM_DeepCopyOfTheTableAtScale)->Arg(10000)->Arg(100000)->Iterations(10)->Unit(benchmark::kMillisecond);
 
 void BM_SelectFullAtScale(benchmark::State& state) {
   Grown& g = grownCorridor(static_cast<int>(state.range(0)));

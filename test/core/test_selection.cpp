@@ -363,5 +363,62 @@ TEST(Selection, CacheFollowsACopiedTable) {
   expectSameSelection(cache.update(a, config), selectViews(a, config), "original changed");
 }
 
+TEST(Selection, TableCopiesStayAsTheyWereWhileTheOriginalChanges) {
+  // Copies share their lists with the original until one side changes (copy on write): every
+  // copy must keep exactly the entries, columns and best entries it had when taken, whatever
+  // happens to the original or to other copies afterwards.
+  std::mt19937 rng(77);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  const size_t n = 25;
+  ErrorResistanceTable e(n);
+  struct Kept {
+    ErrorResistanceTable copy;
+    std::vector<std::vector<double>> dense;
+    std::vector<std::vector<TableEntry>> columns, tops;
+  };
+  auto capture = [&](const ErrorResistanceTable& t) {
+    Kept k{t, t.dense(), {}, {}};
+    for (size_t i = 0; i < n; ++i) {
+      k.columns.push_back(t.column(static_cast<ViewId>(i)));
+      k.tops.push_back(t.top(static_cast<ViewId>(i)));
+    }
+    return k;
+  };
+  auto same = [&](const Kept& k, const ErrorResistanceTable& t) {
+    if (t.dense() != k.dense) return false;
+    for (size_t i = 0; i < n; ++i)
+      if (t.column(static_cast<ViewId>(i)) != k.columns[i] || t.top(static_cast<ViewId>(i)) != k.tops[i])
+        return false;
+    return true;
+  };
+  std::vector<Kept> kept;
+  for (int step = 0; step < 3000; ++step) {
+    const auto i = static_cast<ViewId>(uni(rng) * n), j = static_cast<ViewId>(uni(rng) * n);
+    const double op = uni(rng);
+    if (op < 0.6) {
+      e.set(i, j, std::round(uni(rng) * 30) / 30);
+    } else if (op < 0.9) {
+      e.set(i, j, kInfinity);
+    } else if (op < 0.95) {
+      std::vector<TableEntry> entries;
+      for (size_t q = 0; q < n; ++q)
+        if (uni(rng) < 0.3) entries.push_back({static_cast<ViewId>(q), uni(rng)});
+      e.replaceRow(i, entries);
+    } else if (!kept.empty() && op < 0.97) {
+      // A copy changes too: neither the original nor the other copies may see it.
+      const Kept before = capture(e);
+      Kept& victim = kept[static_cast<size_t>(uni(rng) * kept.size())];
+      victim.copy.set(i, j, 0.5);
+      victim = capture(victim.copy);
+      ASSERT_TRUE(same(before, e)) << "a change to a copy reached the original at step " << step;
+    } else {
+      kept.push_back(capture(e));
+    }
+    for (size_t q = 0; q < kept.size(); ++q)
+      ASSERT_TRUE(same(kept[q], kept[q].copy)) << "copy " << q << " changed at step " << step;
+  }
+  EXPECT_GT(kept.size(), 50u);
+}
+
 }  // namespace
 }  // namespace view_selection
