@@ -31,13 +31,13 @@ struct ErrorResistanceConfig {
   Gate gate = Gate::kMatchable;
   /// A point counts only where the angle at it between the rays to O_i and O_j is at most this
   /// [deg]; 0 switches the test off.
-  double max_parallax_deg = 15.0;
+  double max_parallax_deg = 20.0;
   /// ... and where s = (|O_j X| / f_j) / (|O_i X| / f_i) has max(s, 1/s) at most this; 0: off.
   double max_scale_ratio = 1.6;
   /// E[i][j] is +inf when fewer than max(min_covisible_points, min_covisible_ratio * |X_i|)
   /// points of X_i count.
   int min_covisible_points = 10;
-  double min_covisible_ratio = 0.4;
+  double min_covisible_ratio = 0.5;
   /// Optional gate: +inf when the optical axes differ by more than this [deg]; 0 disables it
   /// (the paper's mode).
   double max_view_angle_deg = 0.0;
