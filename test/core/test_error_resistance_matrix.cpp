@@ -217,6 +217,7 @@ TEST(ErrorResistanceMatrix, IncrementalEqualsFromScratchInAnyInsertionOrder) {
   const size_t n = scene.keyframes.size();
   ErrorResistanceConfig config;
   config.max_view_angle_deg = 100.0;  // exercise the optional gate too
+  config.min_covisible_ratio = 0.2;   // enough finite entries in this small room to compare
   std::mt19937 rng(99);
   for (int trial = 0; trial < 4; ++trial) {
     std::vector<size_t> perm(n);
