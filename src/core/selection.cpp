@@ -111,8 +111,12 @@ ViewId findStartView(const ErrorResistanceTable& e) {
   return best_row;
 }
 
-void traverse(const std::vector<NextViewSet>& sets, ViewId start, std::vector<char>& visited,
-              std::vector<ViewId>& order) {
+namespace {
+
+/// The depth-first traversal of `traverse`, over any storage of the sets (`set(i)` gives C_i).
+template <typename Sets>
+void traverseSets(const Sets& set, ViewId start, std::vector<char>& visited,
+                  std::vector<ViewId>& order) {
   if (!visited[static_cast<size_t>(start)]) {
     visited[static_cast<size_t>(start)] = 1;
     order.push_back(start);
@@ -122,17 +126,29 @@ void traverse(const std::vector<NextViewSet>& sets, ViewId start, std::vector<ch
   std::vector<std::pair<ViewId, size_t>> stack{{start, 0}};
   while (!stack.empty()) {
     auto& [current, cursor] = stack.back();
-    const NextViewSet& candidates = sets[static_cast<size_t>(current)];
-    while (cursor < candidates.size() && visited[static_cast<size_t>(candidates[cursor])]) ++cursor;
-    if (cursor == candidates.size()) {
+    const SetView candidates = set(current);
+    while (cursor < candidates.size && visited[static_cast<size_t>(candidates.data[cursor])]) ++cursor;
+    if (cursor == candidates.size) {
       stack.pop_back();  // all next views marked: return to the previous view
       continue;
     }
-    const ViewId next = candidates[cursor];
+    const ViewId next = candidates.data[cursor];
     visited[static_cast<size_t>(next)] = 1;
     order.push_back(next);
     stack.emplace_back(next, 0);
   }
+}
+
+}  // namespace
+
+void traverse(const std::vector<NextViewSet>& sets, ViewId start, std::vector<char>& visited,
+              std::vector<ViewId>& order) {
+  traverseSets(
+      [&sets](ViewId i) {
+        const NextViewSet& c = sets[static_cast<size_t>(i)];
+        return SetView{c.data(), c.size()};
+      },
+      start, visited, order);
 }
 
 std::vector<std::pair<ViewId, ViewId>> pairsFromSets(const std::vector<NextViewSet>& sets) {
@@ -230,6 +246,9 @@ void SelectionCache::clear() {
   seen_.clear();
   first_value_.clear();
   extended_rows_.clear();
+  extended_.clear();
+  flat_.clear();
+  flat_size_.clear();
 }
 
 void SelectionCache::refreshSets(const ErrorResistanceTable& e) {
@@ -238,13 +257,22 @@ void SelectionCache::refreshSets(const ErrorResistanceTable& e) {
   auto& final_sets = selection_.final_next_views;
   // Completion appended to some final sets last time: back to the plain C_i first.
   for (const ViewId a : extended_rows_)
-    if (static_cast<size_t>(a) < n) final_sets[static_cast<size_t>(a)] = next[static_cast<size_t>(a)];
+    if (static_cast<size_t>(a) < n) {
+      final_sets[static_cast<size_t>(a)] = next[static_cast<size_t>(a)];
+      extended_[static_cast<size_t>(a)] = 0;
+    }
   extended_rows_.clear();
   next.resize(n);
   final_sets.resize(n);
   seen_.resize(n, 0);
   first_value_.resize(n, kInfinity);
+  extended_.resize(n, 0);
   const size_t keep = static_cast<size_t>(config_.k);
+  // A flat copy of the sets (stride k) for the traversal: contiguous, where the sets themselves
+  // are one small allocation each. Only for k within the table's cached best entries.
+  flat_stride_ = keep <= ErrorResistanceTable::kTopCapacity ? keep : 0;
+  flat_size_.resize(n, 0);
+  flat_.resize(n * flat_stride_);
   std::vector<TableEntry> best;
   for (size_t i = 0; i < n; ++i) {
     const std::uint64_t version = e.rowVersion(static_cast<ViewId>(i));
@@ -268,7 +296,26 @@ void SelectionCache::refreshSets(const ErrorResistanceTable& e) {
       first_value_[i] = take ? best.front().value : kInfinity;
     }
     final_sets[i] = set;
+    if (flat_stride_) {
+      std::copy(set.begin(), set.end(), flat_.begin() + static_cast<std::ptrdiff_t>(i * flat_stride_));
+      flat_size_[i] = static_cast<std::uint32_t>(set.size());
+    }
   }
+}
+
+SetView SelectionCache::plainSet(ViewId i) const {
+  if (flat_stride_)
+    return {flat_.data() + static_cast<size_t>(i) * flat_stride_, flat_size_[static_cast<size_t>(i)]};
+  const NextViewSet& c = selection_.next_views[static_cast<size_t>(i)];
+  return {c.data(), c.size()};
+}
+
+SetView SelectionCache::finalSet(ViewId i) const {
+  if (extended_[static_cast<size_t>(i)] || !flat_stride_) {
+    const NextViewSet& c = selection_.final_next_views[static_cast<size_t>(i)];
+    return {c.data(), c.size()};
+  }
+  return plainSet(i);
 }
 
 void SelectionCache::completePaper(const ErrorResistanceTable& e) {
@@ -284,6 +331,7 @@ void SelectionCache::completePaper(const ErrorResistanceTable& e) {
     if (std::find(set.begin(), set.end(), static_cast<ViewId>(x)) == set.end()) {
       set.push_back(static_cast<ViewId>(x));
       extended_rows_.push_back(a);
+      extended_[static_cast<size_t>(a)] = 1;
     }
     out.completed.push_back({static_cast<ViewId>(x), a});
   }
@@ -317,9 +365,10 @@ void SelectionCache::completeReachable(const ErrorResistanceTable& e) {
     const ViewId a = bestPredecessor(e, x, &visited_);
     out.final_next_views[static_cast<size_t>(a)].push_back(x);
     extended_rows_.push_back(a);
+    extended_[static_cast<size_t>(a)] = 1;
     out.completed.push_back({x, a});
     const size_t scanned = out.order.size();
-    traverse(out.final_next_views, x, visited_, out.order);
+    traverseSets([this](ViewId i) { return finalSet(i); }, x, visited_, out.order);
     for (size_t q = scanned; q < out.order.size(); ++q)
       for (const TableEntry& entry : e.row(out.order[q])) offer(entry.view);
   }
@@ -328,19 +377,23 @@ void SelectionCache::completeReachable(const ErrorResistanceTable& e) {
 }
 
 void SelectionCache::buildPairs() {
-  const auto& sets = selection_.final_next_views;
-  const size_t n = sets.size();
+  const size_t n = selection_.final_next_views.size();
   bucket_begin_.assign(n + 1, 0);
-  for (size_t i = 0; i < n; ++i)
-    for (const ViewId j : sets[i]) ++bucket_begin_[std::min(i, static_cast<size_t>(j)) + 1];
+  for (size_t i = 0; i < n; ++i) {
+    const SetView set = finalSet(static_cast<ViewId>(i));
+    for (size_t q = 0; q < set.size; ++q)
+      ++bucket_begin_[std::min(i, static_cast<size_t>(set.data[q])) + 1];
+  }
   for (size_t i = 0; i < n; ++i) bucket_begin_[i + 1] += bucket_begin_[i];
   bucket_.resize(bucket_begin_[n]);
   std::vector<std::size_t>& fill = bucket_begin_;  // advanced while filling, then restored
-  for (size_t i = 0; i < n; ++i)
-    for (const ViewId j : sets[i]) {
-      const size_t lo = std::min(i, static_cast<size_t>(j));
-      bucket_[fill[lo]++] = static_cast<ViewId>(std::max(i, static_cast<size_t>(j)));
+  for (size_t i = 0; i < n; ++i) {
+    const SetView set = finalSet(static_cast<ViewId>(i));
+    for (size_t q = 0; q < set.size; ++q) {
+      const auto j = static_cast<size_t>(set.data[q]);
+      bucket_[fill[std::min(i, j)]++] = static_cast<ViewId>(std::max(i, j));
     }
+  }
   // fill[lo] is now the end of bucket lo, which is the begin of lo + 1.
   auto& pairs = selection_.pairs;
   pairs.clear();
@@ -379,7 +432,8 @@ const Selection& SelectionCache::update(const ErrorResistanceTable& e,
   out.order.clear();
   out.completed.clear();
   out.isolated.clear();
-  if (out.start_view >= 0) traverse(out.next_views, out.start_view, visited_, out.order);
+  if (out.start_view >= 0)
+    traverseSets([this](ViewId i) { return plainSet(i); }, out.start_view, visited_, out.order);
   if (config_.completion == CompletionMode::kPaper)
     completePaper(e);
   else

@@ -77,6 +77,12 @@ std::vector<std::pair<ViewId, ViewId>> pairsFromSets(const std::vector<NextViewS
 /// the number of finite entries.
 Selection selectViews(const ErrorResistanceTable& e, const SelectionConfig& config);
 
+/// A view's set as the traversal reads it, wherever it is stored: a pointer and a length.
+struct SetView {
+  const ViewId* data;
+  size_t size;
+};
+
 /// selectViews kept current as a table changes (keyframes added, rows recomputed): equal to
 /// selectViews(e, config) after every update (a property test holds it to that).
 ///   - next view sets are recomputed only for rows whose ErrorResistanceTable::rowVersion moved;
@@ -98,6 +104,8 @@ class SelectionCache {
   void completePaper(const ErrorResistanceTable& e);
   void completeReachable(const ErrorResistanceTable& e);
   void buildPairs();
+  SetView plainSet(ViewId i) const;  ///< C_i
+  SetView finalSet(ViewId i) const;  ///< C_i after completion so far
 
   SelectionConfig config_;
   bool configured_ = false;
@@ -105,6 +113,10 @@ class SelectionCache {
   std::vector<std::uint64_t> seen_;    ///< rowVersion each cached C_i was computed at
   std::vector<double> first_value_;    ///< E[i][C_i[0]], +inf when C_i is empty
   std::vector<ViewId> extended_rows_;  ///< rows whose final set completion lengthened last time
+  std::vector<char> extended_;         ///< the same as a flag per row
+  size_t flat_stride_ = 0;             ///< k when the sets are also kept flat (k <= 16), else 0
+  std::vector<ViewId> flat_;           ///< C_i at [i * k, i * k + |C_i|)
+  std::vector<std::uint32_t> flat_size_;
   std::vector<char> visited_;
   std::vector<char> queued_;  ///< offered to reachable completion
   std::vector<std::size_t> bucket_begin_;  ///< pairs by smaller id (CSR)
