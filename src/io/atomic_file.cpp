@@ -38,6 +38,24 @@ std::string temporaryPath(const fs::path& path) {
 
 }  // namespace
 
+void writeFileContents(const std::string& path, const void* data, size_t size) {
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) throw core::IoError("cannot create '" + path + "': " + std::strerror(errno));
+  const char* bytes = static_cast<const char*>(data);
+  size_t done = 0;
+  while (done < size) {
+    const ssize_t n = ::write(fd, bytes + done, size - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      const int saved = n < 0 ? errno : EIO;
+      ::close(fd);
+      throw core::IoError("cannot write '" + path + "': " + std::strerror(saved));
+    }
+    done += static_cast<size_t>(n);
+  }
+  if (::close(fd) != 0) throw core::IoError("cannot write '" + path + "': " + std::strerror(errno));
+}
+
 void writeAtomically(const std::string& path,
                      const std::function<void(const std::string&)>& write) {
   const fs::path target(path);

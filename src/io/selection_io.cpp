@@ -4,7 +4,10 @@
 #include "view_selection/core/exceptions.h"
 
 #include <cmath>
+#include "view_selection/io/atomic_file.h"
+
 #include <fstream>
+#include <sstream>
 
 namespace view_selection::io {
 
@@ -119,10 +122,9 @@ void writeSelectionJson(const std::string& path, const core::SelectionSnapshot& 
        {"format", "params", "keyframes", "error_resistance", "next_views", "start_view",
         "initial_pair", "order", "completed", "isolated", "final_next_views", "pairs"})
     ordered[key] = doc.at(key);
-  std::ofstream out(path);
-  if (!out) throw core::IoError("cannot write '" + path + "'");
+  std::ostringstream out;
   writeReadable(out, ordered);
-  if (!out) throw core::IoError("error while writing '" + path + "'");
+  writeFileContents(path, out.str());  // the system's reason on failure (a full disk, ...)
 }
 
 void writeSelectionJson(const std::string& path, const core::ErrorResistanceMatrix& matrix,
@@ -144,12 +146,11 @@ void writePairsTxt(const std::string& path, const std::vector<std::string>& imag
                             " is empty or contains whitespace, which COLMAP cannot read");
     }
   }
-  std::ofstream out(path);
-  if (!out) throw core::IoError("cannot write '" + path + "'");
+  std::ostringstream out;
   for (const auto& [a, b] : pairs)
     out << image_names[static_cast<size_t>(a)] << ' ' << image_names[static_cast<size_t>(b)]
         << '\n';
-  if (!out) throw core::IoError("error while writing '" + path + "'");
+  writeFileContents(path, out.str());
 }
 
 nlohmann::json readSelectionJson(const std::string& path) {

@@ -12,4 +12,11 @@ namespace view_selection::io {
 /// is untouched, and core::IoError says why (the writer's own exception is rethrown as is).
 void writeAtomically(const std::string& path, const std::function<void(const std::string&)>& write);
 
+/// Creates (or truncates) `path` and writes `size` bytes into it; throws core::IoError with the
+/// system's reason ("No space left on device", ...). For writers inside writeAtomically.
+void writeFileContents(const std::string& path, const void* data, size_t size);
+inline void writeFileContents(const std::string& path, const std::string& text) {
+  writeFileContents(path, text.data(), text.size());
+}
+
 }  // namespace view_selection::io
