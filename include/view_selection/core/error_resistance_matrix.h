@@ -47,6 +47,11 @@ class ErrorResistanceMatrix {
   void setPoints(ViewId id, Eigen::Matrix3Xd points);
   /// Forgets every keyframe.
   void clear();
+  /// Replaces everything with saved keyframes and their finite rows of E (rows[i]: entries of
+  /// row i, any order), without recomputing an entry: a saved session continues exactly. Throws
+  /// InvalidInput (nothing changes then) for an invalid keyframe or entry (unknown column, the
+  /// diagonal, a repeated column, a non-finite or negative value).
+  void restore(std::vector<Keyframe> keyframes, const std::vector<std::vector<TableEntry>>& rows);
   /// New parameters (throws InvalidArgument; nothing changes then); when they differ from the
   /// current ones, every entry is recomputed with them.
   void setConfig(const ErrorResistanceConfig& config);

@@ -67,6 +67,8 @@ struct DepthMap {
   std::vector<float> depth;  ///< row-major, metres, 0 = unknown
 
   bool empty() const { return depth.empty(); }
+  /// Sizes agree (depth holds cols x rows values), cells are positive, depths finite and >= 0.
+  bool isConsistent() const;
   /// Depth [m] at a full-resolution pixel, 0 when unknown or outside.
   float at(double u, double v) const {
     if (u < 0.0 || v < 0.0) return 0.0f;
