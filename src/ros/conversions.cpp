@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <sstream>
 
 namespace enc = sensor_msgs::image_encodings;
@@ -69,6 +70,42 @@ void checkImageMessage(const sensor_msgs::Image& msg, const std::string& what) {
   if (bit_depth > 8 && msg.is_bigendian == little)
     throw core::InvalidInput(what + " is " + (msg.is_bigendian ? "big" : "little") +
                              "-endian, which this machine does not read natively");
+}
+
+Eigen::Matrix3Xd mapPointsFromCloud(const sensor_msgs::PointCloud2& cloud) {
+  uint32_t offsets[3] = {0, 0, 0};
+  const char* names[3] = {"x", "y", "z"};
+  for (int a = 0; a < 3; ++a) {
+    const sensor_msgs::PointField* field = nullptr;
+    for (const auto& f : cloud.fields)
+      if (f.name == names[a]) field = &f;
+    if (!field) throw core::InvalidInput(std::string("the cloud has no field '") + names[a] + "'");
+    if (field->datatype != sensor_msgs::PointField::FLOAT32 || field->count < 1)
+      throw core::InvalidInput(std::string("the cloud's field '") + names[a] + "' is not float32");
+    if (static_cast<uint64_t>(field->offset) + 4 > cloud.point_step)
+      throw core::InvalidInput(std::string("the cloud's field '") + names[a] +
+                               "' lies outside its point_step");
+    offsets[a] = field->offset;
+  }
+  if (cloud.is_bigendian) throw core::InvalidInput("the cloud is big-endian");
+  const uint64_t width = cloud.width, height = cloud.height;
+  if (static_cast<uint64_t>(cloud.point_step) * width > cloud.row_step ||
+      static_cast<uint64_t>(cloud.row_step) * height > cloud.data.size())
+    throw core::InvalidInput("the cloud's data is shorter than its width, height and steps say");
+  Eigen::Matrix3Xd points(3, static_cast<Eigen::Index>(width * height));
+  Eigen::Index kept = 0;
+  for (uint64_t r = 0; r < height; ++r) {
+    for (uint64_t c = 0; c < width; ++c) {
+      const uint8_t* p = cloud.data.data() + r * cloud.row_step + c * cloud.point_step;
+      float v[3];
+      for (int a = 0; a < 3; ++a) std::memcpy(&v[a], p + offsets[a], sizeof(float));
+      if (!std::isfinite(v[0]) || !std::isfinite(v[1]) || !std::isfinite(v[2]))
+        continue;  // organised clouds pad with NaN
+      points.col(kept++) = Eigen::Vector3d(v[0], v[1], v[2]);
+    }
+  }
+  points.conservativeResize(3, kept);
+  return points;
 }
 
 cv::Mat imageView(const sensor_msgs::Image& msg) {

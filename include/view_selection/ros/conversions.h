@@ -13,6 +13,7 @@
 #include <geometry_msgs/Transform.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <sensor_msgs/PointCloud2.h>
 #include <opencv2/core.hpp>
 
 #include <string>
@@ -47,6 +48,11 @@ core::ColourImage borrowedImageView(const sensor_msgs::ImageConstPtr& msg);
 cv::Mat depthToMetres(const sensor_msgs::Image& msg, double metres_per_unit_16u);
 /// Throws InvalidInput unless the depth encoding is one depthToMetres accepts.
 void checkDepthEncoding(const sensor_msgs::Image& msg);
+
+/// The finite points of a cloud with FLOAT32 fields x, y and z (NaN padding of organised clouds
+/// skipped). Throws InvalidInput when the fields are missing, of another type, outside a point,
+/// big-endian, or the data is shorter than width, height and the steps say.
+Eigen::Matrix3Xd mapPointsFromCloud(const sensor_msgs::PointCloud2& cloud);
 
 core::CameraPose poseFromMsg(const geometry_msgs::Pose& pose);
 core::CameraPose poseFromTransform(const geometry_msgs::Transform& transform);
