@@ -193,8 +193,17 @@ class Statistics:
         return s.frames_offered + drops
 
     def wait(self, predicate, timeout, what):
-        return wait_until(lambda: self.get() is not None and predicate(self.get()), timeout,
-                          '%s %s' % (self.node, what))
+        """The first message for which predicate(message) holds."""
+        found = []
+
+        def check():
+            s = self.get()
+            if s is not None and predicate(s):
+                found.append(s)
+                return True
+            return False
+        wait_until(check, timeout, '%s %s' % (self.node, what))
+        return found[0]
 
     def close(self):
         self.subscriber.unregister()
