@@ -67,6 +67,8 @@ void KeyframeWorker::restoreLoaded() {
   }
   last_stamp_ = loaded->selector.last_stamp;
   const size_t keyframes = selector_->matrix().size();
+  // The state file keeps no images: the continued keyframes have none (null), later ones do.
+  if (config_.save_keyframe_images) images_.assign(keyframes, nullptr);
   statistics_.restore(loaded->statistics, keyframes);
   const auto& last = loaded->statistics.last_frame_stamp;
   statistics_.stateSaved(static_cast<uint32_t>(keyframes),

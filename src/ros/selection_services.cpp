@@ -82,6 +82,7 @@ int writeKeyframeImages(const std::string& directory, const NodeSnapshot& snapsh
   const std::vector<std::string> names = snapshot.selection.imageNames();
   int written = 0;
   for (size_t i = 0; i < snapshot.images.size() && i < names.size(); ++i) {
+    if (!snapshot.images[i]) continue;  // a keyframe continued from ~state_file: no image kept
     const fs::path path = fs::path(directory) / names[i];
     std::error_code ec;
     fs::create_directories(path.parent_path(), ec);
@@ -127,6 +128,10 @@ bool SelectionServices::exportSelection(view_selection::Export::Request& req,
         std::to_string(s.selection.pairs.size()) + " pairs" +
         (config_.save_keyframe_images ? ", " + std::to_string(res.images_written) + " images"
                                       : " (no images: ~save_keyframe_images is false)") +
+        (config_.save_keyframe_images && static_cast<size_t>(res.images_written) < s.size()
+             ? " (" + std::to_string(s.size() - static_cast<size_t>(res.images_written)) +
+                   " keyframes continued from ~state_file have no image)"
+             : std::string()) +
         " to " + req.directory;
   } catch (const std::exception& e) {
     res.success = false;

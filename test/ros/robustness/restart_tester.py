@@ -19,7 +19,7 @@ import rospy
 import rostest
 from std_srvs.srv import Trigger
 
-from view_selection.srv import GetSelection
+from view_selection.srv import Export, ExportRequest, GetSelection
 
 from vs_robust import (FramePublisher, NodeProcess, Statistics, bag_frames, call,
                        check_selection, check_statistics, find_tool, note_without_real_data,
@@ -102,8 +102,9 @@ class Restart(unittest.TestCase):
     def test_1_killed_session_continues_exactly(self):
         state = os.path.join(self.tmp, 'state', 'session.state')
         half = len(self.frames) // 2
-        ref, ref_pub = self.start('restart_ref')
-        node, pub = self.start('restart_node', {'state_file': state, 'autosave_keyframes': 3})
+        ref, ref_pub = self.start('restart_ref', {'save_keyframe_images': True})
+        node, pub = self.start('restart_node', {'state_file': state, 'autosave_keyframes': 3,
+                                                'save_keyframe_images': True})
         ref_stats, stats = Statistics(ref.name), Statistics(node.name)
         try:
             both = [(ref_pub, ref_stats), (pub, stats)]
@@ -153,6 +154,25 @@ class Restart(unittest.TestCase):
             for field in ('frames_received', 'frames_offered', 'keyframes', 'frames_dropped'):
                 self.assertEqual(getattr(sb, field), getattr(sa, field), field)
             self.assertEqual(sb.frames_received, len(self.frames))
+
+            # Images are not in the state file: the continued keyframes have none, and every
+            # image written is the same keyframe's as the uninterrupted node's.
+            exports = {}
+            for n in (ref, node):
+                folder = os.path.join(self.tmp, 'export' + n.name.replace('/', '_'))
+                answer = call(n.name + '/export', Export, ExportRequest(directory=folder), 60)
+                self.assertTrue(answer.success, answer.message)
+                exports[n.name] = (folder, answer)
+            folder, answer = exports[node.name]
+            self.assertEqual(answer.images_written, len(b.keyframes) - restored.keyframes,
+                             answer.message)
+            self.assertIn('continued from ~state_file have no image', answer.message)
+            for k in b.keyframes[restored.keyframes:]:
+                with open(os.path.join(folder, k.image_name), 'rb') as x, \
+                        open(os.path.join(exports[ref.name][0], k.image_name), 'rb') as y:
+                    self.assertEqual(x.read(), y.read(), 'image of ' + k.image_name)
+            for k in b.keyframes[:restored.keyframes]:
+                self.assertFalse(os.path.exists(os.path.join(folder, k.image_name)), k.image_name)
 
             # SIGINT: the node saves on the way out; select_views re-selects that file.
             self.assertEqual(node.stop(), 0)
