@@ -14,6 +14,7 @@
 #include <benchmark/benchmark.h>
 
 #include <map>
+#include <tuple>
 #include <memory>
 #include <random>
 
@@ -104,11 +105,17 @@ Keyframe objectKeyframe(int index, std::mt19937& rng) {
 
 using Maker = Keyframe (*)(int, std::mt19937&);
 
-const ErrorResistanceMatrix& cachedMatrix(Maker make, int n) {
-  static std::map<std::pair<Maker, int>, std::unique_ptr<ErrorResistanceMatrix>> cache;
-  auto& slot = cache[{make, n}];
+ErrorResistanceConfig gateConfig(Gate gate) {
+  ErrorResistanceConfig config;
+  config.gate = gate;
+  return config;
+}
+
+const ErrorResistanceMatrix& cachedMatrix(Maker make, int n, Gate gate = Gate::kPaper) {
+  static std::map<std::tuple<Maker, int, Gate>, std::unique_ptr<ErrorResistanceMatrix>> cache;
+  auto& slot = cache[{make, n, gate}];
   if (!slot) {
-    slot = std::make_unique<ErrorResistanceMatrix>();
+    slot = std::make_unique<ErrorResistanceMatrix>(gateConfig(gate));
     std::mt19937 rng(42);
     for (int q = 0; q < n; ++q) slot->addKeyframe(make(q, rng));
   }
@@ -166,9 +173,11 @@ BENCHMARK(BM_ErrorResistanceBruteForce);
 
 // --- keyframe insertion -------------------------------------------------------------------------
 
+// Arguments: n, then the gate (0: paper, 1: matchable with its defaults).
 void insertion(benchmark::State& state, Maker make) {
   const int n = static_cast<int>(state.range(0));
-  const ErrorResistanceMatrix& base = cachedMatrix(make, n);
+  const Gate gate = state.range(1) ? Gate::kMatchable : Gate::kPaper;
+  const ErrorResistanceMatrix& base = cachedMatrix(make, n, gate);
   std::mt19937 rng(7);
   const Keyframe next = make(n, rng);
   size_t evaluated = 0;
@@ -188,10 +197,16 @@ void insertion(benchmark::State& state, Maker make) {
 }
 
 void BM_InsertKeyframeCorridor(benchmark::State& state) { insertion(state, corridorKeyframe); }
-BENCHMARK(BM_InsertKeyframeCorridor)->Arg(100)->Arg(1000)->Arg(2000)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_InsertKeyframeCorridor)
+    ->ArgsProduct({{100, 1000, 2000}, {0, 1}})
+    ->ArgNames({"n", "matchable"})
+    ->Unit(benchmark::kMillisecond);
 
 void BM_InsertKeyframeObject(benchmark::State& state) { insertion(state, objectKeyframe); }
-BENCHMARK(BM_InsertKeyframeObject)->Arg(100)->Arg(1000)->Arg(2000)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_InsertKeyframeObject)
+    ->ArgsProduct({{100, 1000, 2000}, {0, 1}})
+    ->ArgNames({"n", "matchable"})
+    ->Unit(benchmark::kMillisecond);
 
 // --- selection ----------------------------------------------------------------------------------
 

@@ -11,6 +11,16 @@ namespace view_selection::core {
 
 void ErrorResistanceConfig::visitParameters(ParameterVisitor& v) {
   v.section("The error-resistance matrix: gates");
+  visitChoice(v, "gate", gate, kGateNames,
+              "which points count for E[i][j]: paper (every visible point; sets the four values "
+              "below and max_view_angle_deg to the paper's) or matchable (visible, parallax and "
+              "footprint ratio within the limits below)");
+  visitReal(v, "max_parallax_deg", max_parallax_deg, 0.0, 180.0,
+            "matchable: a point counts where the angle at it between the two rays is at most "
+            "this [deg]; 0 = off");
+  visitReal(v, "max_scale_ratio", max_scale_ratio, 0.0, 1e6,
+            "matchable: ... and the pixel-footprint ratio of the two views at it is at most "
+            "this; 0 = off, else >= 1");
   visitInteger(
       v, "min_covisible_points", min_covisible_points, 1, 1000000,
       "E[i][j] = inf when fewer than max(points, ratio * |X_i|) points of X_i are visible in j");
@@ -19,6 +29,23 @@ void ErrorResistanceConfig::visitParameters(ParameterVisitor& v) {
   visitReal(v, "max_view_angle_deg", max_view_angle_deg, 0.0, 180.0,
             "optional gate on the angle between optical axes [deg]; 0 = off (the paper's mode)");
   occlusion.visitParameters(v);
+}
+
+void ErrorResistanceConfig::applyGate() {
+  if (gate != Gate::kPaper) return;
+  // The paper's behaviour, exactly version 1 of METHOD.md.
+  max_parallax_deg = 0.0;
+  max_scale_ratio = 0.0;
+  min_covisible_points = 10;
+  min_covisible_ratio = 0.1;
+  max_view_angle_deg = 0.0;
+}
+
+void ErrorResistanceConfig::validate() const {
+  checkRanges(*this);
+  if (max_scale_ratio != 0.0 && max_scale_ratio < 1.0)
+    throw InvalidArgument("max_scale_ratio = " + formatNumber(max_scale_ratio) +
+                          " must be 0 (off) or at least 1");
 }
 
 void validateKeyframe(const Keyframe& keyframe) {
@@ -83,6 +110,68 @@ bool outsideFrustum(const Eigen::Matrix<double, 3, 5>& normals, const Eigen::Vec
   return (normals.transpose() * centre).minCoeff() < -margin;
 }
 
+/// METHOD.md's matchable test (version 2) for the points of one ordered pair i -> j, in camera-j
+/// coordinates, and a bound on it over a sphere of points, for culling before projecting.
+class MatchableTest {
+ public:
+  MatchableTest(const ErrorResistanceConfig& config, const Eigen::Vector3d& o_i_cam,
+                const PinholeIntrinsics& k_i, const PinholeIntrinsics& k_j)
+      : parallax_(config.max_parallax_deg > 0.0),
+        scale_(config.max_scale_ratio > 0.0),
+        cos_max_parallax_(std::cos(config.max_parallax_deg * M_PI / 180.0)),
+        max_ratio_(config.max_scale_ratio),
+        focal_ratio_(std::sqrt(k_i.fx * k_i.fy) / std::sqrt(k_j.fx * k_j.fy)),
+        o_i_(o_i_cam),
+        baseline_sq_(o_i_cam.squaredNorm()) {}
+
+  bool active() const { return parallax_ || scale_; }
+
+  /// X (camera-j coordinates) is matchable: the angle at X between the rays to O_i and O_j is
+  /// at most max_parallax_deg, and s = (|O_j X| / f_j) / (|O_i X| / f_i) has max(s, 1/s) at most
+  /// max_scale_ratio.
+  bool passes(const Eigen::Vector3d& x) const {
+    const Eigen::Vector3d to_i = o_i_ - x;  // X -> O_i; X -> O_j is -x
+    const double d_j = x.norm(), d_i = to_i.norm();
+    if (parallax_ && !(-x.dot(to_i) >= cos_max_parallax_ * d_i * d_j)) return false;
+    if (scale_) {
+      const double s = d_j / d_i * focal_ratio_;
+      if (!(s <= max_ratio_ && s * max_ratio_ >= 1.0)) return false;
+    }
+    return true;
+  }
+
+  /// False only when no point within `radius` of `centre` (camera-j coordinates) can pass: from
+  /// the ranges of |O_i X| and |O_j X| over the sphere, a lower bound on the parallax (law of
+  /// cosines) and the range of the footprint ratio.
+  bool mayPass(const Eigen::Vector3d& centre, double radius) const {
+    if (!active() || radius < 0.0) return true;
+    const double cj = centre.norm(), ci = (o_i_ - centre).norm();
+    const double margin = radius + 1e-9 * (cj + ci + radius);  // conservative under rounding
+    const double dj_lo = cj - margin, dj_hi = cj + margin;
+    const double di_lo = ci - margin, di_hi = ci + margin;
+    if (!(dj_lo > 0.0) || !(di_lo > 0.0)) return true;  // a camera may be inside: no bound
+    if (scale_) {
+      const double s_lo = dj_lo / di_hi * focal_ratio_, s_hi = dj_hi / di_lo * focal_ratio_;
+      if (s_lo * (1.0 - 1e-12) > max_ratio_ || s_hi * (1.0 + 1e-12) * max_ratio_ < 1.0) return false;
+    }
+    if (parallax_) {
+      // cos(gamma) = (rho + 1/rho) / 2 - B^2 / (2 d_i d_j), rho = d_i / d_j: bounded above by
+      // the larger end of rho's range and the largest product.
+      const double rho_lo = di_lo / dj_hi, rho_hi = di_hi / dj_lo;
+      const double f = 0.5 * std::max(rho_lo + 1.0 / rho_lo, rho_hi + 1.0 / rho_hi);
+      const double cos_upper = f - baseline_sq_ / (2.0 * di_hi * dj_hi);
+      if (cos_upper + 1e-12 < cos_max_parallax_) return false;
+    }
+    return true;
+  }
+
+ private:
+  bool parallax_, scale_;
+  double cos_max_parallax_, max_ratio_, focal_ratio_;
+  Eigen::Vector3d o_i_;
+  double baseline_sq_;
+};
+
 }  // namespace
 
 ErrorResistanceMatrix::View ErrorResistanceMatrix::makeView(Keyframe keyframe) {
@@ -128,17 +217,24 @@ double computeErrorResistance(const ErrorResistanceMatrix::View& view_i,
 
   const Eigen::Matrix3d& r_cw = view_j.world_to_camera;
   const Eigen::Vector3d& o_j = kf_j.pose.position;
-  // Pair-level cull: no point can be visible when X_i's bounding sphere is outside j's frustum.
-  if (outsideFrustum(view_j.frustum_normals, r_cw * (view_i.sphere_centre - o_j),
-                     view_i.sphere_radius))
+  const MatchableTest matchable(config, r_cw * (kf_i.pose.position - o_j), kf_i.intrinsics,
+                                kf_j.intrinsics);
+  // Pair-level culls: no point can count when X_i's bounding sphere is outside j's frustum, or
+  // when no point in it can be matchable.
+  const Eigen::Vector3d sphere_cam = r_cw * (view_i.sphere_centre - o_j);
+  if (outsideFrustum(view_j.frustum_normals, sphere_cam, view_i.sphere_radius) ||
+      !matchable.mayPass(sphere_cam, view_i.sphere_radius))
     return kInfinity;
-  // Group-level cull: keep the groups that may be visible; stop early when they cannot hold
+  // Group-level cull: keep the groups that may count; stop early when they cannot hold
   // enough points to pass the co-visibility gate.
   auto& candidates = scratch.groups;
   candidates.clear();
   Eigen::Index possible = 0;
   for (const auto& g : view_i.groups) {
-    if (outsideFrustum(view_j.frustum_normals, r_cw * (g.centre - o_j), g.radius)) continue;
+    const Eigen::Vector3d centre_cam = r_cw * (g.centre - o_j);
+    if (outsideFrustum(view_j.frustum_normals, centre_cam, g.radius) ||
+        !matchable.mayPass(centre_cam, g.radius))
+      continue;
     candidates.push_back(&g);
     possible += g.end - g.begin;
   }
@@ -164,6 +260,7 @@ double computeErrorResistance(const ErrorResistanceMatrix::View& view_i,
       if (!(u >= 0.0 && v >= 0.0 && u < width && v < height)) continue;
       // Occluded (or in front of the surface j saw): not visible.
       if (depth && occluded(*depth, u, v, p.z(), config.occlusion)) continue;
+      if (matchable.active() && !matchable.passes(p)) continue;
       scratch.points_cam.push_back(p);
     }
   }
@@ -191,11 +288,11 @@ double computeErrorResistance(const Keyframe& view_i, const Keyframe& view_j,
                               const ErrorResistanceConfig& config) {
   ErrorResistanceMatrix::Scratch scratch;
   return computeErrorResistance(ErrorResistanceMatrix::makeView(view_i),
-                                ErrorResistanceMatrix::makeView(view_j), config, scratch);
+                                ErrorResistanceMatrix::makeView(view_j), config.inForce(), scratch);
 }
 
 ErrorResistanceMatrix::ErrorResistanceMatrix(ErrorResistanceConfig config)
-    : config_(std::move(config)) {
+    : config_(config.inForce()) {
   config_.validate();
 }
 
@@ -236,7 +333,8 @@ void ErrorResistanceMatrix::setPoints(ViewId id, Eigen::Matrix3Xd points) {
   table_.replaceRow(id, std::move(row));
 }
 
-void ErrorResistanceMatrix::setConfig(const ErrorResistanceConfig& config) {
+void ErrorResistanceMatrix::setConfig(const ErrorResistanceConfig& requested) {
+  const ErrorResistanceConfig config = requested.inForce();
   config.validate();
   if (config == config_) return;
   config_ = config;

@@ -14,6 +14,14 @@ double secondsSince(std::chrono::steady_clock::time_point start) {
 }
 }  // namespace
 
+namespace {
+/// The parameters as they act: the gate's preset applied (params() reports these).
+ViewSelectorConfig inForce(ViewSelectorConfig config) {
+  config.matrix.applyGate();
+  return config;
+}
+}  // namespace
+
 void ViewSelectorConfig::visitParameters(ParameterVisitor& v) {
   keyframes.visitParameters(v);
   matrix.visitParameters(v);
@@ -21,7 +29,7 @@ void ViewSelectorConfig::visitParameters(ParameterVisitor& v) {
 }
 
 ViewSelector::ViewSelector(ViewSelectorConfig config, std::unique_ptr<PointSource> points)
-    : config_(std::move(config)),
+    : config_(inForce(std::move(config))),
       points_(std::move(points)),
       policy_(config_.keyframes),
       matrix_(config_.matrix) {
@@ -123,7 +131,8 @@ SelectionSnapshot ViewSelector::snapshot() const {
   return makeSnapshot(matrix_, select(), config_.selection, params());
 }
 
-void ViewSelector::setConfig(const ViewSelectorConfig& config) {
+void ViewSelector::setConfig(const ViewSelectorConfig& requested) {
+  const ViewSelectorConfig config = inForce(requested);
   config.validate();
   policy_.setConfig(config.keyframes);
   matrix_.setConfig(config.matrix);

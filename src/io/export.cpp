@@ -24,6 +24,7 @@ ExportResult exportSelection(const std::string& directory, const core::Selection
   result.selection_json = (dir / "selection.json").string();
   result.pairs_txt = (dir / "pairs.txt").string();
   result.plot_png = (dir / "selection.png").string();
+  result.mvs_pair_txt = (dir / "pair.txt").string();
   const std::vector<std::string> names = snapshot.imageNames();
   writeAtomically(result.selection_json, [&](const std::string& tmp) {
     writeSelectionJson(tmp, snapshot, params, options.points);
@@ -31,6 +32,8 @@ ExportResult exportSelection(const std::string& directory, const core::Selection
   writeAtomically(result.pairs_txt, [&](const std::string& tmp) {
     writePairsTxt(tmp, names, snapshot.selection.pairs);
   });
+  writeAtomically(result.mvs_pair_txt,
+                  [&](const std::string& tmp) { writeMvsPairTxt(tmp, snapshot); });
   writeAtomically(result.plot_png, [&](const std::string& tmp) {
     writeSelectionPlot(tmp, snapshot, options.title);
   });

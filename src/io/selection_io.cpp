@@ -153,6 +153,24 @@ void writePairsTxt(const std::string& path, const std::vector<std::string>& imag
   writeFileContents(path, out.str());
 }
 
+void writeMvsPairTxt(const std::string& path, const core::SelectionSnapshot& snapshot) {
+  std::ofstream out(path);
+  if (!out) throw core::IoError("cannot write '" + path + "'");
+  out.precision(9);
+  const auto& sets = snapshot.selection.final_next_views;
+  out << snapshot.size() << '\n';
+  for (size_t i = 0; i < snapshot.size(); ++i) {
+    out << i << '\n';
+    const std::vector<core::ViewId> none;
+    const auto& set = i < sets.size() ? sets[i] : none;
+    out << set.size();
+    for (const core::ViewId j : set)
+      out << ' ' << j << ' ' << 1.0 / snapshot.table.at(static_cast<core::ViewId>(i), j);
+    out << '\n';
+  }
+  if (!out) throw core::IoError("error while writing '" + path + "'");
+}
+
 nlohmann::json readSelectionJson(const std::string& path) {
   std::ifstream in(path);
   if (!in) throw core::IoError("cannot read '" + path + "'");

@@ -13,6 +13,8 @@ void forEachField(Values& r, Config& c, F f) {
   auto& m = c.selector.matrix;
   auto& kf = c.selector.keyframes;
   f(r.k, c.selector.selection.k);
+  f(r.max_parallax_deg, m.max_parallax_deg);
+  f(r.max_scale_ratio, m.max_scale_ratio);
   f(r.min_covisible_points, m.min_covisible_points);
   f(r.min_covisible_ratio, m.min_covisible_ratio);
   f(r.max_view_angle_deg, m.max_view_angle_deg);
@@ -30,6 +32,7 @@ view_selection::ViewSelectionConfig toReconfigure(const NodeConfig& config) {
   forEachField(r, c, [](auto& to, auto& from) { to = from; });
   r.completion = core::toString(config.selector.selection.completion);
   r.keyframe_policy = core::toString(config.selector.keyframes.mode);
+  r.gate = core::nameOf(config.selector.matrix.gate, core::kGateNames);
   return r;
 }
 
@@ -38,6 +41,7 @@ void fromReconfigure(const view_selection::ViewSelectionConfig& values, NodeConf
   forEachField(r, config, [](auto& from, auto& to) { to = from; });
   config.selector.selection.completion = core::completionModeFromString(values.completion);
   config.selector.keyframes.mode = core::keyframeModeFromString(values.keyframe_policy);
+  config.selector.matrix.gate = core::valueOf(values.gate, core::kGateNames, "gate");
 }
 
 LiveReconfigure::LiveReconfigure(const NodeConfig& config, ros::NodeHandle private_nh,

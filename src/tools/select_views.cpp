@@ -64,13 +64,14 @@ options:
   --help                    this text
 
 parameters (the node's ~parameters of the same names, '_' written '-'; defaults shown;
---max-view-angle and --min-rotation are short for the *-deg ones):
+--max-view-angle, --max-parallax and --min-rotation are short for the *-deg ones):
 )";
 
 /// Short option names kept from earlier versions and for typing.
 const std::map<std::string, std::string> kAliases = {
     {"--max-view-angle", "--max-view-angle-deg"},
     {"--min-rotation", "--min-rotation-deg"},
+    {"--max-parallax", "--max-parallax-deg"},
 };
 
 double seconds(std::chrono::steady_clock::time_point since) {

@@ -20,8 +20,33 @@ namespace {
 using test::lookAt;
 using test::vgaIntrinsics;
 
+/// The paper's gate (METHOD.md version 1): every visible point counts, max(10, 0.1 |X_i|).
+ErrorResistanceConfig paperGate() {
+  ErrorResistanceConfig config;
+  config.gate = Gate::kPaper;
+  return config;
+}
+
+/// METHOD.md's matchable test written out with angles, independent of the optimised form.
+bool naiveMatchable(const Eigen::Vector3d& x, const Keyframe& i, const Keyframe& j,
+                    const ErrorResistanceConfig& config) {
+  const Eigen::Vector3d to_i = i.pose.position - x, to_j = j.pose.position - x;
+  if (config.max_parallax_deg > 0.0) {
+    const double angle = std::acos(std::clamp(to_i.dot(to_j) / (to_i.norm() * to_j.norm()), -1.0, 1.0));
+    if (angle * 180.0 / M_PI > config.max_parallax_deg) return false;
+  }
+  if (config.max_scale_ratio > 0.0) {
+    const double f_i = std::sqrt(i.intrinsics.fx * i.intrinsics.fy);
+    const double f_j = std::sqrt(j.intrinsics.fx * j.intrinsics.fy);
+    const double s = (to_j.norm() / f_j) / (to_i.norm() / f_i);
+    if (std::max(s, 1.0 / s) > config.max_scale_ratio) return false;
+  }
+  return true;
+}
+
 /// The definition of METHOD.md written out plainly, independent of the optimised code path.
-double naiveEntry(const Keyframe& i, const Keyframe& j, const ErrorResistanceConfig& config) {
+double naiveEntry(const Keyframe& i, const Keyframe& j, const ErrorResistanceConfig& requested) {
+  const ErrorResistanceConfig config = requested.inForce();
   const double needed =
       std::max<double>(config.min_covisible_points, config.min_covisible_ratio * i.points.cols());
   if (config.max_view_angle_deg > 0.0) {
@@ -42,6 +67,7 @@ double naiveEntry(const Keyframe& i, const Keyframe& j, const ErrorResistanceCon
                                                      config.occlusion.rel_tolerance * pc.z()))
         continue;
     }
+    if (!naiveMatchable(p, i, j, config)) continue;
     values.push_back(pointErrorResistance(p, i.pose.position, j.intrinsics, j.pose));
   }
   if (values.size() < needed) return kInfinity;
@@ -148,6 +174,42 @@ TEST(ErrorResistanceMatrix, OptimisedEntryMatchesNaiveDefinition) {
   EXPECT_GT(infinite, 40);
 }
 
+TEST(ErrorResistanceMatrix, CullsAreConservativeUnderEveryGate) {
+  // The pair- and group-level bounds on parallax and footprint ratio may only skip points that
+  // the per-point test would reject: every entry equals the naive one, for tight and loose gates.
+  const Scene scene = makeScene(17, 18, true);
+  std::vector<ErrorResistanceConfig> configs(8);
+  for (auto& c : configs) c.min_covisible_ratio = 0.1;  // enough finite entries to compare
+  configs[0].gate = Gate::kPaper;
+  configs[1].max_parallax_deg = 10.0;
+  configs[2].max_parallax_deg = 20.0;
+  configs[3].max_parallax_deg = 60.0;
+  configs[4].max_scale_ratio = 1.2;
+  configs[5].max_scale_ratio = 0.0;
+  configs[6].max_parallax_deg = 0.0;
+  configs[7].max_parallax_deg = 0.0;
+  configs[7].max_scale_ratio = 0.0;
+  for (size_t c = 0; c < configs.size(); ++c) {
+    int finite = 0, infinite = 0;
+    for (const auto& a : scene.keyframes) {
+      for (const auto& b : scene.keyframes) {
+        if (&a == &b) continue;
+        const double fast = computeErrorResistance(a, b, configs[c]);
+        const double slow = naiveEntry(a, b, configs[c]);
+        if (std::isfinite(slow)) {
+          ++finite;
+          ASSERT_NEAR(fast, slow, 1e-12 * slow) << "config " << c;
+        } else {
+          ++infinite;
+          ASSERT_EQ(fast, kInfinity) << "config " << c;
+        }
+      }
+    }
+    EXPECT_GT(finite, 10) << "config " << c;
+    EXPECT_GT(infinite, 10) << "config " << c;
+  }
+}
+
 TEST(ErrorResistanceMatrix, IncrementalEqualsFromScratchInAnyInsertionOrder) {
   const Scene scene = makeScene(5, 20, true);
   const size_t n = scene.keyframes.size();
@@ -219,8 +281,45 @@ std::pair<Keyframe, Keyframe> twoViews(int count) {
   return {a, b};
 }
 
+TEST(ErrorResistanceMatrix, MatchableGateCountsOnlyMatchablePoints) {
+  auto [a, b] = twoViews(30);  // 1 m baseline at 3 m: about 19 degrees of parallax
+  ErrorResistanceConfig config;
+  config.max_scale_ratio = 0.0;
+  config.max_parallax_deg = 25.0;
+  EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, config)));
+  config.max_parallax_deg = 15.0;
+  EXPECT_EQ(computeErrorResistance(a, b, config), kInfinity);
+  // gate paper ignores the limits: the paper's visible points count.
+  config.gate = Gate::kPaper;
+  ErrorResistanceConfig version1;  // every visible point counts
+  version1.max_parallax_deg = 0.0;
+  version1.max_scale_ratio = 0.0;
+  EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, config)));
+  EXPECT_EQ(computeErrorResistance(a, b, config), computeErrorResistance(a, b, version1));
+  // Footprint ratio: b twice as far from the points as a (3 m vs 6 m, same focal length).
+  Keyframe far = b;
+  far.pose = lookAt({0.5, 0, -3.0}, {0.5, 0, 3});
+  ErrorResistanceConfig scale;
+  scale.max_parallax_deg = 0.0;
+  scale.max_scale_ratio = 2.2;
+  EXPECT_TRUE(std::isfinite(computeErrorResistance(a, far, scale)));
+  scale.max_scale_ratio = 1.8;
+  EXPECT_EQ(computeErrorResistance(a, far, scale), kInfinity);
+  // The same ratio with b's focal length doubled is a footprint ratio of 1: it counts.
+  far.intrinsics.fx *= 2.0;
+  far.intrinsics.fy *= 2.0;
+  EXPECT_TRUE(std::isfinite(computeErrorResistance(a, far, scale)));
+  // Limits out of range are refused.
+  ErrorResistanceConfig bad;
+  bad.max_scale_ratio = 0.5;
+  EXPECT_THROW(bad.validate(), InvalidArgument);
+  bad.max_scale_ratio = 0.0;
+  bad.max_parallax_deg = 200.0;
+  EXPECT_THROW(bad.validate(), InvalidArgument);
+}
+
 TEST(ErrorResistanceMatrix, CovisibilityGate) {
-  ErrorResistanceConfig config;  // max(10, 0.1 |X_i|)
+  const ErrorResistanceConfig config = paperGate();  // max(10, 0.1 |X_i|)
   {
     auto [a, b] = twoViews(10);
     EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, config)));
@@ -248,30 +347,34 @@ TEST(ErrorResistanceMatrix, OcclusionAgainstTheOtherViewsDepthMap) {
   wall->cell_width = wall->cell_height = 8.0;
   wall->depth.assign(80 * 60, 1.0f);  // b sees a surface 1 m away everywhere: points hidden
   b.depth = wall;
-  EXPECT_EQ(computeErrorResistance(a, b, {}), kInfinity);
+  EXPECT_EQ(computeErrorResistance(a, b, paperGate()), kInfinity);
   // A surface at the points' depth in b (within 3 %) keeps them visible.
   auto same = std::make_shared<DepthMap>(*wall);
   const double z = b.pose.worldToCamera(a.points.col(0)).z();
   same->depth.assign(80 * 60, static_cast<float>(z * 1.02));
   b.depth = same;
-  EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, {})));
+  EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, paperGate())));
   // Unknown depth (0) cannot occlude.
   auto unknown = std::make_shared<DepthMap>(*wall);
   unknown->depth.assign(80 * 60, 0.0f);
   b.depth = unknown;
-  EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, {})));
+  EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, paperGate())));
 }
 
 TEST(ErrorResistanceMatrix, ViewAngleGateAndDiagonal) {
   auto [a, b] = twoViews(30);
   const double angle = std::acos(a.pose.opticalAxis().dot(b.pose.opticalAxis())) * 180.0 / M_PI;
-  ErrorResistanceConfig config;
+  ErrorResistanceConfig config = paperGate();
+  config.gate = Gate::kMatchable;  // the paper's preset would switch the view-angle gate off
+  config.max_parallax_deg = 0.0;
+  config.max_scale_ratio = 0.0;
+  config.min_covisible_ratio = 0.1;
   config.max_view_angle_deg = angle + 0.5;
   EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, config)));
   config.max_view_angle_deg = angle - 0.5;
   EXPECT_EQ(computeErrorResistance(a, b, config), kInfinity);
 
-  ErrorResistanceMatrix matrix;
+  ErrorResistanceMatrix matrix(paperGate());
   matrix.addKeyframe(a);
   matrix.addKeyframe(b);
   EXPECT_EQ(matrix.at(0, 0), kInfinity);
@@ -287,7 +390,7 @@ TEST(ErrorResistanceMatrix, MedianOfEvenCountIsMeanOfMiddleValues) {
     r.push_back(pointErrorResistance(a.points.col(q), a.pose.position, b.intrinsics, b.pose));
   std::sort(r.begin(), r.end());
   ASSERT_LT(r[5], r[6]);  // distinct middle values, so the rule matters
-  EXPECT_DOUBLE_EQ(computeErrorResistance(a, b, {}), 0.5 * (r[5] + r[6]));
+  EXPECT_DOUBLE_EQ(computeErrorResistance(a, b, paperGate()), 0.5 * (r[5] + r[6]));
 }
 
 TEST(ErrorResistanceMatrix, RejectsUnusableKeyframesAndKeepsState) {

@@ -157,5 +157,40 @@ TEST(SelectionIo, PairsTxtForColmap) {
   fs::remove_all(dir);
 }
 
+TEST(SelectionIo, MvsPairTxtListsTheFinalSetsWithInverseErrorResistance) {
+  const ErrorResistanceMatrix m = threeViews();
+  const SelectionSnapshot snap = makeSnapshot(m, selectViews(m.table(), {1, CompletionMode::kPaper}),
+                                              {1, CompletionMode::kPaper});
+  const fs::path dir = freshDir("mvs");
+  writeMvsPairTxt((dir / "pair.txt").string(), snap);
+  std::istringstream in(slurp(dir / "pair.txt"));
+  size_t views = 0;
+  in >> views;
+  ASSERT_EQ(views, 3u);
+  size_t listed = 0;
+  for (size_t i = 0; i < views; ++i) {
+    size_t id = 0, count = 0;
+    in >> id >> count;
+    ASSERT_EQ(id, i);
+    const auto& set = snap.selection.final_next_views[i];
+    ASSERT_EQ(count, set.size()) << "view " << i;
+    for (size_t q = 0; q < count; ++q) {
+      int j = -1;
+      double score = 0.0;
+      in >> j >> score;
+      EXPECT_EQ(j, set[q]) << "view " << i;
+      EXPECT_NEAR(score, 1.0 / m.at(static_cast<ViewId>(i), j), 1e-8 / m.at(static_cast<ViewId>(i), j));
+      if (q > 0) {
+        // Best first: E ascending within the selected k, so scores descend (completion last).
+        EXPECT_TRUE(q >= snap.selection.next_views[i].size() || score <= 1.0 / m.at(static_cast<ViewId>(i), set[q - 1]));
+      }
+      ++listed;
+    }
+  }
+  EXPECT_TRUE(in.good() || in.eof());
+  EXPECT_GT(listed, 0u);
+  EXPECT_THROW(writeMvsPairTxt((dir / "no" / "such" / "pair.txt").string(), snap), IoError);
+}
+
 }  // namespace
 }  // namespace view_selection

@@ -63,7 +63,7 @@ TEST(ViewSelector, FramesBecomeKeyframesAndSelectionCoversThem) {
   EXPECT_LT(selector.matrix().table().finiteCount(), 12u * 11);
   const auto params = toJson(selector.params());
   EXPECT_EQ(params.at("k"), 5);
-  EXPECT_EQ(params.at("completion"), "paper");
+  EXPECT_EQ(params.at("completion"), toString(SelectionConfig{}.completion));
   EXPECT_EQ(params.at("point_source"), "depth");
   EXPECT_EQ(params.at("keyframe_policy"), "every_frame");
 }

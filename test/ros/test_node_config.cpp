@@ -46,7 +46,8 @@ TEST(NodeConfig, DefaultsAreTheCoresAndTheDocumentedOnes) {
   EXPECT_DOUBLE_EQ(c.selector.keyframes.min_translation, defaults.keyframes.min_translation);
   EXPECT_DOUBLE_EQ(c.selector.keyframes.min_rotation_deg, defaults.keyframes.min_rotation_deg);
   EXPECT_EQ(c.selector.selection.k, defaults.selection.k);
-  EXPECT_EQ(c.selector.selection.completion, core::CompletionMode::kPaper);
+  EXPECT_EQ(c.selector.selection.completion, core::CompletionMode::kReachable);  // by measurement
+  EXPECT_EQ(c.selector.matrix.gate, core::Gate::kMatchable);
   EXPECT_EQ(c.selector.matrix.min_covisible_points, defaults.matrix.min_covisible_points);
   EXPECT_DOUBLE_EQ(c.selector.matrix.min_covisible_ratio, defaults.matrix.min_covisible_ratio);
   EXPECT_DOUBLE_EQ(c.selector.matrix.max_view_angle_deg, 0.0);

@@ -93,13 +93,16 @@ TEST(Parameters, ReconfigureDefaultsAndRangesAreTheStructs) {
   changed.selector.selection.completion = core::CompletionMode::kReachable;
   changed.selector.keyframes.mode = core::KeyframeMode::kEveryNth;
   changed.publish_period = 2.5;
+  changed.selector.matrix.gate = core::Gate::kPaper;
+  changed.selector.matrix.max_parallax_deg = 25.0;
   ros_node::NodeConfig back;
   ros_node::fromReconfigure(ros_node::toReconfigure(changed), back);
   EXPECT_EQ(core::paramsOf(back), core::paramsOf(changed));
   // Ranges of the numbers, names of the choices.
   const auto range = ranges();
   const std::map<std::string, std::string> choices = {
-      {"completion", "paper reachable"}, {"keyframe_policy", "every_frame every_nth motion"}};
+      {"completion", "paper reachable"}, {"keyframe_policy", "every_frame every_nth motion"},
+                                                      {"gate", "paper matchable"}};
   for (const auto& description : Config::__getParamDescriptions__()) {
     const std::string& name = description->name;
     if (description->type == "str") {

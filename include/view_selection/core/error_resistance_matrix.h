@@ -14,21 +14,46 @@
 
 namespace view_selection::core {
 
+/// Which points count for E[i][j] (METHOD.md version 2).
+enum class Gate {
+  kPaper,      ///< the paper's: every point of X_i visible in j (version 1 of METHOD.md)
+  kMatchable,  ///< ours: visible in j, and parallax and pixel-footprint ratio within limits
+};
+inline constexpr EnumNames<Gate, 2> kGateNames{
+    {{Gate::kPaper, "paper"}, {Gate::kMatchable, "matchable"}}};
+
 /// Parameters of E (METHOD.md "The matrix E"); the defaults are the values in force by default.
 struct ErrorResistanceConfig {
+  /// paper: the five values below are the paper's (0, 0, 10, 0.1, 0) whatever they are set to;
+  /// matchable: they are used as set. applyGate() puts the paper's in.
+  Gate gate = Gate::kMatchable;
+  /// A point counts only where the angle at it between the rays to O_i and O_j is at most this
+  /// [deg]; 0 switches the test off.
+  double max_parallax_deg = 15.0;
+  /// ... and where s = (|O_j X| / f_j) / (|O_i X| / f_i) has max(s, 1/s) at most this; 0: off.
+  double max_scale_ratio = 1.6;
   /// E[i][j] is +inf when fewer than max(min_covisible_points, min_covisible_ratio * |X_i|)
-  /// points of X_i are visible in j.
+  /// points of X_i count.
   int min_covisible_points = 10;
-  double min_covisible_ratio = 0.1;
+  double min_covisible_ratio = 0.4;
   /// Optional gate: +inf when the optical axes differ by more than this [deg]; 0 disables it
   /// (the paper's mode).
   double max_view_angle_deg = 0.0;
   OcclusionConfig occlusion;  ///< visibility against j's depth map
 
+  /// With gate paper, sets the gate's five values to the paper's; with matchable, nothing.
+  void applyGate();
+  /// The values in force: a copy with applyGate() done.
+  ErrorResistanceConfig inForce() const {
+    ErrorResistanceConfig c = *this;
+    c.applyGate();
+    return c;
+  }
+
   bool operator==(const ErrorResistanceConfig& o) const { return paramsOf(*this) == paramsOf(o); }
   void visitParameters(ParameterVisitor& v);
   /// Throws InvalidArgument naming the first field out of range.
-  void validate() const { checkRanges(*this); }
+  void validate() const;
 };
 
 /// E[i][j] computed from scratch for one ordered pair: the median of r(X; i -> j) over the
@@ -101,8 +126,9 @@ class ErrorResistanceMatrix {
   size_t pairs_evaluated_ = 0;
 };
 
-/// The pair computation behind both computeErrorResistance and the matrix. `evaluated` is set
-/// when the points had to be projected (the pair was not culled by a pair-level test).
+/// The pair computation behind both computeErrorResistance and the matrix, with `config` as it
+/// acts (ErrorResistanceConfig::inForce()). `evaluated` is set when the points had to be
+/// projected (the pair was not culled by a pair-level test).
 double computeErrorResistance(const ErrorResistanceMatrix::View& view_i,
                               const ErrorResistanceMatrix::View& view_j,
                               const ErrorResistanceConfig& config,

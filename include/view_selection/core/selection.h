@@ -28,7 +28,7 @@ inline CompletionMode completionModeFromString(const std::string& text) {
 
 struct SelectionConfig {
   int k = 5;  ///< size of each next view set
-  CompletionMode completion = CompletionMode::kPaper;
+  CompletionMode completion = CompletionMode::kReachable;
 
   void visitParameters(ParameterVisitor& v);
   /// Throws InvalidArgument naming the first field out of range.

@@ -1,5 +1,5 @@
 // The export that view_selection_node's ~export and select_views share: selection.json, pairs.txt
-// and selection.png of one snapshot, each written atomically.
+// pair.txt (MVS) and selection.png of one snapshot, each written atomically.
 #pragma once
 
 #include "view_selection/core/error_resistance_matrix.h"
@@ -21,9 +21,11 @@ struct ExportResult {
   std::string selection_json;  ///< paths written
   std::string pairs_txt;
   std::string plot_png;
+  std::string mvs_pair_txt;  ///< pair.txt for MVSNet-family tools
 };
 
-/// Creates `directory` if missing and writes the three files into it. Each file is complete or
+/// Creates `directory` if missing and writes selection.json, pairs.txt, pair.txt (MVS) and
+/// selection.png into it. Each file is complete or
 /// left as it was (io::writeAtomically). Throws core::IoError naming what failed.
 ExportResult exportSelection(const std::string& directory, const core::SelectionSnapshot& snapshot,
                              const nlohmann::json& params, const ExportOptions& options = {});

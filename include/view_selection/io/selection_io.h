@@ -37,6 +37,12 @@ void writeSelectionJson(const std::string& path, const core::ErrorResistanceMatr
 void writePairsTxt(const std::string& path, const std::vector<std::string>& image_names,
                    const std::vector<std::pair<core::ViewId, core::ViewId>>& pairs);
 
+/// The view-pair file of the MVSNet family of MVS tools (MVSNet, CasMVSNet, ...): the view count,
+/// then for each view its id and "n id score id score ...", the final next view set best first.
+/// Ids are keyframe ids (the order of selection.json's keyframes); score = 1 / E[i][j] [1/m,
+/// scene units], higher is better as those tools expect. Throws IoError when it cannot write.
+void writeMvsPairTxt(const std::string& path, const core::SelectionSnapshot& snapshot);
+
 /// Reads a selection.json back (for tests and tools); throws IoError naming the file.
 nlohmann::json readSelectionJson(const std::string& path);
 
