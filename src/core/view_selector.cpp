@@ -168,7 +168,7 @@ void ViewSelector::restore(const ViewSelectorState& state) {
   matrix.restore(state.keyframes, state.rows);
   KeyframePolicy policy(state.config.keyframes);
   policy.restore(state.policy);
-  config_ = state.config;
+  config_ = inForce(state.config);
   matrix_ = std::move(matrix);
   policy_ = std::move(policy);
   last_stamp_ = state.last_stamp;

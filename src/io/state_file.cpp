@@ -314,8 +314,7 @@ core::Params readParams(Reader& r, int depth = 0) {
   return params;
 }
 
-/// Fills a config from saved parameters by name; names the file lacks keep their defaults (a
-/// file from before a parameter existed behaves as it did).
+/// Fills a config from saved parameters by name; names the file lacks keep their defaults.
 class ParamsReader : public core::ParameterVisitor {
  public:
   ParamsReader(const core::Params& params, Reader& r) : r_(r) {

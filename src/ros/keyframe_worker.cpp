@@ -53,8 +53,11 @@ void KeyframeWorker::restoreLoaded() {
   if (!loaded) return;
   try {
     io::restoreSession(*selector_, *loaded);
-    // The node's parameters win over the saved ones, as a live reconfigure would apply them.
-    if (core::paramsOf(selector_->config()) != core::paramsOf(config_.selector)) {
+    // The node's parameters win over the saved ones, as a live reconfigure would apply them
+    // (compared as they act: the saved ones are the values in force, the gate's preset applied).
+    core::ViewSelectorConfig wanted = config_.selector;
+    wanted.matrix.applyGate();
+    if (core::paramsOf(selector_->config()) != core::paramsOf(wanted)) {
       ROS_INFO(
           "view_selection: the saved session used other method parameters; applying this "
           "node's (the matrix is recomputed where its gates changed)");
