@@ -6,6 +6,7 @@
 #include <cv_bridge/cv_bridge.h>
 #include <sensor_msgs/image_encodings.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -52,6 +53,12 @@ void checkImageMessage(const sensor_msgs::Image& msg, const std::string& what) {
   if (msg.step < row_bytes) {
     s << what << " step " << msg.step << " is less than width " << msg.width << " x "
       << channels * (bit_depth / 8) << " bytes of '" << msg.encoding << "'";
+    throw core::InvalidInput(s.str());
+  }
+  // OpenCV (cv_bridge too) reads rows only at whole elements apart (fuzz/regressions/messages).
+  if (msg.step % static_cast<uint32_t>(std::max(1, bit_depth / 8)) != 0) {
+    s << what << " step " << msg.step << " is not a multiple of its " << bit_depth / 8
+      << "-byte elements ('" << msg.encoding << "')";
     throw core::InvalidInput(s.str());
   }
   if (msg.data.size() < static_cast<uint64_t>(msg.step) * msg.height) {
@@ -115,8 +122,12 @@ cv::Mat imageView(const sensor_msgs::Image& msg) {
   } catch (const std::exception& e) {
     throw core::InvalidInput("cannot read encoding '" + msg.encoding + "': " + e.what());
   }
-  return cv::Mat(static_cast<int>(msg.height), static_cast<int>(msg.width), type,
-                 const_cast<uint8_t*>(msg.data.data()), msg.step);
+  try {
+    return cv::Mat(static_cast<int>(msg.height), static_cast<int>(msg.width), type,
+                   const_cast<uint8_t*>(msg.data.data()), msg.step);
+  } catch (const cv::Exception& e) {
+    throw core::InvalidInput("cannot view the '" + msg.encoding + "' image: " + e.what());
+  }
 }
 
 namespace {

@@ -31,6 +31,7 @@
 #include <std_srvs/Trigger.h>
 #include <tf2_msgs/TFMessage.h>
 #include <visualization_msgs/MarkerArray.h>
+#include <boost/make_shared.hpp>
 
 #include <unistd.h>
 
@@ -302,6 +303,14 @@ TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames
     Send s = next(good[2]);
     s.depth = cv_bridge::CvImage(s.image->header, sensor_msgs::image_encodings::BGR8, good[2].image)
                   .toImageMsg();
+    ASSERT_TRUE(sendBad(s, "bad_depth"));
+  }
+  {  // 32FC1 depth whose rows are not whole floats apart (found by fuzz_messages: OpenCV threw)
+    Send s = next(good[2]);
+    auto depth = boost::make_shared<sensor_msgs::Image>(*s.depth);
+    depth->step = depth->width * 4 + 2;
+    depth->data.assign(static_cast<size_t>(depth->step) * depth->height, 0);
+    s.depth = depth;
     ASSERT_TRUE(sendBad(s, "bad_depth"));
   }
   ASSERT_TRUE(sendGood(2));

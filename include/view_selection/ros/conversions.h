@@ -25,13 +25,13 @@ namespace view_selection::ros_node {
 core::PinholeIntrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& info);
 
 /// Checks an image message's shape before anything reads its pixels: non-zero size, a known
-/// encoding, step >= width * pixel size and data holding step * height bytes. `what` names the
-/// input in the message ("image", "depth"); for "image" the encoding must also be a colour, grey
-/// or Bayer one. Throws InvalidInput.
+/// encoding, step >= width * pixel size and a whole number of channel elements, and data
+/// holding step * height bytes. `what` names the input in the message ("image", "depth"); for
+/// "image" the encoding must also be a colour, grey or Bayer one. Throws InvalidInput.
 void checkImageMessage(const sensor_msgs::Image& msg, const std::string& what);
 
 /// A cv::Mat header over the message's pixels (no copy), in the message's own encoding.
-/// The message must outlive the Mat. Call checkImageMessage first.
+/// The message must outlive the Mat. Call checkImageMessage first (InvalidInput otherwise).
 cv::Mat imageView(const sensor_msgs::Image& msg);
 
 /// The image as the core wants it: BGR (8 bit) for colour encodings, grey for mono8.
