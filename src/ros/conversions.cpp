@@ -96,6 +96,8 @@ Eigen::Matrix3Xd mapPointsFromCloud(const sensor_msgs::PointCloud2& cloud) {
   }
   if (cloud.is_bigendian) throw core::InvalidInput("the cloud is big-endian");
   const uint64_t width = cloud.width, height = cloud.height;
+  // No points: done (not 4e9 empty rows, fuzz/regressions/messages/cloud_zero_width_4e9_rows).
+  if (width == 0 || height == 0) return Eigen::Matrix3Xd(3, 0);
   if (static_cast<uint64_t>(cloud.point_step) * width > cloud.row_step ||
       static_cast<uint64_t>(cloud.row_step) * height > cloud.data.size())
     throw core::InvalidInput("the cloud's data is shorter than its width, height and steps say");
