@@ -49,10 +49,13 @@ void checkImageMessage(const sensor_msgs::Image& msg, const std::string& what) {
   }
   if (channels <= 0 || bit_depth <= 0)
     throw core::InvalidInput(what + " has unusable encoding '" + msg.encoding + "'");
-  const uint64_t row_bytes = static_cast<uint64_t>(msg.width) * channels * (bit_depth / 8);
+  // In 64 bits: "8UC<n>" encodings may name any channel count (fuzz/regressions/messages).
+  const uint64_t pixel_bytes =
+      static_cast<uint64_t>(channels) * static_cast<uint64_t>(bit_depth / 8);
+  const uint64_t row_bytes = static_cast<uint64_t>(msg.width) * pixel_bytes;
   if (msg.step < row_bytes) {
-    s << what << " step " << msg.step << " is less than width " << msg.width << " x "
-      << channels * (bit_depth / 8) << " bytes of '" << msg.encoding << "'";
+    s << what << " step " << msg.step << " is less than width " << msg.width << " x " << pixel_bytes
+      << " bytes of '" << msg.encoding << "'";
     throw core::InvalidInput(s.str());
   }
   // OpenCV (cv_bridge too) reads rows only at whole elements apart (fuzz/regressions/messages).
