@@ -57,12 +57,10 @@ void validateKeyframe(const Keyframe& keyframe) {
   if (!keyframe.pose.isValid())
     throw InvalidInput("keyframe pose is not finite or its quaternion is not of unit length");
   if (!keyframe.points.allFinite()) throw InvalidInput("keyframe has non-finite sample points");
-  if (keyframe.depth) {
-    const DepthMap& d = *keyframe.depth;
-    if (d.depth.size() != static_cast<size_t>(d.cols) * static_cast<size_t>(d.rows) ||
-        !(d.cell_width > 0.0) || !(d.cell_height > 0.0))
-      throw InvalidInput("keyframe depth map is inconsistent (size does not match cols x rows)");
-  }
+  if (keyframe.depth && !keyframe.depth->isConsistent())
+    throw InvalidInput(
+        "keyframe depth map is inconsistent (size does not match cols x rows, or a cell or depth "
+        "is not a positive finite number)");
 }
 
 namespace {
@@ -362,16 +360,21 @@ std::vector<TableEntry> ErrorResistanceMatrix::computeRow(ViewId id) {
   return row;
 }
 
+void ErrorResistanceMatrix::index(ViewId id) {
+  const View& v = views_[static_cast<size_t>(id)];
+  max_reach_ = std::max(max_reach_, v.reach);
+  min_focal_ = id == 0 ? v.focal : std::min(min_focal_, v.focal);
+  max_focal_ = std::max(max_focal_, v.focal);
+  grid_.insert(id, v.keyframe.pose.position);
+}
+
 ViewId ErrorResistanceMatrix::addKeyframe(Keyframe keyframe) {
   validateKeyframe(keyframe);
   views_.push_back(makeView(std::move(keyframe)));
   const auto n = static_cast<ViewId>(views_.size() - 1);
   table_.resize(views_.size());
   const View& added = views_.back();
-  max_reach_ = std::max(max_reach_, added.reach);
-  min_focal_ = n == 0 ? added.focal : std::min(min_focal_, added.focal);
-  max_focal_ = std::max(max_focal_, added.focal);
-  grid_.insert(n, added.keyframe.pose.position);
+  index(n);
   candidates(n, true, candidates_);
   for (const ViewId j : candidates_) table_.set(n, j, entry(added, views_[static_cast<size_t>(j)]));
   candidates(n, false, candidates_);
@@ -397,6 +400,37 @@ void ErrorResistanceMatrix::setConfig(const ErrorResistanceConfig& requested) {
   config_ = config;
   for (size_t i = 0; i < views_.size(); ++i)
     table_.replaceRow(static_cast<ViewId>(i), computeRow(static_cast<ViewId>(i)));
+}
+
+void ErrorResistanceMatrix::restore(std::vector<Keyframe> keyframes,
+                                    const std::vector<std::vector<TableEntry>>& rows) {
+  if (rows.size() != keyframes.size())
+    throw InvalidInput("saved matrix has " + std::to_string(rows.size()) + " rows for " +
+                       std::to_string(keyframes.size()) + " keyframes");
+  const size_t n = keyframes.size();
+  for (size_t i = 0; i < n; ++i) {
+    validateKeyframe(keyframes[i]);
+    std::vector<bool> seen(n, false);
+    for (const TableEntry& e : rows[i]) {
+      if (e.view < 0 || static_cast<size_t>(e.view) >= n || static_cast<size_t>(e.view) == i ||
+          seen[static_cast<size_t>(e.view)] || !std::isfinite(e.value) || e.value < 0.0)
+        throw InvalidInput("saved matrix row " + std::to_string(i) +
+                           " has an invalid entry (column " + std::to_string(e.view) + ")");
+      seen[static_cast<size_t>(e.view)] = true;
+    }
+  }
+  std::vector<View> views;
+  views.reserve(n);
+  for (Keyframe& k : keyframes) views.push_back(makeView(std::move(k)));
+  ErrorResistanceTable table(n);
+  for (size_t i = 0; i < n; ++i) table.replaceRow(static_cast<ViewId>(i), rows[i]);
+  views_ = std::move(views);
+  table_ = std::move(table);
+  pairs_evaluated_ = 0;
+  // What insertion's candidate search needs of the views so far.
+  grid_.clear();
+  max_reach_ = min_focal_ = max_focal_ = 0.0;
+  for (size_t i = 0; i < views_.size(); ++i) index(static_cast<ViewId>(i));
 }
 
 void ErrorResistanceMatrix::clear() {

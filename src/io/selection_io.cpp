@@ -4,6 +4,8 @@
 #include "view_selection/core/exceptions.h"
 
 #include <cmath>
+#include "view_selection/io/atomic_file.h"
+
 #include <fstream>
 #include <sstream>
 
@@ -171,11 +173,10 @@ nlohmann::json selectionToJson(const core::ErrorResistanceMatrix& matrix,
 void writeSelectionJson(const std::string& path, const core::SelectionSnapshot& snapshot,
                         const nlohmann::json& params, const core::ErrorResistanceMatrix* points,
                         JsonFormat format) {
-  std::ofstream out(path);
-  if (!out) throw core::IoError("cannot write '" + path + "'");
-  writeSelectionJson(out, snapshot, params, points, format);
-  out.flush();
-  if (!out) throw core::IoError("error while writing '" + path + "'");
+  // Streamed to the file: the system's reason on failure (a full disk, ...).
+  writeFileStreaming(path, [&](std::ostream& out) {
+    writeSelectionJson(out, snapshot, params, points, format);
+  });
 }
 
 void writeSelectionJson(const std::string& path, const core::ErrorResistanceMatrix& matrix,
@@ -197,30 +198,28 @@ void writePairsTxt(const std::string& path, const std::vector<std::string>& imag
                             " is empty or contains whitespace, which COLMAP cannot read");
     }
   }
-  std::ofstream out(path);
-  if (!out) throw core::IoError("cannot write '" + path + "'");
+  std::ostringstream out;
   for (const auto& [a, b] : pairs)
     out << image_names[static_cast<size_t>(a)] << ' ' << image_names[static_cast<size_t>(b)]
         << '\n';
-  if (!out) throw core::IoError("error while writing '" + path + "'");
+  writeFileContents(path, out.str());
 }
 
 void writeMvsPairTxt(const std::string& path, const core::SelectionSnapshot& snapshot) {
-  std::ofstream out(path);
-  if (!out) throw core::IoError("cannot write '" + path + "'");
-  out.precision(9);
-  const auto& sets = snapshot.selection.final_next_views;
-  out << snapshot.size() << '\n';
-  for (size_t i = 0; i < snapshot.size(); ++i) {
-    out << i << '\n';
-    const std::vector<core::ViewId> none;
-    const auto& set = i < sets.size() ? sets[i] : none;
-    out << set.size();
-    for (const core::ViewId j : set)
-      out << ' ' << j << ' ' << 1.0 / snapshot.table.at(static_cast<core::ViewId>(i), j);
-    out << '\n';
-  }
-  if (!out) throw core::IoError("error while writing '" + path + "'");
+  writeFileStreaming(path, [&](std::ostream& out) {
+    out.precision(9);
+    const auto& sets = snapshot.selection.final_next_views;
+    out << snapshot.size() << '\n';
+    for (size_t i = 0; i < snapshot.size(); ++i) {
+      out << i << '\n';
+      const std::vector<core::ViewId> none;
+      const auto& set = i < sets.size() ? sets[i] : none;
+      out << set.size();
+      for (const core::ViewId j : set)
+        out << ' ' << j << ' ' << 1.0 / snapshot.table.at(static_cast<core::ViewId>(i), j);
+      out << '\n';
+    }
+  });
 }
 
 nlohmann::json readSelectionJson(const std::string& path) {

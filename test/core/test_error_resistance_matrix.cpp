@@ -12,6 +12,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
+#include <limits>
 #include <numeric>
 #include <random>
 #include "support/layers.h"
@@ -434,6 +436,27 @@ TEST(ErrorResistanceMatrix, OcclusionAgainstTheOtherViewsDepthMap) {
   unknown->depth.assign(80 * 60, 0.0f);
   b.depth = unknown;
   EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, paperGate())));
+}
+
+// The lookup is defined for any pixel and any consistent map (a state file may hold odd cells).
+TEST(ErrorResistanceMatrix, DepthMapLookupIsDefinedForAnyPixel) {
+  DepthMap map;
+  map.cols = 4;
+  map.rows = 3;
+  map.cell_width = map.cell_height = 8.0;
+  map.depth.assign(12, 2.0f);
+  map.depth[2 * 4 + 3] = 5.0f;
+  EXPECT_EQ(map.at(31.9, 23.9), 5.0f);
+  EXPECT_EQ(map.at(0.0, 0.0), 2.0f);
+  EXPECT_EQ(map.at(32.0, 0.0), 0.0f);
+  EXPECT_EQ(map.at(-0.5, 0.0), 0.0f);
+  EXPECT_EQ(map.at(0.0, 1e300), 0.0f);
+  EXPECT_EQ(map.at(std::nan(""), 1.0), 0.0f);
+  EXPECT_EQ(map.at(1.0, std::numeric_limits<double>::infinity()), 0.0f);
+  map.cell_width = map.cell_height = 1e-256;  // positive and finite: consistent, and tiny
+  ASSERT_TRUE(map.isConsistent());
+  EXPECT_EQ(map.at(100.0, 100.0), 0.0f);
+  EXPECT_EQ(map.at(0.0, 0.0), 2.0f);
 }
 
 TEST(ErrorResistanceMatrix, ViewAngleGateAndDiagonal) {

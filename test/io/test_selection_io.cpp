@@ -9,6 +9,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <random>
 #include <sstream>
 #include "support/layers.h"
@@ -111,6 +112,34 @@ TEST(SelectionIo, CompletionAndNullStartAreWritten) {
   const auto doc = readSelectionJson((dir / "s.json").string());
   EXPECT_TRUE(doc["start_view"].is_null());
   EXPECT_TRUE(doc["keyframes"].empty());
+  ASSERT_TRUE(doc["completed"].is_array());
+  EXPECT_TRUE(doc["completed"].empty());
+
+  // k = 1: views 0 and 1 choose each other, view 2 chooses 0 but no set reaches 2, so
+  // completion must bring it back; the file must say which view went into which set.
+  const double inf = std::numeric_limits<double>::infinity();
+  SelectionSnapshot snapshot;
+  snapshot.table =
+      ErrorResistanceTable::fromDense({{inf, 1.0, 3.0}, {1.0, inf, 4.0}, {2.0, 5.0, inf}});
+  snapshot.config.k = 1;
+  snapshot.config.completion = CompletionMode::kPaper;
+  for (int i = 0; i < 3; ++i) {
+    KeyframeSummary k;
+    k.stamp = i;
+    k.image_name = std::to_string(i) + ".png";
+    k.intrinsics = vgaIntrinsics();
+    snapshot.keyframes.push_back(k);
+  }
+  snapshot.selection = selectViews(snapshot.table, snapshot.config);
+  ASSERT_FALSE(snapshot.selection.completed.empty()) << "the example must need completion";
+  writeSelectionJson((dir / "c.json").string(), snapshot, {});
+  const auto completed = readSelectionJson((dir / "c.json").string())["completed"];
+  ASSERT_EQ(completed.size(), snapshot.selection.completed.size());
+  for (size_t q = 0; q < completed.size(); ++q) {
+    EXPECT_EQ(completed[q]["view"], snapshot.selection.completed[q].view);
+    EXPECT_EQ(completed[q]["added_to"], snapshot.selection.completed[q].added_to);
+  }
+  EXPECT_EQ(completed[0]["view"], 2);
   fs::remove_all(dir);
 }
 

@@ -74,6 +74,11 @@ class ErrorResistanceMatrix {
   void setPoints(ViewId id, Eigen::Matrix3Xd points);
   /// Forgets every keyframe.
   void clear();
+  /// Replaces everything with saved keyframes and their finite rows of E (rows[i]: entries of
+  /// row i, any order), without recomputing an entry: a saved session continues exactly. Throws
+  /// InvalidInput (nothing changes then) for an invalid keyframe or entry (unknown column, the
+  /// diagonal, a repeated column, a non-finite or negative value).
+  void restore(std::vector<Keyframe> keyframes, const std::vector<std::vector<TableEntry>>& rows);
   /// New parameters (throws InvalidArgument; nothing changes then); when they differ from the
   /// current ones, every entry is recomputed with them.
   void setConfig(const ErrorResistanceConfig& config);
@@ -122,6 +127,8 @@ class ErrorResistanceMatrix {
   /// footprint-ratio gate's reach bound through the camera grid, or every view without it.
   /// Ascending ids, `view`'s own excluded.
   void candidates(ViewId id, bool row, std::vector<ViewId>& out);
+  /// Adds view `id` to the camera grid and the reach and focal-length bounds.
+  void index(ViewId id);
   /// The row of `id` from scratch, over its candidates.
   std::vector<TableEntry> computeRow(ViewId id);
 

@@ -42,6 +42,16 @@ struct FrameResult {
   double matrix_seconds = 0.0;       ///< time inserting into the matrix (row, column, updates)
 };
 
+/// Everything of a ViewSelector but its point source, for saving a session and continuing it
+/// exactly (io/state_file saves it with the point source's own state).
+struct ViewSelectorState {
+  ViewSelectorConfig config;
+  std::vector<Keyframe> keyframes;            ///< by id, with points and occlusion depth maps
+  std::vector<std::vector<TableEntry>> rows;  ///< E's finite entries, row by row
+  KeyframePolicy::State policy;
+  std::optional<double> last_stamp;  ///< of the last valid frame offered
+};
+
 class ViewSelector {
  public:
   /// Takes ownership of the point source (points::makePointSource makes one by name). Throws
@@ -61,6 +71,12 @@ class ViewSelector {
   /// The keyframes, E, select() and params() together, for outputs.
   SelectionSnapshot snapshot() const;
   void reset();
+  /// The whole state but the point source's (copies the keyframes; depth maps are shared).
+  ViewSelectorState state() const;
+  /// Continues from a saved state, with its config: keyframes and E as saved (no entry
+  /// recomputed), the policy and the last stamp. The point source is the caller's to restore.
+  /// Throws InvalidArgument / InvalidInput (nothing changes then).
+  void restore(const ViewSelectorState& state);
   /// New parameters for what comes next (throws InvalidArgument; nothing changes then): the
   /// keyframe policy keeps its place, the matrix is recomputed only when its parameters differ,
   /// the selection follows. Keyframes and their points stay.

@@ -34,6 +34,10 @@ struct NodeConfig {
   double publish_period = 0.5;        ///< [s, wall] minimum interval between ~selection messages
   bool save_keyframe_images = false;  ///< keep keyframe images for ~export
   double marker_scale = 0.1;          ///< frustum depth in RViz [m, scene units]
+  /// The session is saved here (on shutdown, every autosave_keyframes keyframes, ~save_state)
+  /// and continued from it at start; "" = off; relative to ROS_HOME (default ~/.ros).
+  std::string state_file;
+  int autosave_keyframes = 10;  ///< 0: save only on shutdown and ~save_state
 
   core::ViewSelectorConfig selector;       ///< keyframe policy, matrix gates, selection
   points::PointSourceParams point_params;  ///< each point source's parameters
