@@ -319,21 +319,11 @@ SetView SelectionCache::finalSet(ViewId i) const {
 }
 
 void SelectionCache::completePaper(const ErrorResistanceTable& e) {
-  Selection& out = selection_;
-  for (size_t x = 0; x < e.size(); ++x) {
-    if (visited_[x]) continue;
-    const ViewId a = bestPredecessor(e, static_cast<ViewId>(x), nullptr);
-    if (a < 0) {
-      out.isolated.push_back(static_cast<ViewId>(x));
-      continue;
-    }
-    auto& set = out.final_next_views[static_cast<size_t>(a)];
-    if (std::find(set.begin(), set.end(), static_cast<ViewId>(x)) == set.end()) {
-      set.push_back(static_cast<ViewId>(x));
-      extended_rows_.push_back(a);
-      extended_[static_cast<size_t>(a)] = 1;
-    }
-    out.completed.push_back({static_cast<ViewId>(x), a});
+  // The definition's own paper completion (it traverses nothing), then the rows it lengthened.
+  view_selection::core::completePaper(e, visited_, selection_);
+  for (const CompletedView& c : selection_.completed) {
+    extended_rows_.push_back(c.added_to);
+    extended_[static_cast<size_t>(c.added_to)] = 1;
   }
 }
 
