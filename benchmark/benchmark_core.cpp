@@ -9,11 +9,14 @@
 #include "view_selection/core/error_resistance.h"
 #include "view_selection/core/error_resistance_matrix.h"
 #include "view_selection/core/selection.h"
+#include "view_selection/core/selection_snapshot.h"
 #include "view_selection/eval/reference_error_resistance.h"
 
 #include <benchmark/benchmark.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <fstream>
 #include <map>
 #include <memory>
 #include <random>
@@ -152,6 +155,26 @@ void BM_ErrorResistanceClosedForm(benchmark::State& state) {
 }
 BENCHMARK(BM_ErrorResistanceClosedForm);
 
+void BM_ErrorResistanceBatched(benchmark::State& state) {
+  // The form the matrix uses: one pair's points as arrays, vectorised.
+  const PointSet s = pointSet();
+  const PairErrorResistance pair(s.pose_i.position, s.k, s.pose_j);
+  std::vector<double> x, y, z, out(s.world.size());
+  for (const auto& p : s.world) {
+    const Eigen::Vector3d c = s.pose_j.worldToCamera(p);
+    x.push_back(c.x());
+    y.push_back(c.y());
+    z.push_back(c.z());
+  }
+  for (auto _ : state) {
+    pair.evaluate(x.data(), y.data(), z.data(), x.size(), out.data());
+    benchmark::DoNotOptimize(out.data());
+    benchmark::ClobberMemory();
+  }
+  state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(x.size()));
+}
+BENCHMARK(BM_ErrorResistanceBatched);
+
 void BM_ErrorResistanceClosedFormPerCall(benchmark::State& state) {
   // Including the per-pair set-up and the world-to-camera transform on every call.
   const PointSet s = pointSet();
@@ -267,6 +290,140 @@ BENCHMARK(BM_CorrectPosesCorridor)
     ->ArgsProduct({{2000}, {10, 100}, {1, 0}, {1, 0}})
     ->ArgNames({"n", "percent", "contiguous", "matchable"})
     ->Unit(benchmark::kMillisecond);
+
+// --- at scale: 10k to 100k keyframes ----------------------------------------------------------
+
+/// Resident memory of this process [bytes] (/proc/self/statm).
+double residentBytes() {
+  std::ifstream statm("/proc/self/statm");
+  double pages = 0.0, resident = 0.0;
+  statm >> pages >> resident;
+  return resident * static_cast<double>(sysconf(_SC_PAGESIZE));
+}
+
+/// The matrix grown to n keyframes once per n (the default, matchable gate), with the resident
+/// memory it added.
+struct Grown {
+  std::unique_ptr<ErrorResistanceMatrix> matrix;
+  std::mt19937 rng{42};
+  double bytes = 0.0;
+};
+Grown& grownCorridor(int n) {
+  static std::map<int, Grown> cache;
+  Grown& g = cache[n];
+  if (!g.matrix) {
+    const double before = residentBytes();
+    g.matrix = std::make_unique<ErrorResistanceMatrix>();
+    for (int q = 0; q < n; ++q) g.matrix->addKeyframe(corridorKeyframe(q, g.rng));
+    g.bytes = residentBytes() - before;
+  }
+  return g;
+}
+
+// Each iteration inserts the next keyframe of the walk into the grown matrix (n grows by the
+// iterations, a fraction of a percent). Counters: memory a keyframe (points, occlusion map,
+// matrix entries, per-view data), finite entries a row, pairs projected per insertion.
+void BM_InsertKeyframeCorridorAtScale(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  Grown& g = grownCorridor(n);
+  ErrorResistanceMatrix& m = *g.matrix;
+  const size_t keyframes_before = m.size();
+  const size_t evaluated_before = m.pairsEvaluated();
+  for (auto _ : state) {
+    state.PauseTiming();
+    Keyframe next = corridorKeyframe(static_cast<int>(m.size()), g.rng);
+    state.ResumeTiming();
+    m.addKeyframe(std::move(next));
+  }
+  const double inserted = static_cast<double>(m.size() - keyframes_before);
+  state.counters["bytes_per_keyframe"] = g.bytes / n;
+  state.counters["finite_per_row"] = static_cast<double>(m.table().finiteCount()) / static_cast<double>(m.size());
+  state.counters["pairs_projected"] = static_cast<double>(m.pairsEvaluated() - evaluated_before) / inserted;
+}
+BENCHMARK(BM_InsertKeyframeCorridorAtScale)
+    ->Arg(10000)
+    ->Arg(50000)
+    ->Arg(100000)
+    ->Iterations(200)
+    ->Unit(benchmark::kMillisecond);
+
+// Selection after each insertion, at scale: the incremental cache that ViewSelector keeps (each
+// iteration inserts one keyframe untimed, then updates the selection), and the plain
+// definition over the same matrix for comparison.
+void BM_SelectAfterInsertionAtScale(benchmark::State& state) {
+  Grown& g = grownCorridor(static_cast<int>(state.range(0)));
+  ErrorResistanceMatrix& m = *g.matrix;
+  const SelectionConfig config;
+  SelectionCache cache;
+  cache.update(m.table(), config);
+  for (auto _ : state) {
+    state.PauseTiming();
+    m.addKeyframe(corridorKeyframe(static_cast<int>(m.size()), g.rng));
+    state.ResumeTiming();
+    benchmark::DoNotOptimize(cache.update(m.table(), config).pairs.data());
+  }
+  state.counters["pairs"] = static_cast<double>(cache.selection().pairs.size());
+  const Selection& last = cache.selection();
+  state.counters["completed"] = static_cast<double>(last.completed.size());
+  // How much of the order the plain traversal reached before completion took over.
+  const auto first = last.completed.empty()
+                         ? last.order.end()
+                         : std::find(last.order.begin(), last.order.end(), last.completed.front().view);
+  state.counters["traversed"] = static_cast<double>(first - last.order.begin());
+}
+BENCHMARK(BM_SelectAfterInsertionAtScale)
+    ->Arg(10000)
+    ->Arg(50000)
+    ->Arg(100000)
+    ->Iterations(50)
+    ->Unit(benchmark::kMillisecond);
+
+// What the node does after each insertion: a snapshot of keyframes, E and the selection for the
+// outputs (ViewSelector::snapshot). E's lists are shared with the live table (copy on write), so
+// the copy costs a pointer a list; the keyframe summaries and the selection are copied.
+void BM_SnapshotAtScale(benchmark::State& state) {
+  Grown& g = grownCorridor(static_cast<int>(state.range(0)));
+  ErrorResistanceMatrix& m = *g.matrix;
+  SelectionCache cache;
+  const SelectionConfig config;
+  cache.update(m.table(), config);
+  std::vector<SelectionSnapshot> held;  // readers still hold the previous ones
+  for (auto _ : state) {
+    state.PauseTiming();
+    m.addKeyframe(corridorKeyframe(static_cast<int>(m.size()), g.rng));
+    const Selection selection = cache.update(m.table(), config);
+    if (held.size() == 2) held.erase(held.begin());
+    state.ResumeTiming();
+    held.push_back(makeSnapshot(m, selection, config));
+  }
+}
+BENCHMARK(BM_SnapshotAtScale)->Arg(10000)->Arg(100000)->Iterations(30)->Unit(benchmark::kMillisecond);
+
+// For comparison, what a copy of E cost before its lists were shared: every row, column and
+// best-entries list copied.
+void BM_DeepCopyOfTheTableAtScale(benchmark::State& state) {
+  Grown& g = grownCorridor(static_cast<int>(state.range(0)));
+  const ErrorResistanceTable& e = g.matrix->table();
+  for (auto _ : state) {
+    std::vector<std::vector<TableEntry>> rows, cols, tops;
+    rows.reserve(e.size());
+    cols.reserve(e.size());
+    tops.reserve(e.size());
+    for (size_t i = 0; i < e.size(); ++i) {
+      rows.push_back(e.row(static_cast<ViewId>(i)));
+      cols.push_back(e.column(static_cast<ViewId>(i)));
+      tops.push_back(e.top(static_cast<ViewId>(i)));
+    }
+    benchmark::DoNotOptimize(rows.data());
+  }
+}
+BENCHMARK(BM_DeepCopyOfTheTableAtScale)->Arg(10000)->Arg(100000)->Iterations(10)->Unit(benchmark::kMillisecond);
+
+void BM_SelectFullAtScale(benchmark::State& state) {
+  Grown& g = grownCorridor(static_cast<int>(state.range(0)));
+  for (auto _ : state) benchmark::DoNotOptimize(selectViews(g.matrix->table(), {}).pairs.data());
+}
+BENCHMARK(BM_SelectFullAtScale)->Arg(10000)->Arg(100000)->Iterations(5)->Unit(benchmark::kMillisecond);
 
 // --- selection ----------------------------------------------------------------------------------
 

@@ -1,5 +1,7 @@
 #include "view_selection/core/error_resistance.h"
 
+#include <limits>
+
 #include <algorithm>
 #include <cmath>
 
@@ -12,6 +14,67 @@ PairErrorResistance::PairErrorResistance(const Eigen::Vector3d& origin_i,
   epipole_h_ = k_.matrix() * o_i_cam_;
   inv_fx_ = 1.0 / k_.fx;
   inv_fy_ = 1.0 / k_.fy;
+  epipole_xy_norm_ = epipole_h_.head<2>().norm();
+}
+
+namespace {
+
+/// One point of PairErrorResistance::evaluate, written out in scalars in the order of
+/// operations Eigen uses for operator() (cross products component by component, dot products
+/// and squared norms summed left to right), so both give the same bits.
+struct PairConstants {
+  double fx, fy, cx, cy, inv_fx, inv_fy;
+  double bx, by, bz;       // O_i in camera j
+  double ex, ey, ez;       // the homogeneous epipole
+  double abs_ez, exy_norm;
+};
+
+inline double resistance(const PairConstants& c, double px, double py, double pz) {
+  const double kInf = std::numeric_limits<double>::infinity();
+  bool valid = pz > 0.0;  // behind camera j (also NaN)
+  const double inv_z = 1.0 / pz;
+  const double uj = c.fx * px * inv_z + c.cx;
+  const double vj = c.fy * py * inv_z + c.cy;
+  // epipolarDirection: dir = e_z * p_j - e_xy, unit; none when p_j is the epipole.
+  const double dx = c.ez * uj - c.ex, dy = c.ez * vj - c.ey;
+  const double norm = std::sqrt(dx * dx + dy * dy);
+  const double scale = c.abs_ez * std::sqrt(uj * uj + vj * vj) + c.exy_norm;
+  // `&` not `&&`: no branch, so the loop over points vectorises.
+  valid = valid & (norm > 1e-12 * scale) & (norm <= std::numeric_limits<double>::max());
+  const double ux = dx / norm, uy = dy / norm;
+  const double ax = px - c.bx, ay = py - c.by, az = pz - c.bz;  // O_i -> P
+  double worst = 0.0;
+  for (int k = 0; k < 2; ++k) {
+    const double sgn = k == 0 ? 1.0 : -1.0;
+    const double rx = (uj + sgn * ux - c.cx) * c.inv_fx;  // the ray through p'_j
+    const double ry = (vj + sgn * uy - c.cy) * c.inv_fy;
+    const double rz = 1.0;
+    const double nx = ay * rz - az * ry, ny = az * rx - ax * rz, nz = ax * ry - ay * rx;  // a x d
+    const double nn = nx * nx + ny * ny + nz * nz;
+    const double mx = c.by * rz - c.bz * ry, my = c.bz * rx - c.bx * rz, mz = c.bx * ry - c.by * rx;  // b x d
+    const double t = -(mx * nx + my * ny + mz * nz) / nn;
+    valid = valid & (nn > 1e-300) & (t > 0.0) & (c.bz + t * az > 0.0);
+    const double moved = std::abs(t - 1.0);
+    worst = moved > worst ? moved : worst;
+  }
+  const double r = worst * std::sqrt(ax * ax + ay * ay + az * az);
+  return valid & (r <= std::numeric_limits<double>::max()) ? r : kInf;
+}
+
+__attribute__((target_clones("avx2", "default"))) void evaluateAll(
+    const PairConstants& c, const double* __restrict x, const double* __restrict y,
+    const double* __restrict z, std::size_t count, double* __restrict out) {
+  for (std::size_t q = 0; q < count; ++q) out[q] = resistance(c, x[q], y[q], z[q]);
+}
+
+}  // namespace
+
+void PairErrorResistance::evaluate(const double* x, const double* y, const double* z,
+                                   std::size_t count, double* out) const {
+  const PairConstants c{k_.fx,         k_.fy,         k_.cx,          k_.cy,       inv_fx_,
+                        inv_fy_,       o_i_cam_.x(),  o_i_cam_.y(),   o_i_cam_.z(), epipole_h_.x(),
+                        epipole_h_.y(), epipole_h_.z(), std::abs(epipole_h_.z()), epipole_xy_norm_};
+  evaluateAll(c, x, y, z, count, out);
 }
 
 double PairErrorResistance::operator()(const Eigen::Vector3d& p_cam) const {

@@ -57,51 +57,56 @@ void validateKeyframe(const Keyframe& keyframe) {
   if (!keyframe.pose.isValid())
     throw InvalidInput("keyframe pose is not finite or its quaternion is not of unit length");
   if (!keyframe.points.allFinite()) throw InvalidInput("keyframe has non-finite sample points");
-  if (keyframe.depth) {
-    const DepthMap& d = *keyframe.depth;
-    if (d.depth.size() != static_cast<size_t>(d.cols) * static_cast<size_t>(d.rows) ||
-        !(d.cell_width > 0.0) || !(d.cell_height > 0.0))
-      throw InvalidInput("keyframe depth map is inconsistent (size does not match cols x rows)");
-  }
+  if (keyframe.depth && !keyframe.depth->isConsistent())
+    throw InvalidInput(
+        "keyframe depth map is inconsistent (size does not match cols x rows, or a cell or depth "
+        "is not a positive finite number)");
 }
 
 namespace {
 
-/// Smallest sphere-ish bound: centre of the bounding box, radius to the farthest point.
-void boundingSphere(const Eigen::Matrix3Xd& points, Eigen::Index begin, Eigen::Index end,
-                    Eigen::Vector3d& centre, double& radius) {
-  const auto block = points.middleCols(begin, end - begin);
-  centre = 0.5 * (block.rowwise().minCoeff() + block.rowwise().maxCoeff());
-  radius = (block.colwise() - centre).colwise().norm().maxCoeff();
+/// Smallest sphere-ish bound of the points order[begin, end): centre of the bounding box,
+/// radius to the farthest point.
+void boundingSphere(const Eigen::Matrix3Xd& points, const std::vector<std::uint32_t>& order,
+                    std::uint32_t begin, std::uint32_t end, Eigen::Vector3d& centre, double& radius) {
+  Eigen::Vector3d lo = points.col(order[begin]), hi = lo;
+  for (std::uint32_t q = begin + 1; q < end; ++q) {
+    lo = lo.cwiseMin(points.col(order[q]));
+    hi = hi.cwiseMax(points.col(order[q]));
+  }
+  centre = 0.5 * (lo + hi);
+  radius = 0.0;
+  for (std::uint32_t q = begin; q < end; ++q)
+    radius = std::max(radius, (points.col(order[q]) - centre).norm());
 }
 
-/// Splits columns [begin, end) at the median of their widest axis until groups are small.
-void buildGroups(Eigen::Matrix3Xd& points, Eigen::Index begin, Eigen::Index end,
+/// Splits order[begin, end) at the median of its points' widest axis until groups are small.
+void buildGroups(const Eigen::Matrix3Xd& points, std::vector<std::uint32_t>& order,
+                 std::uint32_t begin, std::uint32_t end,
                  std::vector<ErrorResistanceMatrix::PointGroup>& groups) {
   ErrorResistanceMatrix::PointGroup group;
   group.begin = begin;
   group.end = end;
-  boundingSphere(points, begin, end, group.centre, group.radius);
+  boundingSphere(points, order, begin, end, group.centre, group.radius);
   if (end - begin <= ErrorResistanceMatrix::kGroupSize) {
     groups.push_back(group);
     return;
   }
-  const auto block = points.middleCols(begin, end - begin);
+  Eigen::Vector3d lo = points.col(order[begin]), hi = lo;
+  for (std::uint32_t q = begin + 1; q < end; ++q) {
+    lo = lo.cwiseMin(points.col(order[q]));
+    hi = hi.cwiseMax(points.col(order[q]));
+  }
   Eigen::Index axis = 0;
-  (block.rowwise().maxCoeff() - block.rowwise().minCoeff()).maxCoeff(&axis);
-  std::vector<Eigen::Index> order(static_cast<size_t>(end - begin));
-  for (size_t q = 0; q < order.size(); ++q) order[q] = begin + static_cast<Eigen::Index>(q);
-  const auto mid = order.begin() + static_cast<std::ptrdiff_t>(order.size() / 2);
-  std::nth_element(order.begin(), mid, order.end(), [&](Eigen::Index a, Eigen::Index b) {
+  (hi - lo).maxCoeff(&axis);
+  const auto first = order.begin() + begin;
+  const auto mid = first + (end - begin) / 2;
+  std::nth_element(first, mid, order.begin() + end, [&](std::uint32_t a, std::uint32_t b) {
     return points(axis, a) < points(axis, b) || (points(axis, a) == points(axis, b) && a < b);
   });
-  Eigen::Matrix3Xd sorted(3, end - begin);
-  for (size_t q = 0; q < order.size(); ++q)
-    sorted.col(static_cast<Eigen::Index>(q)) = points.col(order[q]);
-  points.middleCols(begin, end - begin) = sorted;
-  const Eigen::Index split = begin + static_cast<Eigen::Index>(order.size() / 2);
-  buildGroups(points, begin, split, groups);
-  buildGroups(points, split, end, groups);
+  const std::uint32_t split = begin + (end - begin) / 2;
+  buildGroups(points, order, begin, split, groups);
+  buildGroups(points, order, split, end, groups);
 }
 
 /// True when a sphere (centre in camera coordinates) lies wholly outside one frustum plane.
@@ -188,10 +193,14 @@ ErrorResistanceMatrix::View ErrorResistanceMatrix::makeView(Keyframe keyframe) {
   v.frustum_normals.col(2) = Eigen::Vector3d(-k.fx, 0.0, k.width - k.cx).normalized();
   v.frustum_normals.col(3) = Eigen::Vector3d(0.0, k.fy, k.cy).normalized();
   v.frustum_normals.col(4) = Eigen::Vector3d(0.0, -k.fy, k.height - k.cy).normalized();
-  if (keyframe.points.cols() > 0) {
-    boundingSphere(keyframe.points, 0, keyframe.points.cols(), v.sphere_centre, v.sphere_radius);
-    v.grouped_points = keyframe.points;
-    buildGroups(v.grouped_points, 0, v.grouped_points.cols(), v.groups);
+  v.focal = std::sqrt(k.fx * k.fy);
+  const auto count = static_cast<std::uint32_t>(keyframe.points.cols());
+  if (count > 0) {
+    v.point_order.resize(count);
+    for (std::uint32_t q = 0; q < count; ++q) v.point_order[q] = q;
+    boundingSphere(keyframe.points, v.point_order, 0, count, v.sphere_centre, v.sphere_radius);
+    buildGroups(keyframe.points, v.point_order, 0, count, v.groups);
+    v.reach = (keyframe.points.colwise() - keyframe.pose.position).colwise().norm().maxCoeff();
   } else {
     v.sphere_centre.setZero();
     v.sphere_radius = -1.0;
@@ -239,7 +248,7 @@ double computeErrorResistance(const ErrorResistanceMatrix::View& view_i,
         !matchable.mayPass(centre_cam, g.radius))
       continue;
     candidates.push_back(&g);
-    possible += g.end - g.begin;
+    possible += static_cast<Eigen::Index>(g.end - g.begin);
   }
   if (static_cast<double>(possible) < needed) return kInfinity;
   if (evaluated) *evaluated = true;
@@ -247,15 +256,17 @@ double computeErrorResistance(const ErrorResistanceMatrix::View& view_i,
   const PinholeIntrinsics& k = kf_j.intrinsics;
   const DepthMap* depth = kf_j.depth ? kf_j.depth.get() : nullptr;
   const double width = k.width, height = k.height;
-  scratch.points_cam.clear();
+  scratch.x.clear();
+  scratch.y.clear();
+  scratch.z.clear();
   // Points not yet looked at; when they cannot lift the visible count to the gate, stop.
   Eigen::Index unseen = possible;
   for (const auto* g : candidates) {
-    if (static_cast<double>(scratch.points_cam.size() + static_cast<size_t>(unseen)) < needed)
+    if (static_cast<double>(scratch.x.size() + static_cast<size_t>(unseen)) < needed)
       return kInfinity;
-    unseen -= g->end - g->begin;
-    for (Eigen::Index c = g->begin; c < g->end; ++c) {
-      const Eigen::Vector3d p = r_cw * (view_i.grouped_points.col(c) - o_j);
+    unseen -= static_cast<Eigen::Index>(g->end - g->begin);
+    for (std::uint32_t c = g->begin; c < g->end; ++c) {
+      const Eigen::Vector3d p = r_cw * (kf_i.points.col(view_i.point_order[c]) - o_j);
       if (!(p.z() > 0.0)) continue;
       const double inv_z = 1.0 / p.z();
       const double u = k.fx * p.x() * inv_z + k.cx;
@@ -264,15 +275,18 @@ double computeErrorResistance(const ErrorResistanceMatrix::View& view_i,
       // Occluded (or in front of the surface j saw): not visible.
       if (depth && occluded(*depth, u, v, p.z(), config.occlusion)) continue;
       if (matchable.active() && !matchable.passes(p)) continue;
-      scratch.points_cam.push_back(p);
+      scratch.x.push_back(p.x());
+      scratch.y.push_back(p.y());
+      scratch.z.push_back(p.z());
     }
   }
-  if (static_cast<double>(scratch.points_cam.size()) < needed) return kInfinity;
+  const size_t count = scratch.x.size();
+  if (static_cast<double>(count) < needed) return kInfinity;
 
   const PairErrorResistance resistance(kf_i.pose.position, k, kf_j.pose);
-  scratch.values.resize(scratch.points_cam.size());
-  for (size_t q = 0; q < scratch.points_cam.size(); ++q)
-    scratch.values[q] = resistance(scratch.points_cam[q]);
+  scratch.values.resize(count);
+  resistance.evaluate(scratch.x.data(), scratch.y.data(), scratch.z.data(), count,
+                      scratch.values.data());
 
   // Median; for an even count the mean of the two middle values (+inf if either is +inf).
   auto& vals = scratch.values;
@@ -306,17 +320,67 @@ double ErrorResistanceMatrix::entry(const View& view_i, const View& view_j) {
   return value;
 }
 
+void ErrorResistanceMatrix::candidates(ViewId id, bool row, std::vector<ViewId>& out) {
+  const View& v = views_[static_cast<size_t>(id)];
+  out.clear();
+  const double ratio = config_.max_scale_ratio;
+  if (!(ratio > 0.0) || v.focal <= 0.0) {
+    // No footprint-ratio gate: no distance bound, every other view is a candidate (O(n)).
+    for (size_t j = 0; j < views_.size(); ++j)
+      if (static_cast<ViewId>(j) != id) out.push_back(static_cast<ViewId>(j));
+    return;
+  }
+  // A point X of X_i counts in j only when |O_j X| <= ratio |O_i X| f_j / f_i, so
+  // |O_i O_j| <= |O_i X| + |O_j X| <= reach_i (1 + ratio f_j / f_i): pairs farther apart are +inf.
+  const Eigen::Vector3d& centre = v.keyframe.pose.position;
+  const double slack = 1.0 + 1e-9;
+  if (row) {  // X_id in the others
+    grid_.query(centre, slack * v.reach * (1.0 + ratio * max_focal_ / v.focal), out);
+  } else {  // the others' points in id: bound by the largest reach, then each by its own
+    grid_.query(centre, slack * max_reach_ * (1.0 + ratio * v.focal / min_focal_), out);
+    out.erase(std::remove_if(out.begin(), out.end(),
+                             [&](ViewId i) {
+                               const View& w = views_[static_cast<size_t>(i)];
+                               const double bound = slack * w.reach * (1.0 + ratio * v.focal / w.focal);
+                               return (w.keyframe.pose.position - centre).norm() > bound;
+                             }),
+              out.end());
+  }
+  out.erase(std::remove(out.begin(), out.end(), id), out.end());
+}
+
+std::vector<TableEntry> ErrorResistanceMatrix::computeRow(ViewId id) {
+  std::vector<TableEntry> row;
+  std::vector<ViewId> others;
+  candidates(id, true, others);
+  const View& v = views_[static_cast<size_t>(id)];
+  for (const ViewId j : others) {
+    const double value = entry(v, views_[static_cast<size_t>(j)]);
+    if (std::isfinite(value)) row.push_back({j, value});
+  }
+  return row;
+}
+
+void ErrorResistanceMatrix::index(ViewId id) {
+  const View& v = views_[static_cast<size_t>(id)];
+  max_reach_ = std::max(max_reach_, v.reach);
+  min_focal_ = id == 0 ? v.focal : std::min(min_focal_, v.focal);
+  max_focal_ = std::max(max_focal_, v.focal);
+  grid_.insert(id, v.keyframe.pose.position);
+}
+
 ViewId ErrorResistanceMatrix::addKeyframe(Keyframe keyframe) {
   validateKeyframe(keyframe);
   views_.push_back(makeView(std::move(keyframe)));
-  const size_t n = views_.size() - 1;
+  const auto n = static_cast<ViewId>(views_.size() - 1);
   table_.resize(views_.size());
-  const View& added = views_[n];
-  for (size_t j = 0; j < n; ++j)
-    table_.set(static_cast<ViewId>(n), static_cast<ViewId>(j), entry(added, views_[j]));
-  for (size_t i = 0; i < n; ++i)
-    table_.set(static_cast<ViewId>(i), static_cast<ViewId>(n), entry(views_[i], added));
-  return static_cast<ViewId>(n);
+  const View& added = views_.back();
+  index(n);
+  candidates(n, true, candidates_);
+  for (const ViewId j : candidates_) table_.set(n, j, entry(added, views_[static_cast<size_t>(j)]));
+  candidates(n, false, candidates_);
+  for (const ViewId i : candidates_) table_.set(i, n, entry(views_[static_cast<size_t>(i)], added));
+  return n;
 }
 
 void ErrorResistanceMatrix::setPoints(ViewId id, Eigen::Matrix3Xd points) {
@@ -326,14 +390,8 @@ void ErrorResistanceMatrix::setPoints(ViewId id, Eigen::Matrix3Xd points) {
   Keyframe keyframe = std::move(views_[static_cast<size_t>(id)].keyframe);
   keyframe.points = std::move(points);
   views_[static_cast<size_t>(id)] = makeView(std::move(keyframe));
-  const View& changed = views_[static_cast<size_t>(id)];
-  std::vector<TableEntry> row;
-  for (size_t j = 0; j < views_.size(); ++j) {
-    if (static_cast<ViewId>(j) == id) continue;
-    const double value = entry(changed, views_[j]);
-    if (std::isfinite(value)) row.push_back({static_cast<ViewId>(j), value});
-  }
-  table_.replaceRow(id, std::move(row));
+  max_reach_ = std::max(max_reach_, views_[static_cast<size_t>(id)].reach);
+  table_.replaceRow(id, computeRow(id));
 }
 
 void ErrorResistanceMatrix::setConfig(const ErrorResistanceConfig& requested) {
@@ -341,15 +399,39 @@ void ErrorResistanceMatrix::setConfig(const ErrorResistanceConfig& requested) {
   config.validate();
   if (config == config_) return;
   config_ = config;
-  for (size_t i = 0; i < views_.size(); ++i) {
-    std::vector<TableEntry> row;
-    for (size_t j = 0; j < views_.size(); ++j) {
-      if (i == j) continue;
-      const double value = entry(views_[i], views_[j]);
-      if (std::isfinite(value)) row.push_back({static_cast<ViewId>(j), value});
+  for (size_t i = 0; i < views_.size(); ++i)
+    table_.replaceRow(static_cast<ViewId>(i), computeRow(static_cast<ViewId>(i)));
+}
+
+void ErrorResistanceMatrix::restore(std::vector<Keyframe> keyframes,
+                                    const std::vector<std::vector<TableEntry>>& rows) {
+  if (rows.size() != keyframes.size())
+    throw InvalidInput("saved matrix has " + std::to_string(rows.size()) + " rows for " +
+                       std::to_string(keyframes.size()) + " keyframes");
+  const size_t n = keyframes.size();
+  for (size_t i = 0; i < n; ++i) {
+    validateKeyframe(keyframes[i]);
+    std::vector<bool> seen(n, false);
+    for (const TableEntry& e : rows[i]) {
+      if (e.view < 0 || static_cast<size_t>(e.view) >= n || static_cast<size_t>(e.view) == i ||
+          seen[static_cast<size_t>(e.view)] || !std::isfinite(e.value) || e.value < 0.0)
+        throw InvalidInput("saved matrix row " + std::to_string(i) +
+                           " has an invalid entry (column " + std::to_string(e.view) + ")");
+      seen[static_cast<size_t>(e.view)] = true;
     }
-    table_.replaceRow(static_cast<ViewId>(i), std::move(row));
   }
+  std::vector<View> views;
+  views.reserve(n);
+  for (Keyframe& k : keyframes) views.push_back(makeView(std::move(k)));
+  ErrorResistanceTable table(n);
+  for (size_t i = 0; i < n; ++i) table.replaceRow(static_cast<ViewId>(i), rows[i]);
+  views_ = std::move(views);
+  table_ = std::move(table);
+  pairs_evaluated_ = 0;
+  // What insertion's candidate search needs of the views so far.
+  grid_.clear();
+  max_reach_ = min_focal_ = max_focal_ = 0.0;
+  for (size_t i = 0; i < views_.size(); ++i) index(static_cast<ViewId>(i));
 }
 
 Keyframe movedKeyframe(Keyframe keyframe, CameraPose pose) {
@@ -378,29 +460,35 @@ void ErrorResistanceMatrix::setPoses(const std::vector<std::pair<ViewId, CameraP
   for (const auto& [id, pose] : poses) {
     View& view = views_[static_cast<size_t>(id)];
     view = makeView(movedKeyframe(std::move(view.keyframe), pose));
+    // A rigid motion keeps a view's reach and focal length; only its centre moves in the grid.
+    grid_.move(id, view.keyframe.pose.position);
   }
-  // Rows of the moved keyframes in full; of the others, only the moved keyframes' columns.
+  // Rows of the moved keyframes in full (over their candidates, as insertion does); of the
+  // others, only the moved keyframes' columns.
+  for (const auto& [id, pose] : poses) table_.replaceRow(id, computeRow(id));
+  std::vector<ViewId> rows;
   for (const auto& [id, pose] : poses) {
-    const View& changed = views_[static_cast<size_t>(id)];
-    std::vector<TableEntry> row;
-    for (size_t j = 0; j < views_.size(); ++j) {
-      if (static_cast<ViewId>(j) == id) continue;
-      const double value = entry(changed, views_[j]);
-      if (std::isfinite(value)) row.push_back({static_cast<ViewId>(j), value});
-    }
-    table_.replaceRow(id, std::move(row));
-  }
-  for (const auto& [id, pose] : poses) {
-    // Most entries are +inf before and after: the table is touched only where one is finite.
+    // The candidates now, and every row whose entry was finite before (it may have become
+    // +inf); most entries are +inf before and after, and the table is touched only where one is
+    // finite.
     const std::vector<TableEntry> before = table_.column(id);  // ascending row
-    size_t k = 0;
+    candidates(id, false, candidates_);
+    rows.clear();
+    std::vector<TableEntry>::const_iterator b = before.begin();
+    for (const ViewId i : candidates_) {
+      for (; b != before.end() && b->view < i; ++b) rows.push_back(b->view);
+      if (b != before.end() && b->view == i) ++b;
+      rows.push_back(i);
+    }
+    for (; b != before.end(); ++b) rows.push_back(b->view);
     const View& changed = views_[static_cast<size_t>(id)];
-    for (size_t i = 0; i < views_.size(); ++i) {
-      if (moved[i]) continue;
-      const double value = entry(views_[i], changed);
-      while (k < before.size() && before[k].view < static_cast<ViewId>(i)) ++k;
-      const bool was_finite = k < before.size() && before[k].view == static_cast<ViewId>(i);
-      if (was_finite || std::isfinite(value)) table_.set(static_cast<ViewId>(i), id, value);
+    size_t k = 0;
+    for (const ViewId i : rows) {
+      if (moved[static_cast<size_t>(i)]) continue;
+      const double value = entry(views_[static_cast<size_t>(i)], changed);
+      while (k < before.size() && before[k].view < i) ++k;
+      const bool was_finite = k < before.size() && before[k].view == i;
+      if (was_finite || std::isfinite(value)) table_.set(i, id, value);
     }
   }
 }
@@ -409,6 +497,8 @@ void ErrorResistanceMatrix::clear() {
   views_.clear();
   table_.clear();
   pairs_evaluated_ = 0;
+  grid_.clear();
+  max_reach_ = min_focal_ = max_focal_ = 0.0;
 }
 
 }  // namespace view_selection::core

@@ -4,6 +4,7 @@
 #include "view_selection/core/exceptions.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <string>
 
@@ -36,17 +37,24 @@ void ErrorResistanceTable::resize(size_t size) {
   rows_.resize(size);
   cols_.resize(size);
   top_.resize(size);
+  row_version_.resize(size, 0);
+}
+
+void ErrorResistanceTable::touch(size_t i) {
+  static std::atomic<std::uint64_t> next_version{1};
+  row_version_[i] = next_version.fetch_add(1, std::memory_order_relaxed);
 }
 
 void ErrorResistanceTable::clear() {
   rows_.clear();
   cols_.clear();
   top_.clear();
+  row_version_.clear();
   finite_count_ = 0;
 }
 
 double ErrorResistanceTable::at(ViewId i, ViewId j) const {
-  const auto& row = rows_.at(static_cast<size_t>(i));
+  const auto& row = rows_.at(static_cast<size_t>(i)).get();
   const auto it = std::lower_bound(row.begin(), row.end(), j, byView);
   return (it != row.end() && it->view == j) ? it->value : kInfinity;
 }
@@ -75,36 +83,42 @@ void ErrorResistanceTable::set(ViewId i, ViewId j, double value) {
   if (i < 0 || j < 0 || static_cast<size_t>(i) >= size() || static_cast<size_t>(j) >= size())
     throw InvalidArgument("ErrorResistanceTable::set: index out of range");
   if (i == j) return;
-  auto& row = rows_[static_cast<size_t>(i)];
-  auto& col = cols_[static_cast<size_t>(j)];
+  SharedEntries& row = rows_[static_cast<size_t>(i)];
+  SharedEntries& col = cols_[static_cast<size_t>(j)];
   if (std::isfinite(value)) {
-    const size_t before = row.size();
-    upsert(row, j, value);
-    upsert(col, i, value);
-    finite_count_ += row.size() - before;
+    const size_t before = row.get().size();
+    upsert(row.edit(), j, value);
+    upsert(col.edit(), i, value);
+    finite_count_ += row.get().size() - before;
     updateTop(static_cast<size_t>(i), j, value);
-  } else if (erase(row, j)) {
-    erase(col, i);
-    --finite_count_;
-    updateTop(static_cast<size_t>(i), j, kInfinity);
+    touch(static_cast<size_t>(i));
+    return;
   }
+  // Removing an entry that is not there changes nothing and copies nothing.
+  const auto& current = row.get();
+  const auto it = std::lower_bound(current.begin(), current.end(), j, byView);
+  if (it == current.end() || it->view != j) return;
+  erase(row.edit(), j);
+  erase(col.edit(), i);
+  --finite_count_;
+  updateTop(static_cast<size_t>(i), j, kInfinity);
+  touch(static_cast<size_t>(i));
 }
 
 void ErrorResistanceTable::updateTop(size_t i, ViewId j, double value) {
-  auto& top = top_[i];
-  const size_t row_size = rows_[i].size();
-  const auto it =
-      std::find_if(top.begin(), top.end(), [j](const TableEntry& e) { return e.view == j; });
-  if (it != top.end()) {
+  // Read first, edit (and so copy a shared list) only when the top changes.
+  const auto& view = top_[i].get();
+  const size_t row_size = rows_[i].get().size();
+  const auto found =
+      std::find_if(view.begin(), view.end(), [j](const TableEntry& e) { return e.view == j; });
+  if (found != view.end()) {
+    const auto at = found - view.begin();
     // An entry of the top changed: if it got better (or as good), it stays; otherwise an entry
     // outside the top may now belong in it, which only a scan of the row can tell.
-    if (std::isfinite(value) && !byValue({j, it->value}, {j, value})) {
-      it->value = value;
-      std::sort(top.begin(), top.end(), byValue);
-      return;
-    }
-    if (std::isfinite(value) && row_size <= top.size()) {
-      it->value = value;  // the whole row is in the top: just reorder
+    if (std::isfinite(value) && (!byValue({j, found->value}, {j, value}) || row_size <= view.size())) {
+      // (or the whole row is in the top: just reorder)
+      auto& top = top_[i].edit();
+      top[static_cast<size_t>(at)].value = value;
       std::sort(top.begin(), top.end(), byValue);
       return;
     }
@@ -113,20 +127,22 @@ void ErrorResistanceTable::updateTop(size_t i, ViewId j, double value) {
   }
   if (!std::isfinite(value)) return;  // removed an entry outside the top: nothing changes
   const TableEntry entry{j, value};
-  if (top.size() < kTopCapacity) {
+  if (view.size() < kTopCapacity) {
     // The top held the whole row before this entry arrived.
+    auto& top = top_[i].edit();
     top.insert(std::upper_bound(top.begin(), top.end(), entry, byValue), entry);
     return;
   }
-  if (byValue(entry, top.back())) {
+  if (byValue(entry, view.back())) {
+    auto& top = top_[i].edit();
     top.pop_back();
     top.insert(std::upper_bound(top.begin(), top.end(), entry, byValue), entry);
   }
 }
 
 void ErrorResistanceTable::rescanTop(size_t i) {
-  auto& top = top_[i];
-  const auto& row = rows_[i];
+  const auto& row = rows_[i].get();
+  auto& top = top_[i].edit();
   top.assign(row.begin(), row.end());
   const size_t keep = std::min(kTopCapacity, top.size());
   std::partial_sort(top.begin(), top.begin() + static_cast<std::ptrdiff_t>(keep), top.end(),
@@ -135,8 +151,8 @@ void ErrorResistanceTable::rescanTop(size_t i) {
 }
 
 void ErrorResistanceTable::replaceRow(ViewId i, std::vector<TableEntry> entries) {
-  auto& row = rows_.at(static_cast<size_t>(i));
-  for (const TableEntry& e : row) erase(cols_[static_cast<size_t>(e.view)], i);
+  auto& row = rows_.at(static_cast<size_t>(i)).edit();
+  for (const TableEntry& e : row) erase(cols_[static_cast<size_t>(e.view)].edit(), i);
   finite_count_ -= row.size();
   row.clear();
   std::sort(entries.begin(), entries.end(),
@@ -144,16 +160,17 @@ void ErrorResistanceTable::replaceRow(ViewId i, std::vector<TableEntry> entries)
   for (const TableEntry& e : entries) {
     if (e.view == i || !std::isfinite(e.value)) continue;
     row.push_back(e);
-    upsert(cols_.at(static_cast<size_t>(e.view)), i, e.value);
+    upsert(cols_.at(static_cast<size_t>(e.view)).edit(), i, e.value);
   }
   finite_count_ += row.size();
   rescanTop(static_cast<size_t>(i));
+  touch(static_cast<size_t>(i));
 }
 
 std::vector<std::vector<double>> ErrorResistanceTable::dense() const {
   std::vector<std::vector<double>> out(size(), std::vector<double>(size(), kInfinity));
   for (size_t i = 0; i < size(); ++i)
-    for (const TableEntry& e : rows_[i]) out[i][static_cast<size_t>(e.view)] = e.value;
+    for (const TableEntry& e : rows_[i].get()) out[i][static_cast<size_t>(e.view)] = e.value;
   return out;
 }
 

@@ -47,6 +47,14 @@ bool KeyframePolicy::offer(const CameraPose& pose, bool external) {
 
 void KeyframePolicy::keyframeAccepted(const CameraPose& pose) { last_keyframe_ = pose; }
 
+void KeyframePolicy::restore(const State& state) {
+  if (state.frames_offered < 0) throw InvalidInput("keyframe policy: negative frame count");
+  if (state.last_keyframe && !state.last_keyframe->isValid())
+    throw InvalidInput("keyframe policy: the last keyframe's pose is invalid");
+  frames_offered_ = state.frames_offered;
+  last_keyframe_ = state.last_keyframe;
+}
+
 void KeyframePolicy::reset() {
   frames_offered_ = 0;
   last_keyframe_.reset();

@@ -1,8 +1,12 @@
 #include "view_selection/core/selection.h"
 
+#include "view_selection/core/error_resistance.h"
 #include "view_selection/core/exceptions.h"
 
 #include <algorithm>
+#include <cmath>
+#include <functional>
+#include <queue>
 #include <set>
 
 namespace view_selection::core {
@@ -107,8 +111,12 @@ ViewId findStartView(const ErrorResistanceTable& e) {
   return best_row;
 }
 
-void traverse(const std::vector<NextViewSet>& sets, ViewId start, std::vector<char>& visited,
-              std::vector<ViewId>& order) {
+namespace {
+
+/// The depth-first traversal of `traverse`, over any storage of the sets (`set(i)` gives C_i).
+template <typename Sets>
+void traverseSets(const Sets& set, ViewId start, std::vector<char>& visited,
+                  std::vector<ViewId>& order) {
   if (!visited[static_cast<size_t>(start)]) {
     visited[static_cast<size_t>(start)] = 1;
     order.push_back(start);
@@ -118,17 +126,29 @@ void traverse(const std::vector<NextViewSet>& sets, ViewId start, std::vector<ch
   std::vector<std::pair<ViewId, size_t>> stack{{start, 0}};
   while (!stack.empty()) {
     auto& [current, cursor] = stack.back();
-    const NextViewSet& candidates = sets[static_cast<size_t>(current)];
-    while (cursor < candidates.size() && visited[static_cast<size_t>(candidates[cursor])]) ++cursor;
-    if (cursor == candidates.size()) {
+    const SetView candidates = set(current);
+    while (cursor < candidates.size && visited[static_cast<size_t>(candidates.data[cursor])]) ++cursor;
+    if (cursor == candidates.size) {
       stack.pop_back();  // all next views marked: return to the previous view
       continue;
     }
-    const ViewId next = candidates[cursor];
+    const ViewId next = candidates.data[cursor];
     visited[static_cast<size_t>(next)] = 1;
     order.push_back(next);
     stack.emplace_back(next, 0);
   }
+}
+
+}  // namespace
+
+void traverse(const std::vector<NextViewSet>& sets, ViewId start, std::vector<char>& visited,
+              std::vector<ViewId>& order) {
+  traverseSets(
+      [&sets](ViewId i) {
+        const NextViewSet& c = sets[static_cast<size_t>(i)];
+        return SetView{c.data(), c.size()};
+      },
+      start, visited, order);
 }
 
 std::vector<std::pair<ViewId, ViewId>> pairsFromSets(const std::vector<NextViewSet>& sets) {
@@ -214,6 +234,201 @@ Selection selectViews(const ErrorResistanceTable& e, const SelectionConfig& conf
   else
     completeReachable(e, visited, out);
   out.pairs = pairsFromSets(out.final_next_views);
+  return out;
+}
+
+
+// --- SelectionCache -----------------------------------------------------------------------------
+
+void SelectionCache::clear() {
+  configured_ = false;
+  selection_ = Selection{};
+  seen_.clear();
+  first_value_.clear();
+  extended_rows_.clear();
+  extended_.clear();
+  flat_.clear();
+  flat_size_.clear();
+}
+
+void SelectionCache::refreshSets(const ErrorResistanceTable& e) {
+  const size_t n = e.size();
+  auto& next = selection_.next_views;
+  auto& final_sets = selection_.final_next_views;
+  // Completion appended to some final sets last time: back to the plain C_i first.
+  for (const ViewId a : extended_rows_)
+    if (static_cast<size_t>(a) < n) {
+      final_sets[static_cast<size_t>(a)] = next[static_cast<size_t>(a)];
+      extended_[static_cast<size_t>(a)] = 0;
+    }
+  extended_rows_.clear();
+  next.resize(n);
+  final_sets.resize(n);
+  seen_.resize(n, 0);
+  first_value_.resize(n, kInfinity);
+  extended_.resize(n, 0);
+  const size_t keep = static_cast<size_t>(config_.k);
+  // A flat copy of the sets (stride k) for the traversal: contiguous, where the sets themselves
+  // are one small allocation each. Only for k within the table's cached best entries.
+  flat_stride_ = keep <= ErrorResistanceTable::kTopCapacity ? keep : 0;
+  flat_size_.resize(n, 0);
+  flat_.resize(n * flat_stride_);
+  std::vector<TableEntry> best;
+  for (size_t i = 0; i < n; ++i) {
+    const std::uint64_t version = e.rowVersion(static_cast<ViewId>(i));
+    if (version != 0 && seen_[i] == version) continue;  // unchanged since last time
+    seen_[i] = version;
+    auto& set = next[i];
+    set.clear();
+    if (keep <= ErrorResistanceTable::kTopCapacity) {
+      const auto& top = e.top(static_cast<ViewId>(i));
+      const size_t take = std::min(keep, top.size());
+      for (size_t q = 0; q < take; ++q) set.push_back(top[q].view);
+      first_value_[i] = take ? top.front().value : kInfinity;
+    } else {
+      best.assign(e.row(static_cast<ViewId>(i)).begin(), e.row(static_cast<ViewId>(i)).end());
+      const size_t take = std::min(keep, best.size());
+      std::partial_sort(best.begin(), best.begin() + static_cast<std::ptrdiff_t>(take), best.end(),
+                        [](const TableEntry& a, const TableEntry& b) {
+                          return better(a.value, a.view, b.value, b.view);
+                        });
+      for (size_t q = 0; q < take; ++q) set.push_back(best[q].view);
+      first_value_[i] = take ? best.front().value : kInfinity;
+    }
+    final_sets[i] = set;
+    if (flat_stride_) {
+      std::copy(set.begin(), set.end(), flat_.begin() + static_cast<std::ptrdiff_t>(i * flat_stride_));
+      flat_size_[i] = static_cast<std::uint32_t>(set.size());
+    }
+  }
+}
+
+SetView SelectionCache::plainSet(ViewId i) const {
+  if (flat_stride_)
+    return {flat_.data() + static_cast<size_t>(i) * flat_stride_, flat_size_[static_cast<size_t>(i)]};
+  const NextViewSet& c = selection_.next_views[static_cast<size_t>(i)];
+  return {c.data(), c.size()};
+}
+
+SetView SelectionCache::finalSet(ViewId i) const {
+  if (extended_[static_cast<size_t>(i)] || !flat_stride_) {
+    const NextViewSet& c = selection_.final_next_views[static_cast<size_t>(i)];
+    return {c.data(), c.size()};
+  }
+  return plainSet(i);
+}
+
+void SelectionCache::completePaper(const ErrorResistanceTable& e) {
+  // The definition's own paper completion (it traverses nothing), then the rows it lengthened.
+  view_selection::core::completePaper(e, visited_, selection_);
+  for (const CompletedView& c : selection_.completed) {
+    extended_rows_.push_back(c.added_to);
+    extended_[static_cast<size_t>(c.added_to)] = 1;
+  }
+}
+
+void SelectionCache::completeReachable(const ErrorResistanceTable& e) {
+  Selection& out = selection_;
+  // The same candidates as the plain definition (unvisited views with a finite entry from a
+  // visited one), found from the unvisited side: a column of each view the traversal missed.
+  // A min-heap with a flag per view instead of a set: each view enters at most once, since a
+  // candidate stays a candidate until completion visits it.
+  std::priority_queue<ViewId, std::vector<ViewId>, std::greater<ViewId>> candidates;
+  queued_.assign(e.size(), 0);
+  auto offer = [&](ViewId x) {
+    if (visited_[static_cast<size_t>(x)] || queued_[static_cast<size_t>(x)]) return;
+    queued_[static_cast<size_t>(x)] = 1;
+    candidates.push(x);
+  };
+  for (size_t x = 0; x < e.size(); ++x) {
+    if (visited_[x]) continue;
+    for (const TableEntry& entry : e.column(static_cast<ViewId>(x)))
+      if (visited_[static_cast<size_t>(entry.view)]) {
+        offer(static_cast<ViewId>(x));
+        break;
+      }
+  }
+  while (!candidates.empty()) {
+    const ViewId x = candidates.top();
+    candidates.pop();
+    if (visited_[static_cast<size_t>(x)]) continue;
+    const ViewId a = bestPredecessor(e, x, &visited_);
+    out.final_next_views[static_cast<size_t>(a)].push_back(x);
+    extended_rows_.push_back(a);
+    extended_[static_cast<size_t>(a)] = 1;
+    out.completed.push_back({x, a});
+    const size_t scanned = out.order.size();
+    traverseSets([this](ViewId i) { return finalSet(i); }, x, visited_, out.order);
+    for (size_t q = scanned; q < out.order.size(); ++q)
+      for (const TableEntry& entry : e.row(out.order[q])) offer(entry.view);
+  }
+  for (size_t x = 0; x < e.size(); ++x)
+    if (!visited_[x]) out.isolated.push_back(static_cast<ViewId>(x));
+}
+
+void SelectionCache::buildPairs() {
+  const size_t n = selection_.final_next_views.size();
+  bucket_begin_.assign(n + 1, 0);
+  for (size_t i = 0; i < n; ++i) {
+    const SetView set = finalSet(static_cast<ViewId>(i));
+    for (size_t q = 0; q < set.size; ++q)
+      ++bucket_begin_[std::min(i, static_cast<size_t>(set.data[q])) + 1];
+  }
+  for (size_t i = 0; i < n; ++i) bucket_begin_[i + 1] += bucket_begin_[i];
+  bucket_.resize(bucket_begin_[n]);
+  std::vector<std::size_t>& fill = bucket_begin_;  // advanced while filling, then restored
+  for (size_t i = 0; i < n; ++i) {
+    const SetView set = finalSet(static_cast<ViewId>(i));
+    for (size_t q = 0; q < set.size; ++q) {
+      const auto j = static_cast<size_t>(set.data[q]);
+      bucket_[fill[std::min(i, j)]++] = static_cast<ViewId>(std::max(i, j));
+    }
+  }
+  // fill[lo] is now the end of bucket lo, which is the begin of lo + 1.
+  auto& pairs = selection_.pairs;
+  pairs.clear();
+  size_t begin = 0;
+  for (size_t lo = 0; lo < n; ++lo) {
+    const size_t end = fill[lo];
+    std::sort(bucket_.begin() + static_cast<std::ptrdiff_t>(begin),
+              bucket_.begin() + static_cast<std::ptrdiff_t>(end));
+    for (size_t q = begin; q < end; ++q)
+      if (q == begin || bucket_[q] != bucket_[q - 1])
+        pairs.emplace_back(static_cast<ViewId>(lo), bucket_[q]);
+    begin = end;
+  }
+}
+
+const Selection& SelectionCache::update(const ErrorResistanceTable& e,
+                                        const SelectionConfig& config) {
+  config.validate();
+  if (!configured_ || config.k != config_.k || config.completion != config_.completion ||
+      e.size() < seen_.size())
+    clear();
+  config_ = config;
+  configured_ = true;
+  refreshSets(e);
+  Selection& out = selection_;
+  const size_t n = e.size();
+  // s: the best C_i[0] by (value, row); rows ascend, so a tie keeps the smaller row.
+  out.start_view = -1;
+  double best_value = kInfinity;
+  for (size_t i = 0; i < n; ++i)
+    if (first_value_[i] < best_value) {
+      best_value = first_value_[i];
+      out.start_view = static_cast<ViewId>(i);
+    }
+  visited_.assign(n, 0);
+  out.order.clear();
+  out.completed.clear();
+  out.isolated.clear();
+  if (out.start_view >= 0)
+    traverseSets([this](ViewId i) { return plainSet(i); }, out.start_view, visited_, out.order);
+  if (config_.completion == CompletionMode::kPaper)
+    completePaper(e);
+  else
+    completeReachable(e);
+  buildPairs();
   return out;
 }
 

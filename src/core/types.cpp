@@ -22,4 +22,14 @@ bool CameraPose::isValid() const {
   return std::abs(orientation.norm() - 1.0) <= 0.05;
 }
 
+bool DepthMap::isConsistent() const {
+  if (cols < 0 || rows < 0 || !(cell_width > 0.0) || !(cell_height > 0.0) ||
+      !std::isfinite(cell_width) || !std::isfinite(cell_height) ||
+      depth.size() != static_cast<size_t>(cols) * static_cast<size_t>(rows))
+    return false;
+  for (const float d : depth)
+    if (!std::isfinite(d) || d < 0.0f) return false;
+  return true;
+}
+
 }  // namespace view_selection::core

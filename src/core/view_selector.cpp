@@ -132,7 +132,7 @@ void ViewSelector::correctPoses(const std::vector<std::pair<ViewId, CameraPose>>
     if (id == last) policy_.keyframeAccepted(matrix_.keyframe(id).pose);
 }
 
-Selection ViewSelector::select() const { return selectViews(matrix_.table(), config_.selection); }
+Selection ViewSelector::select() const { return selection_.update(matrix_.table(), config_.selection); }
 
 SelectionSnapshot ViewSelector::snapshot() const {
   return makeSnapshot(matrix_, select(), config_.selection, params());
@@ -151,6 +151,34 @@ void ViewSelector::reset() {
   policy_.reset();
   points_->reset();
   last_stamp_.reset();
+}
+
+ViewSelectorState ViewSelector::state() const {
+  ViewSelectorState s;
+  s.config = config_;
+  s.keyframes.reserve(matrix_.size());
+  s.rows.reserve(matrix_.size());
+  for (size_t i = 0; i < matrix_.size(); ++i) {
+    s.keyframes.push_back(matrix_.keyframe(static_cast<ViewId>(i)));
+    s.rows.push_back(matrix_.table().row(static_cast<ViewId>(i)));
+  }
+  s.policy = policy_.state();
+  s.last_stamp = last_stamp_;
+  return s;
+}
+
+void ViewSelector::restore(const ViewSelectorState& state) {
+  state.config.validate();
+  if (state.last_stamp && !std::isfinite(*state.last_stamp))
+    throw InvalidInput("saved last stamp is not finite");
+  ErrorResistanceMatrix matrix(state.config.matrix);
+  matrix.restore(state.keyframes, state.rows);
+  KeyframePolicy policy(state.config.keyframes);
+  policy.restore(state.policy);
+  config_ = inForce(state.config);
+  matrix_ = std::move(matrix);
+  policy_ = std::move(policy);
+  last_stamp_ = state.last_stamp;
 }
 
 Params ViewSelector::params() const {

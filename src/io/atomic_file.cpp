@@ -9,6 +9,8 @@
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
+#include <memory>
+#include <streambuf>
 
 namespace view_selection::io {
 
@@ -37,6 +39,84 @@ std::string temporaryPath(const fs::path& path) {
 }
 
 }  // namespace
+
+void writeFileContents(const std::string& path, const void* data, size_t size) {
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) throw core::IoError("cannot create '" + path + "': " + std::strerror(errno));
+  const char* bytes = static_cast<const char*>(data);
+  size_t done = 0;
+  while (done < size) {
+    const ssize_t n = ::write(fd, bytes + done, size - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      const int saved = n < 0 ? errno : EIO;
+      ::close(fd);
+      throw core::IoError("cannot write '" + path + "': " + std::strerror(saved));
+    }
+    done += static_cast<size_t>(n);
+  }
+  if (::close(fd) != 0) throw core::IoError("cannot write '" + path + "': " + std::strerror(errno));
+}
+
+namespace {
+
+/// An output buffer onto a file descriptor that remembers the first write error's errno.
+class FdBuffer : public std::streambuf {
+ public:
+  explicit FdBuffer(int fd) : fd_(fd) { setp(buffer_, buffer_ + sizeof buffer_); }
+  int error() const { return error_; }
+  int sync() override { return drain() ? 0 : -1; }
+
+ protected:
+  int_type overflow(int_type c) override {
+    if (!drain()) return traits_type::eof();
+    if (!traits_type::eq_int_type(c, traits_type::eof())) {
+      *pptr() = traits_type::to_char_type(c);
+      pbump(1);
+    }
+    return traits_type::not_eof(c);
+  }
+
+ private:
+  bool drain() {
+    const char* p = pbase();
+    while (p < pptr()) {
+      const ssize_t n = ::write(fd_, p, static_cast<size_t>(pptr() - p));
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) {
+        if (!error_) error_ = n < 0 ? errno : EIO;
+        return false;
+      }
+      p += n;
+    }
+    setp(buffer_, buffer_ + sizeof buffer_);
+    return true;
+  }
+
+  int fd_;
+  int error_ = 0;
+  char buffer_[1 << 16];
+};
+
+}  // namespace
+
+void writeFileStreaming(const std::string& path, const std::function<void(std::ostream&)>& write) {
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) throw core::IoError("cannot create '" + path + "': " + std::strerror(errno));
+  auto buffer = std::make_unique<FdBuffer>(fd);
+  std::ostream out(buffer.get());
+  try {
+    write(out);
+  } catch (...) {
+    ::close(fd);
+    throw;
+  }
+  out.flush();
+  const int error = buffer->error() ? buffer->error() : (out ? 0 : EIO);
+  if (::close(fd) != 0 && error == 0)
+    throw core::IoError("cannot write '" + path + "': " + std::strerror(errno));
+  if (error) throw core::IoError("cannot write '" + path + "': " + std::strerror(error));
+}
 
 void writeAtomically(const std::string& path,
                      const std::function<void(const std::string&)>& write) {

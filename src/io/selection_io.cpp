@@ -4,7 +4,10 @@
 #include "view_selection/core/exceptions.h"
 
 #include <cmath>
+#include "view_selection/io/atomic_file.h"
+
 #include <fstream>
+#include <sstream>
 
 namespace view_selection::io {
 
@@ -36,71 +39,128 @@ nlohmann::json keyframeToJson(core::ViewId id, const core::KeyframeSummary& kf,
   return j;
 }
 
-/// One line per element for the long arrays (keyframes, matrix rows, sets), compact otherwise:
-/// readable for a person, and still a single valid JSON document.
-void writeReadable(std::ostream& out, const nlohmann::ordered_json& document) {
-  out << "{\n";
-  bool first = true;
-  for (auto it = document.begin(); it != document.end(); ++it) {
-    out << (first ? "" : ",\n") << "  " << nlohmann::json(it.key()).dump() << ": ";
-    first = false;
-    const nlohmann::json& value = it.value();
-    const bool nested = value.is_array() && !value.empty() &&
-                        (value.front().is_array() || value.front().is_object());
-    if (!nested) {
-      out << value.dump();
-      continue;
-    }
-    out << "[\n";
-    for (size_t q = 0; q < value.size(); ++q)
-      out << "    " << value[q].dump() << (q + 1 < value.size() ? ",\n" : "\n");
-    out << "  ]";
+}  // namespace
+
+namespace {
+
+/// Writes selection.json to `out` element by element, never holding the document: METHOD.md's keys
+/// in METHOD.md's order, one line per element of the long arrays (keyframes, matrix rows, sets).
+class SelectionWriter {
+ public:
+  SelectionWriter(std::ostream& out) : out_(out) {}
+
+  void write(const core::SelectionSnapshot& snapshot, const nlohmann::json& params,
+             const core::ErrorResistanceMatrix* points, bool sparse) {
+    const size_t n = snapshot.size();
+    const core::Selection& sel = snapshot.selection;
+    out_ << "{\n";
+    key("format");
+    out_ << nlohmann::json(sparse ? kSparseFormat : kDenseFormat).dump();
+    key("params");
+    out_ << params.dump();
+    key("keyframes");
+    list(n, [&](size_t i) {
+      const auto id = static_cast<core::ViewId>(i);
+      out_ << keyframeToJson(id, snapshot.keyframes[i], points ? &points->keyframe(id).points : nullptr)
+                  .dump();
+    });
+    key("error_resistance");
+    list(n, [&](size_t i) {
+      const auto& row = snapshot.table.row(static_cast<core::ViewId>(i));
+      out_ << '[';
+      if (sparse) {
+        for (size_t q = 0; q < row.size(); ++q)
+          out_ << (q ? "," : "") << '[' << row[q].view << ',' << number(row[q].value) << ']';
+      } else {
+        size_t next = 0;  // row entries ascend by column
+        for (size_t j = 0; j < n; ++j) {
+          if (j) out_ << ',';
+          if (next < row.size() && static_cast<size_t>(row[next].view) == j)
+            out_ << number(row[next++].value);
+          else
+            out_ << "null";
+        }
+      }
+      out_ << ']';
+    });
+    key("next_views");
+    sets(sel.next_views);
+    key("start_view");
+    out_ << (sel.start_view >= 0 ? std::to_string(sel.start_view) : "null");
+    key("initial_pair");
+    const auto [s, s_first] = sel.initialPair();
+    out_ << (s >= 0 ? "[" + std::to_string(s) + "," + std::to_string(s_first) + "]" : "null");
+    key("order");
+    ids(sel.order);
+    key("completed");
+    list(sel.completed.size(), [&](size_t q) {
+      out_ << "{\"added_to\":" << sel.completed[q].added_to << ",\"view\":" << sel.completed[q].view << '}';
+    });
+    key("isolated");
+    ids(sel.isolated);
+    key("final_next_views");
+    sets(sel.final_next_views);
+    key("pairs");
+    list(sel.pairs.size(), [&](size_t q) {
+      out_ << '[' << sel.pairs[q].first << ',' << sel.pairs[q].second << ']';
+    });
+    out_ << "\n}\n";
   }
-  out << "\n}\n";
-}
+
+ private:
+  void key(const char* name) {
+    out_ << (first_ ? "" : ",\n") << "  \"" << name << "\": ";
+    first_ = false;
+  }
+  /// A non-empty array one element a line; an empty one as [].
+  template <typename F>
+  void list(size_t size, F element) {
+    if (size == 0) {
+      out_ << "[]";
+      return;
+    }
+    out_ << "[\n";
+    for (size_t q = 0; q < size; ++q) {
+      out_ << "    ";
+      element(q);
+      out_ << (q + 1 < size ? ",\n" : "\n");
+    }
+    out_ << "  ]";
+  }
+  void ids(const std::vector<core::ViewId>& values) {
+    out_ << '[';
+    for (size_t q = 0; q < values.size(); ++q) out_ << (q ? "," : "") << values[q];
+    out_ << ']';
+  }
+  void sets(const std::vector<core::NextViewSet>& values) {
+    list(values.size(), [&](size_t i) { ids(values[i]); });
+  }
+  /// The shortest text that reads back as the same double (nlohmann's), null for +inf.
+  static std::string number(double value) { return finiteOrNull(value).dump(); }
+
+  std::ostream& out_;
+  bool first_ = true;
+};
 
 }  // namespace
 
+bool sparseFormatFor(size_t keyframes, JsonFormat format) {
+  return format == JsonFormat::kSparse ||
+         (format == JsonFormat::kAuto && keyframes > kDenseFormatMaxKeyframes);
+}
+
+void writeSelectionJson(std::ostream& out, const core::SelectionSnapshot& snapshot,
+                        const nlohmann::json& params, const core::ErrorResistanceMatrix* points,
+                        JsonFormat format) {
+  SelectionWriter(out).write(snapshot, params, points, sparseFormatFor(snapshot.size(), format));
+}
+
 nlohmann::json selectionToJson(const core::SelectionSnapshot& snapshot,
                                const nlohmann::json& params,
-                               const core::ErrorResistanceMatrix* points) {
-  const size_t n = snapshot.size();
-  const core::Selection& selection = snapshot.selection;
-  nlohmann::json keyframes = nlohmann::json::array();
-  for (size_t i = 0; i < n; ++i) {
-    const auto id = static_cast<core::ViewId>(i);
-    keyframes.push_back(
-        keyframeToJson(id, snapshot.keyframes[i], points ? &points->keyframe(id).points : nullptr));
-  }
-  nlohmann::json rows = nlohmann::json::array();
-  for (size_t i = 0; i < n; ++i) {
-    std::vector<nlohmann::json> row(n, nullptr);
-    for (const core::TableEntry& e : snapshot.table.row(static_cast<core::ViewId>(i)))
-      row[static_cast<size_t>(e.view)] = finiteOrNull(e.value);
-    rows.push_back(std::move(row));
-  }
-  nlohmann::json completed = nlohmann::json::array();
-  for (const core::CompletedView& c : selection.completed)
-    completed.push_back({{"view", c.view}, {"added_to", c.added_to}});
-  nlohmann::json pairs = nlohmann::json::array();
-  for (const auto& [a, b] : selection.pairs) pairs.push_back({a, b});
-  const auto [s, s_first] = selection.initialPair();
-
-  nlohmann::json doc;
-  doc["format"] = "view_selection/1";
-  doc["params"] = params;
-  doc["keyframes"] = std::move(keyframes);
-  doc["error_resistance"] = std::move(rows);
-  doc["next_views"] = selection.next_views;
-  doc["start_view"] =
-      selection.start_view >= 0 ? nlohmann::json(selection.start_view) : nlohmann::json(nullptr);
-  doc["initial_pair"] = s >= 0 ? nlohmann::json({s, s_first}) : nlohmann::json(nullptr);
-  doc["order"] = selection.order;
-  doc["completed"] = std::move(completed);
-  doc["isolated"] = selection.isolated;
-  doc["final_next_views"] = selection.final_next_views;
-  doc["pairs"] = std::move(pairs);
-  return doc;
+                               const core::ErrorResistanceMatrix* points, JsonFormat format) {
+  std::stringstream text;
+  writeSelectionJson(text, snapshot, params, points, format);
+  return nlohmann::json::parse(text.str());
 }
 
 nlohmann::json selectionToJson(const core::ErrorResistanceMatrix& matrix,
@@ -111,25 +171,19 @@ nlohmann::json selectionToJson(const core::ErrorResistanceMatrix& matrix,
 }
 
 void writeSelectionJson(const std::string& path, const core::SelectionSnapshot& snapshot,
-                        const nlohmann::json& params, const core::ErrorResistanceMatrix* points) {
-  // nlohmann::ordered_json keeps METHOD.md's key order in the file.
-  const nlohmann::json doc = selectionToJson(snapshot, params, points);
-  nlohmann::ordered_json ordered;
-  for (const char* key :
-       {"format", "params", "keyframes", "error_resistance", "next_views", "start_view",
-        "initial_pair", "order", "completed", "isolated", "final_next_views", "pairs"})
-    ordered[key] = doc.at(key);
-  std::ofstream out(path);
-  if (!out) throw core::IoError("cannot write '" + path + "'");
-  writeReadable(out, ordered);
-  if (!out) throw core::IoError("error while writing '" + path + "'");
+                        const nlohmann::json& params, const core::ErrorResistanceMatrix* points,
+                        JsonFormat format) {
+  // Streamed to the file: the system's reason on failure (a full disk, ...).
+  writeFileStreaming(path, [&](std::ostream& out) {
+    writeSelectionJson(out, snapshot, params, points, format);
+  });
 }
 
 void writeSelectionJson(const std::string& path, const core::ErrorResistanceMatrix& matrix,
                         const core::Selection& selection, const nlohmann::json& params,
-                        bool dump_points) {
+                        bool dump_points, JsonFormat format) {
   writeSelectionJson(path, core::makeSnapshot(matrix, selection, {}), params,
-                     dump_points ? &matrix : nullptr);
+                     dump_points ? &matrix : nullptr, format);
 }
 
 void writePairsTxt(const std::string& path, const std::vector<std::string>& image_names,
@@ -144,30 +198,28 @@ void writePairsTxt(const std::string& path, const std::vector<std::string>& imag
                             " is empty or contains whitespace, which COLMAP cannot read");
     }
   }
-  std::ofstream out(path);
-  if (!out) throw core::IoError("cannot write '" + path + "'");
+  std::ostringstream out;
   for (const auto& [a, b] : pairs)
     out << image_names[static_cast<size_t>(a)] << ' ' << image_names[static_cast<size_t>(b)]
         << '\n';
-  if (!out) throw core::IoError("error while writing '" + path + "'");
+  writeFileContents(path, out.str());
 }
 
 void writeMvsPairTxt(const std::string& path, const core::SelectionSnapshot& snapshot) {
-  std::ofstream out(path);
-  if (!out) throw core::IoError("cannot write '" + path + "'");
-  out.precision(9);
-  const auto& sets = snapshot.selection.final_next_views;
-  out << snapshot.size() << '\n';
-  for (size_t i = 0; i < snapshot.size(); ++i) {
-    out << i << '\n';
-    const std::vector<core::ViewId> none;
-    const auto& set = i < sets.size() ? sets[i] : none;
-    out << set.size();
-    for (const core::ViewId j : set)
-      out << ' ' << j << ' ' << 1.0 / snapshot.table.at(static_cast<core::ViewId>(i), j);
-    out << '\n';
-  }
-  if (!out) throw core::IoError("error while writing '" + path + "'");
+  writeFileStreaming(path, [&](std::ostream& out) {
+    out.precision(9);
+    const auto& sets = snapshot.selection.final_next_views;
+    out << snapshot.size() << '\n';
+    for (size_t i = 0; i < snapshot.size(); ++i) {
+      out << i << '\n';
+      const std::vector<core::ViewId> none;
+      const auto& set = i < sets.size() ? sets[i] : none;
+      out << set.size();
+      for (const core::ViewId j : set)
+        out << ' ' << j << ' ' << 1.0 / snapshot.table.at(static_cast<core::ViewId>(i), j);
+      out << '\n';
+    }
+  });
 }
 
 nlohmann::json readSelectionJson(const std::string& path) {
@@ -175,21 +227,44 @@ nlohmann::json readSelectionJson(const std::string& path) {
   if (!in) throw core::IoError("cannot read '" + path + "'");
   try {
     nlohmann::json doc = nlohmann::json::parse(in);
-    if (!doc.contains("format") || doc["format"] != "view_selection/1")
-      throw core::IoError("'" + path + "' is not a view_selection/1 selection.json");
+    if (!doc.is_object() || !doc.contains("format") ||
+        (doc["format"] != kDenseFormat && doc["format"] != kSparseFormat))
+      throw core::IoError("'" + path + "' is not a view_selection/1 or /2 selection.json");
     return doc;
   } catch (const nlohmann::json::exception& e) {
     throw core::IoError("'" + path + "' is not valid JSON: " + e.what());
   }
 }
 
-std::vector<std::vector<double>> errorResistanceFromJson(const nlohmann::json& document) {
-  std::vector<std::vector<double>> out;
-  for (const auto& row : document.at("error_resistance")) {
-    out.emplace_back();
-    for (const auto& v : row) out.back().push_back(v.is_null() ? core::kInfinity : v.get<double>());
+core::ErrorResistanceTable tableFromJson(const nlohmann::json& document) {
+  try {
+    const auto& rows = document.at("error_resistance");
+    const bool sparse = document.at("format") == kSparseFormat;
+    core::ErrorResistanceTable table(rows.size());
+    for (size_t i = 0; i < rows.size(); ++i) {
+      const auto& row = rows[i];
+      if (!sparse && row.size() != rows.size())
+        throw core::IoError("error_resistance row " + std::to_string(i) + " has " +
+                            std::to_string(row.size()) + " values, expected " +
+                            std::to_string(rows.size()));
+      for (size_t q = 0; q < row.size(); ++q) {
+        const auto& v = sparse ? row[q].at(1) : row[q];
+        const size_t j = sparse ? row[q].at(0).get<size_t>() : q;
+        if (j >= rows.size())
+          throw core::IoError("error_resistance row " + std::to_string(i) + " names view " +
+                              std::to_string(j) + " of " + std::to_string(rows.size()));
+        if (!v.is_null())
+          table.set(static_cast<core::ViewId>(i), static_cast<core::ViewId>(j), v.get<double>());
+      }
+    }
+    return table;
+  } catch (const nlohmann::json::exception& e) {
+    throw core::IoError(std::string("selection.json error_resistance: ") + e.what());
   }
-  return out;
+}
+
+std::vector<std::vector<double>> errorResistanceFromJson(const nlohmann::json& document) {
+  return tableFromJson(document).dense();
 }
 
 }  // namespace view_selection::io

@@ -1,6 +1,7 @@
 #include "view_selection/io/selection_plot.h"
 
 #include "view_selection/core/exceptions.h"
+#include "view_selection/io/atomic_file.h"
 
 #include <Eigen/Eigenvalues>
 #include <opencv2/imgcodecs.hpp>
@@ -103,16 +104,21 @@ cv::Mat renderSelectionPlot(const core::SelectionSnapshot& snapshot, int size,
   return image;
 }
 
+void writePng(const std::string& path, const cv::Mat& image) {
+  std::vector<uchar> png;
+  try {
+    if (!cv::imencode(".png", image, png))
+      throw core::IoError("cannot encode '" + path + "' as PNG");
+  } catch (const cv::Exception& e) {
+    throw core::IoError("cannot encode '" + path + "' as PNG: " + e.what());
+  }
+  writeFileContents(path, png.data(), png.size());
+}
+
 void writeSelectionPlot(const std::string& path, const core::SelectionSnapshot& snapshot,
                         const std::string& title) {
   const cv::Mat image = renderSelectionPlot(snapshot, 1000, title);
-  bool ok = false;
-  try {
-    ok = cv::imwrite(path, image);
-  } catch (const cv::Exception& e) {
-    throw core::IoError("cannot write '" + path + "': " + e.what());
-  }
-  if (!ok) throw core::IoError("cannot write '" + path + "'");
+  writePng(path, image);
 }
 
 }  // namespace view_selection::io

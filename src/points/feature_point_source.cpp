@@ -413,6 +413,67 @@ FeatureStats& FeatureStats::operator+=(const FeatureStats& o) {
   return *this;
 }
 
+FeaturePointSource::State FeaturePointSource::state() const {
+  State s;
+  s.views.reserve(views_.size());
+  for (const View& v : views_) s.views.push_back(v);  // the ViewState part
+  s.tracks = tracks_;
+  return s;
+}
+
+void FeaturePointSource::restore(State state) {
+  auto bad = [](const std::string& what) {
+    throw core::InvalidInput("feature point source: saved state is inconsistent: " + what);
+  };
+  const int type = norm_ == cv::NORM_HAMMING ? CV_8U : CV_32F;
+  const int length = norm_ == cv::NORM_HAMMING ? 32 : 128;
+  const size_t n = state.views.size();
+  for (size_t i = 0; i < n; ++i) {
+    const ViewState& v = state.views[i];
+    const std::string which = "keyframe " + std::to_string(v.id);
+    if (v.id < 0 || (i > 0 && v.id <= state.views[i - 1].id)) bad("ids do not ascend");
+    if (!v.intrinsics.isValid() || !v.pose.isValid()) bad(which + " intrinsics or pose");
+    if (v.track_of.size() != v.keypoints.size()) bad(which + " track list size");
+    if (!v.keypoints.empty() && (v.descriptors.rows != static_cast<int>(v.keypoints.size()) ||
+                                 v.descriptors.cols != length || v.descriptors.type() != type))
+      bad(which + " descriptors do not fit the keypoints or the detector '" + config_.detector +
+          "'");
+    for (const cv::KeyPoint& k : v.keypoints)
+      if (!std::isfinite(k.pt.x) || !std::isfinite(k.pt.y)) bad(which + " keypoint not finite");
+    if (!std::isfinite(v.median_depth) || !v.emitted.allFinite()) bad(which + " points");
+    for (const int t : v.track_of)
+      if (t < -1 || t >= static_cast<int>(state.tracks.size())) bad(which + " track index");
+  }
+  for (size_t t = 0; t < state.tracks.size(); ++t) {
+    const Track& track = state.tracks[t];
+    if (!track.point.allFinite()) bad("track " + std::to_string(t) + " point");
+    for (const auto& [v, f] : track.obs) {
+      if (v < 0 || static_cast<size_t>(v) >= n || f < 0 ||
+          static_cast<size_t>(f) >= state.views[static_cast<size_t>(v)].keypoints.size())
+        bad("track " + std::to_string(t) + " observation out of range");
+      if (state.views[static_cast<size_t>(v)].track_of[static_cast<size_t>(f)] !=
+          static_cast<int>(t))
+        bad("track " + std::to_string(t) + " and its feature disagree");
+    }
+  }
+  std::vector<View> views(n);
+  std::vector<TriangulationCamera> cameras;
+  std::map<core::ViewId, int> index_of;
+  for (size_t i = 0; i < n; ++i) {
+    static_cast<ViewState&>(views[i]) = std::move(state.views[i]);
+    View& v = views[i];
+    v.index.build(v.keypoints, v.intrinsics.width, v.intrinsics.height);
+    cameras.push_back(TriangulationCamera::from(v.intrinsics, v.pose));
+    index_of[v.id] = static_cast<int>(i);
+  }
+  views_ = std::move(views);
+  cameras_ = std::move(cameras);
+  index_of_ = std::move(index_of);
+  tracks_ = std::move(state.tracks);
+  last_candidates_.clear();
+  last_ = total_ = FeatureStats{};
+}
+
 size_t FeaturePointSource::validTracks() const {
   size_t n = 0;
   for (const Track& t : tracks_) n += (t.alive && t.valid) ? 1 : 0;
@@ -437,6 +498,8 @@ core::PointSourceResult FeaturePointSource::process(core::ViewId id, const core:
   auto t0 = cpuNow();
   View next;
   next.id = id;
+  next.intrinsics = frame.intrinsics;
+  next.pose = frame.pose;
   detector_->detectAndCompute(grey, cv::noArray(), next.keypoints, next.descriptors);
   next.track_of.assign(next.keypoints.size(), -1);
   next.index.build(next.keypoints, frame.intrinsics.width, frame.intrinsics.height);

@@ -63,6 +63,23 @@ void MapPointSource::setMapPoints(Eigen::Matrix3Xd points) {
   }
 }
 
+void MapPointSource::restore(State state) {
+  if (!state.map.allFinite()) throw core::InvalidInput("map point source: map points not finite");
+  for (size_t i = 0; i < state.views.size(); ++i) {
+    const View& v = state.views[i];
+    if (v.id < 0 || (i > 0 && v.id <= state.views[i - 1].id))
+      throw core::InvalidInput("map point source: keyframe ids do not ascend");
+    if (!v.intrinsics.isValid() || !v.pose.isValid() || !v.assigned.allFinite())
+      throw core::InvalidInput("map point source: keyframe " + std::to_string(v.id) +
+                               " has invalid intrinsics, pose or points");
+    if (v.depth && !v.depth->isConsistent())
+      throw core::InvalidInput("map point source: keyframe " + std::to_string(v.id) +
+                               " has an inconsistent depth map");
+  }
+  map_ = std::move(state.map);
+  views_ = std::move(state.views);
+}
+
 std::vector<core::ViewId> MapPointSource::pendingUpdates() const {
   std::vector<core::ViewId> ids;
   for (const View& v : views_)

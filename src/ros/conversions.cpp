@@ -6,8 +6,10 @@
 #include <cv_bridge/cv_bridge.h>
 #include <sensor_msgs/image_encodings.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <sstream>
 
 namespace enc = sensor_msgs::image_encodings;
@@ -47,10 +49,19 @@ void checkImageMessage(const sensor_msgs::Image& msg, const std::string& what) {
   }
   if (channels <= 0 || bit_depth <= 0)
     throw core::InvalidInput(what + " has unusable encoding '" + msg.encoding + "'");
-  const uint64_t row_bytes = static_cast<uint64_t>(msg.width) * channels * (bit_depth / 8);
+  // In 64 bits: "8UC<n>" encodings may name any channel count (fuzz/regressions/messages).
+  const uint64_t pixel_bytes =
+      static_cast<uint64_t>(channels) * static_cast<uint64_t>(bit_depth / 8);
+  const uint64_t row_bytes = static_cast<uint64_t>(msg.width) * pixel_bytes;
   if (msg.step < row_bytes) {
-    s << what << " step " << msg.step << " is less than width " << msg.width << " x "
-      << channels * (bit_depth / 8) << " bytes of '" << msg.encoding << "'";
+    s << what << " step " << msg.step << " is less than width " << msg.width << " x " << pixel_bytes
+      << " bytes of '" << msg.encoding << "'";
+    throw core::InvalidInput(s.str());
+  }
+  // OpenCV (cv_bridge too) reads rows only at whole elements apart (fuzz/regressions/messages).
+  if (msg.step % static_cast<uint32_t>(std::max(1, bit_depth / 8)) != 0) {
+    s << what << " step " << msg.step << " is not a multiple of its " << bit_depth / 8
+      << "-byte elements ('" << msg.encoding << "')";
     throw core::InvalidInput(s.str());
   }
   if (msg.data.size() < static_cast<uint64_t>(msg.step) * msg.height) {
@@ -71,6 +82,44 @@ void checkImageMessage(const sensor_msgs::Image& msg, const std::string& what) {
                              "-endian, which this machine does not read natively");
 }
 
+Eigen::Matrix3Xd mapPointsFromCloud(const sensor_msgs::PointCloud2& cloud) {
+  uint32_t offsets[3] = {0, 0, 0};
+  const char* names[3] = {"x", "y", "z"};
+  for (int a = 0; a < 3; ++a) {
+    const sensor_msgs::PointField* field = nullptr;
+    for (const auto& f : cloud.fields)
+      if (f.name == names[a]) field = &f;
+    if (!field) throw core::InvalidInput(std::string("the cloud has no field '") + names[a] + "'");
+    if (field->datatype != sensor_msgs::PointField::FLOAT32 || field->count < 1)
+      throw core::InvalidInput(std::string("the cloud's field '") + names[a] + "' is not float32");
+    if (static_cast<uint64_t>(field->offset) + 4 > cloud.point_step)
+      throw core::InvalidInput(std::string("the cloud's field '") + names[a] +
+                               "' lies outside its point_step");
+    offsets[a] = field->offset;
+  }
+  if (cloud.is_bigendian) throw core::InvalidInput("the cloud is big-endian");
+  const uint64_t width = cloud.width, height = cloud.height;
+  // No points: done (not 4e9 empty rows, fuzz/regressions/messages/cloud_zero_width_4e9_rows).
+  if (width == 0 || height == 0) return Eigen::Matrix3Xd(3, 0);
+  if (static_cast<uint64_t>(cloud.point_step) * width > cloud.row_step ||
+      static_cast<uint64_t>(cloud.row_step) * height > cloud.data.size())
+    throw core::InvalidInput("the cloud's data is shorter than its width, height and steps say");
+  Eigen::Matrix3Xd points(3, static_cast<Eigen::Index>(width * height));
+  Eigen::Index kept = 0;
+  for (uint64_t r = 0; r < height; ++r) {
+    for (uint64_t c = 0; c < width; ++c) {
+      const uint8_t* p = cloud.data.data() + r * cloud.row_step + c * cloud.point_step;
+      float v[3];
+      for (int a = 0; a < 3; ++a) std::memcpy(&v[a], p + offsets[a], sizeof(float));
+      if (!std::isfinite(v[0]) || !std::isfinite(v[1]) || !std::isfinite(v[2]))
+        continue;  // organised clouds pad with NaN
+      points.col(kept++) = Eigen::Vector3d(v[0], v[1], v[2]);
+    }
+  }
+  points.conservativeResize(3, kept);
+  return points;
+}
+
 cv::Mat imageView(const sensor_msgs::Image& msg) {
   int type = -1;
   try {
@@ -78,8 +127,12 @@ cv::Mat imageView(const sensor_msgs::Image& msg) {
   } catch (const std::exception& e) {
     throw core::InvalidInput("cannot read encoding '" + msg.encoding + "': " + e.what());
   }
-  return cv::Mat(static_cast<int>(msg.height), static_cast<int>(msg.width), type,
-                 const_cast<uint8_t*>(msg.data.data()), msg.step);
+  try {
+    return cv::Mat(static_cast<int>(msg.height), static_cast<int>(msg.width), type,
+                   const_cast<uint8_t*>(msg.data.data()), msg.step);
+  } catch (const cv::Exception& e) {
+    throw core::InvalidInput("cannot view the '" + msg.encoding + "' image: " + e.what());
+  }
 }
 
 namespace {

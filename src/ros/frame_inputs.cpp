@@ -3,7 +3,7 @@
 #include "view_selection/core/exceptions.h"
 #include "view_selection/core/parameters.h"
 
-#include <sensor_msgs/point_cloud2_iterator.h>
+#include "view_selection/ros/conversions.h"
 
 #include <cmath>
 
@@ -81,7 +81,7 @@ void FrameInputs::onImage(const sensor_msgs::ImageConstPtr& image) {
   if (last_seq_ && seq > *last_seq_ + 1 && seq - *last_seq_ <= kMaxSeqGap) {
     const uint32_t lost = seq - *last_seq_ - 1;
     for (uint32_t n = 0; n < lost; ++n)
-      statistics_.drop("lost_before_node",
+      statistics_.dropInput("lost_before_node",
                        "the image after seq " + std::to_string(*last_seq_) + " is seq " +
                            std::to_string(seq) + ": " + std::to_string(lost) + " image(s) on '" +
                            nh_.resolveName("image") +
@@ -107,11 +107,8 @@ void FrameInputs::onDepth(const sensor_msgs::ImageConstPtr& depth) {
 
 void FrameInputs::deliver(SynchronisedFrames decided) {
   for (const auto& drop : decided.drops)
-    statistics_.drop("unsynchronised", drop.message, drop.stamp);
-  for (PendingFrame& frame : decided.frames) {
-    statistics_.frameReceived();
-    worker_.push(std::move(frame));
-  }
+    statistics_.dropInput("unsynchronised", drop.message, drop.stamp);
+  for (PendingFrame& frame : decided.frames) worker_.push(std::move(frame));  // counts it received
   statistics_.setImagesInSynchroniser(sync_.waiting());
 }
 
@@ -130,29 +127,19 @@ void FrameInputs::checkUnmatched() {
 
 void FrameInputs::onMapPoints(const sensor_msgs::PointCloud2ConstPtr& cloud) {
   auto reject = [&](const std::string& why) {
-    statistics_.drop("bad_map", "ignored the map on '" + nh_.resolveName("points") + "': " + why,
-                     cloud->header.stamp);
+    statistics_.dropInput("bad_map",
+                          "ignored the map on '" + nh_.resolveName("points") + "': " + why,
+                          cloud->header.stamp);
   };
   if (normaliseFrameId(cloud->header.frame_id) != config_.world_frame)
     return reject("the cloud is in frame '" + cloud->header.frame_id + "', not ~world_frame '" +
                   config_.world_frame + "'");
-  const size_t n = static_cast<size_t>(cloud->width) * cloud->height;
-  if (cloud->data.size() < static_cast<size_t>(cloud->row_step) * cloud->height ||
-      static_cast<size_t>(cloud->point_step) * cloud->width > cloud->row_step)
-    return reject("the cloud's data is shorter than its width, height and steps say");
-  Eigen::Matrix3Xd points(3, static_cast<Eigen::Index>(n));
-  Eigen::Index kept = 0;
+  Eigen::Matrix3Xd points;
   try {
-    sensor_msgs::PointCloud2ConstIterator<float> x(*cloud, "x"), y(*cloud, "y"), z(*cloud, "z");
-    for (size_t i = 0; i < n; ++i, ++x, ++y, ++z) {
-      if (!std::isfinite(*x) || !std::isfinite(*y) || !std::isfinite(*z))
-        continue;  // organised clouds pad with NaN
-      points.col(kept++) = Eigen::Vector3d(*x, *y, *z);
-    }
-  } catch (const std::exception& e) {
-    return reject(std::string("the cloud has no float32 x, y, z fields (") + e.what() + ")");
+    points = mapPointsFromCloud(*cloud);
+  } catch (const core::InvalidInput& e) {
+    return reject(e.what());
   }
-  points.conservativeResize(3, kept);
   try {
     worker_.setMapPoints(std::move(points));
   } catch (const core::InvalidInput& e) {

@@ -14,6 +14,16 @@ std::string stampText(const ros::Time& t) {
   return s.str();
 }
 
+namespace {
+/// Drop reasons that count inputs other than received frames: map clouds, paths, and images that
+/// never became a frame (lost before the node, or without a partner in the synchroniser).
+bool isFrameReason(const std::string& reason) {
+  return reason != "bad_map" && reason != "bad_path" && reason != "lost_before_node" &&
+         reason != "unsynchronised";
+}
+ros::Time rosTime(double seconds) { return seconds > 0.0 ? ros::Time(seconds) : ros::Time(); }
+}  // namespace
+
 uint64_t InputStatistics::Counts::dropped_total() const {
   uint64_t total = 0;
   for (const auto& [reason, count] : dropped) total += count;
@@ -50,16 +60,28 @@ void InputStatistics::pathApplied(uint64_t keyframes) {
   ++version_;
 }
 
-void InputStatistics::frameReceived() {
+
+uint64_t InputStatistics::Counts::frames_dropped() const {
+  uint64_t total = 0;
+  for (const auto& [reason, count] : dropped) total += isFrameReason(reason) ? count : 0;
+  return total;
+}
+
+uint64_t InputStatistics::frameReceived() {
   std::lock_guard<std::mutex> lock(mutex_);
   ++counts_.frames_received;
   ++version_;
+  return session_;
 }
 
-void InputStatistics::frameOffered(double insertion_seconds) {
+void InputStatistics::frameOffered(uint64_t session, const ros::Time& stamp,
+                                   double insertion_seconds) {
   std::lock_guard<std::mutex> lock(mutex_);
+  if (session != session_) return;  // received before a reset
   ++counts_.frames_offered;
+  counts_.last_frame_stamp = stamp;
   if (insertion_seconds >= 0.0) {
+    ++counts_.keyframes;
     counts_.last_insertion_seconds = insertion_seconds;
     counts_.max_insertion_seconds = std::max(counts_.max_insertion_seconds, insertion_seconds);
     counts_.last_insertion = ros::WallTime::now();
@@ -67,8 +89,22 @@ void InputStatistics::frameOffered(double insertion_seconds) {
   ++version_;
 }
 
-void InputStatistics::drop(const std::string& reason, const std::string& message,
+void InputStatistics::drop(uint64_t session, const std::string& reason, const std::string& message,
                            const ros::Time& stamp) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (session != session_) return;  // received before a reset: not this session's
+  }
+  count(reason, message, stamp, true);
+}
+
+void InputStatistics::dropInput(const std::string& reason, const std::string& message,
+                                const ros::Time& stamp) {
+  count(reason, message, stamp, false);
+}
+
+void InputStatistics::count(const std::string& reason, const std::string& message,
+                            const ros::Time& stamp, bool frame) {
   uint64_t suppressed = 0;
   bool log = false;
   {
@@ -76,6 +112,7 @@ void InputStatistics::drop(const std::string& reason, const std::string& message
     ++counts_.dropped[reason];
     counts_.last_error = reason + ": " + message;
     counts_.last_error_stamp = stamp;
+    if (frame) counts_.last_frame_stamp = stamp;
     ++version_;
     Throttle& t = throttle_[reason];
     const ros::WallTime now = ros::WallTime::now();
@@ -98,6 +135,49 @@ void InputStatistics::drop(const std::string& reason, const std::string& message
 void InputStatistics::reset() {
   std::lock_guard<std::mutex> lock(mutex_);
   counts_ = Counts{};
+  ++session_;
+  ++version_;
+}
+
+uint64_t InputStatistics::session() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return session_;
+}
+
+io::SessionStatistics InputStatistics::toSaved() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  io::SessionStatistics s;
+  s.frames_offered = counts_.frames_offered;
+  s.frames_received = counts_.frames_offered + counts_.frames_dropped();
+  s.dropped = counts_.dropped;
+  s.last_error = counts_.last_error;
+  s.last_error_stamp = counts_.last_error_stamp.toSec();
+  s.last_insertion_seconds = counts_.last_insertion_seconds;
+  s.max_insertion_seconds = counts_.max_insertion_seconds;
+  if (!counts_.last_frame_stamp.isZero()) s.last_frame_stamp = counts_.last_frame_stamp.toSec();
+  return s;
+}
+
+void InputStatistics::restore(const io::SessionStatistics& saved, uint64_t keyframes) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  counts_ = Counts{};
+  counts_.keyframes = keyframes;
+  counts_.frames_received = saved.frames_received;
+  counts_.frames_offered = saved.frames_offered;
+  counts_.dropped = saved.dropped;
+  counts_.last_error = saved.last_error;
+  counts_.last_error_stamp = rosTime(saved.last_error_stamp);
+  counts_.last_insertion_seconds = saved.last_insertion_seconds;
+  counts_.max_insertion_seconds = saved.max_insertion_seconds;
+  if (saved.last_frame_stamp) counts_.last_frame_stamp = rosTime(*saved.last_frame_stamp);
+  ++session_;
+  ++version_;
+}
+
+void InputStatistics::stateSaved(uint32_t keyframes, const ros::Time& frame_stamp) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  saved_keyframes_ = keyframes;
+  saved_frame_stamp_ = frame_stamp;
   ++version_;
 }
 
@@ -111,10 +191,9 @@ uint64_t InputStatistics::version() const {
   return version_;
 }
 
-view_selection::InputStatistics InputStatistics::toMsg(uint32_t keyframes) const {
+view_selection::InputStatistics InputStatistics::toMsg() const {
   view_selection::InputStatistics msg;
   msg.header.stamp = ros::Time::now();
-  msg.keyframes = keyframes;
   std::lock_guard<std::mutex> lock(mutex_);
   msg.images_arrived = counts_.images_arrived;
   msg.camera_infos_arrived = counts_.camera_infos_arrived;
@@ -124,6 +203,7 @@ view_selection::InputStatistics InputStatistics::toMsg(uint32_t keyframes) const
   msg.paths_applied = counts_.paths_applied;
   msg.keyframes_corrected = counts_.keyframes_corrected;
   msg.frames_offered = counts_.frames_offered;
+  msg.keyframes = static_cast<uint32_t>(counts_.keyframes);
   for (const auto& [reason, count] : counts_.dropped) {
     msg.drop_reasons.push_back(reason);
     msg.drop_counts.push_back(count);
@@ -131,8 +211,11 @@ view_selection::InputStatistics InputStatistics::toMsg(uint32_t keyframes) const
   }
   msg.last_error = counts_.last_error;
   msg.last_error_stamp = counts_.last_error_stamp;
+  msg.last_frame_stamp = counts_.last_frame_stamp;
   msg.last_insertion_seconds = counts_.last_insertion_seconds;
   msg.max_insertion_seconds = counts_.max_insertion_seconds;
+  msg.state_saved_keyframes = saved_keyframes_;
+  msg.state_saved_frame_stamp = saved_frame_stamp_;
   return msg;
 }
 

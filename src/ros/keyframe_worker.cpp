@@ -13,13 +13,19 @@
 namespace view_selection::ros_node {
 
 KeyframeWorker::KeyframeWorker(const NodeConfig& config, PoseProvider& poses,
-                               InputStatistics& statistics, KeyframeVerdicts* verdicts)
-    : config_(config), poses_(poses), statistics_(statistics), verdicts_(verdicts) {
+                               InputStatistics& statistics, StateKeeper& keeper,
+                               KeyframeVerdicts* verdicts)
+    : config_(config),
+      poses_(poses),
+      statistics_(statistics),
+      keeper_(keeper),
+      verdicts_(verdicts) {
   selector_ = std::make_unique<core::ViewSelector>(
       config_.selector, points::makePointSource(config_.point_source, config_.point_params,
                                                 config_.selector.matrix.occlusion));
   {
     std::lock_guard<std::mutex> lock(state_mutex_);
+    restoreLoaded();
     publishSnapshotLocked();
   }
   thread_ = std::thread([this] { loop(); });
@@ -34,6 +40,54 @@ KeyframeWorker::~KeyframeWorker() {
   poses_.stop();
   if (verdicts_) verdicts_->stop();
   if (thread_.joinable()) thread_.join();
+  if (!keeper_.enabled()) return;
+  std::optional<StateSnapshot> last;
+  {
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    if (changed_since_save_) last = captureStateLocked();
+  }
+  if (!last) return;
+  const SaveResult saved = keeper_.saveNow(std::move(*last));
+  if (saved.ok)
+    ROS_INFO_STREAM("view_selection: session saved on shutdown: " << saved.message);
+  else
+    ROS_ERROR_STREAM("view_selection: " << saved.message);
+}
+
+void KeyframeWorker::restoreLoaded() {
+  std::optional<io::SessionState> loaded = keeper_.takeLoaded();
+  if (!loaded) return;
+  try {
+    io::restoreSession(*selector_, *loaded);
+    // The node's parameters win over the saved ones, as a live reconfigure would apply them
+    // (compared as they act: the saved ones are the values in force, the gate's preset applied).
+    core::ViewSelectorConfig wanted = config_.selector;
+    wanted.matrix.applyGate();
+    if (core::paramsOf(selector_->config()) != core::paramsOf(wanted)) {
+      ROS_INFO(
+          "view_selection: the saved session used other method parameters; applying this "
+          "node's (the matrix is recomputed where its gates changed)");
+      selector_->setConfig(config_.selector);
+    }
+  } catch (const core::Error& e) {
+    selector_->reset();
+    keeper_.refuseLoaded(e.what());
+    return;
+  }
+  last_stamp_ = loaded->selector.last_stamp;
+  const size_t keyframes = selector_->matrix().size();
+  // The state file keeps no images: the continued keyframes have none (null), later ones do.
+  if (config_.save_keyframe_images) images_.assign(keyframes, nullptr);
+  statistics_.restore(loaded->statistics, keyframes);
+  const auto& last = loaded->statistics.last_frame_stamp;
+  statistics_.stateSaved(static_cast<uint32_t>(keyframes),
+                         last && *last > 0.0 ? ros::Time(*last) : ros::Time());
+  // The restored session counts as saved: the file holds it.
+  changed_since_save_ = false;
+  ROS_INFO_STREAM(
+      "view_selection: continuing the saved session: "
+      << keyframes << " keyframes, " << loaded->statistics.frames_offered << " frames offered"
+      << (last ? ", last frame at " + stampText(ros::Time(std::max(0.0, *last))) : std::string()));
 }
 
 void KeyframeWorker::push(PendingFrame frame) {
@@ -46,14 +100,22 @@ void KeyframeWorker::push(PendingFrame frame) {
       queue_.pop_front();
     }
     std::lock_guard<std::mutex> state(state_mutex_);
-    queue_.push_back({std::move(frame), generation_, ros::WallTime::now()});
+    // Counted here, under the locks reset() takes, so a frame belongs to exactly one session.
+    const uint64_t session = statistics_.frameReceived();
+    queue_.push_back({std::move(frame), generation_, session, ros::WallTime::now()});
   }
   queue_cv_.notify_one();
   if (overflow)
-    statistics_.drop("worker_behind",
-                     "the worker is " + std::to_string(config_.max_pending_frames) +
-                         " frames behind (~max_pending_frames); dropped the oldest waiting frame",
-                     overflow->frame.image->header.stamp);
+    drop(*overflow, "worker_behind",
+         "the worker is " + std::to_string(config_.max_pending_frames) +
+             " frames behind (~max_pending_frames); dropped the oldest waiting frame");
+}
+
+void KeyframeWorker::drop(const Queued& queued, const std::string& reason,
+                          const std::string& message) {
+  statistics_.drop(queued.session, reason, message, queued.frame.image->header.stamp);
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  if (queued.generation == generation_) changed_since_save_ = true;
 }
 
 size_t KeyframeWorker::pending(double* oldest_age) const {
@@ -64,16 +126,39 @@ size_t KeyframeWorker::pending(double* oldest_age) const {
 }
 
 size_t KeyframeWorker::reset() {
-  std::lock_guard<std::mutex> queue_lock(queue_mutex_);
-  std::lock_guard<std::mutex> lock(state_mutex_);
-  queue_.clear();
-  const size_t forgotten = selector_->matrix().size();
-  selector_->reset();
-  images_.clear();
-  last_stamp_.reset();
-  ++generation_;
-  publishSnapshotLocked();
+  StateSnapshot empty;
+  size_t forgotten = 0;
+  {
+    std::lock_guard<std::mutex> queue_lock(queue_mutex_);
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    queue_.clear();
+    forgotten = selector_->matrix().size();
+    selector_->reset();
+    images_.clear();
+    last_stamp_.reset();
+    ++generation_;
+    statistics_.reset();
+    publishSnapshotLocked();
+    keyframes_since_save_ = 0;
+    empty = captureStateLocked();
+  }
+  keeper_.saveLater(std::move(empty));
   return forgotten;
+}
+
+StateSnapshot KeyframeWorker::captureState() {
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  return captureStateLocked();
+}
+
+StateSnapshot KeyframeWorker::captureStateLocked() {
+  StateSnapshot s;
+  s.sequence = ++captures_;
+  s.state = io::captureSession(*selector_);
+  s.state.statistics = statistics_.toSaved();
+  s.state.saved_at = ros::WallTime::now().toSec();
+  changed_since_save_ = false;
+  return s;
 }
 
 void KeyframeWorker::setMapPoints(Eigen::Matrix3Xd points) {
@@ -82,6 +167,7 @@ void KeyframeWorker::setMapPoints(Eigen::Matrix3Xd points) {
   if (!map) return;
   map->setMapPoints(std::move(points));
   const std::vector<core::ViewId> rows = selector_->applyPointUpdates();
+  changed_since_save_ = true;
   if (!rows.empty()) publishSnapshotLocked();
   ROS_DEBUG_STREAM("view_selection: map of " << map->mapPoints().cols() << " points, "
                                              << rows.size() << " keyframe rows recomputed");
@@ -90,6 +176,7 @@ void KeyframeWorker::setMapPoints(Eigen::Matrix3Xd points) {
 void KeyframeWorker::reconfigure(const core::ViewSelectorConfig& config) {
   std::lock_guard<std::mutex> lock(state_mutex_);
   selector_->setConfig(config);
+  changed_since_save_ = true;
   publishSnapshotLocked();
 }
 
@@ -143,19 +230,18 @@ void KeyframeWorker::loop() {
       process(queued);
     } catch (const std::exception& e) {
       // process() turns every expected failure into a drop; this is the last line of defence.
-      statistics_.drop("invalid_frame", std::string("unexpected error: ") + e.what(),
-                       queued.frame.image->header.stamp);
+      drop(queued, "invalid_frame", std::string("unexpected error: ") + e.what());
     }
   }
 }
 
-bool KeyframeWorker::convert(const PendingFrame& frame, CameraModel& camera) {
+bool KeyframeWorker::convert(const Queued& queued, CameraModel& camera) {
+  const PendingFrame& frame = queued.frame;
   const sensor_msgs::Image& image = *frame.image;
-  const ros::Time stamp = image.header.stamp;
   try {
     checkImageMessage(image, "image");
   } catch (const core::InvalidInput& e) {
-    statistics_.drop("bad_image", e.what(), stamp);
+    drop(queued, "bad_image", e.what());
     return false;
   }
   if (frame.depth) {
@@ -163,28 +249,25 @@ bool KeyframeWorker::convert(const PendingFrame& frame, CameraModel& camera) {
       checkImageMessage(*frame.depth, "depth");
       checkDepthEncoding(*frame.depth);
     } catch (const core::InvalidInput& e) {
-      statistics_.drop("bad_depth", e.what(), stamp);
+      drop(queued, "bad_depth", e.what());
       return false;
     }
     // Depth sampled at colour pixels must be registered to the colour camera.
     const std::string depth_frame = normaliseFrameId(frame.depth->header.frame_id);
     const std::string image_frame = normaliseFrameId(image.header.frame_id);
     if (!depth_frame.empty() && !image_frame.empty() && depth_frame != image_frame) {
-      statistics_.drop("bad_depth",
-                       "the depth image is in frame '" + depth_frame +
-                           "', not the colour "
-                           "image's '" +
-                           image_frame +
-                           "': use depth registered to the colour camera (e.g. "
-                           "depth_registered, aligned_depth_to_color)",
-                       stamp);
+      drop(queued, "bad_depth",
+           "the depth image is in frame '" + depth_frame + "', not the colour image's '" +
+               image_frame +
+               "': use depth registered to the colour camera (e.g. depth_registered, "
+               "aligned_depth_to_color)");
       return false;
     }
   }
   try {
     camera = cameraModelFromInfo(*frame.info);
   } catch (const core::InvalidInput& e) {
-    statistics_.drop("bad_camera_info", e.what(), stamp);
+    drop(queued, "bad_camera_info", e.what());
     return false;
   }
   const core::PinholeIntrinsics& k = camera.intrinsics;
@@ -196,7 +279,7 @@ bool KeyframeWorker::convert(const PendingFrame& frame, CameraModel& camera) {
       << (frame.info->binning_x > 1 || frame.info->binning_y > 1 || frame.info->roi.width > 0
               ? " (with its binning and ROI)"
               : "");
-    statistics_.drop("bad_camera_info", s.str(), stamp);
+    drop(queued, "bad_camera_info", s.str());
     return false;
   }
   return true;
@@ -206,7 +289,7 @@ void KeyframeWorker::process(const Queued& queued) {
   const PendingFrame& frame = queued.frame;
   const ros::Time stamp = frame.image->header.stamp;
   CameraModel camera;
-  if (!convert(frame, camera)) return;
+  if (!convert(queued, camera)) return;
   {
     std::lock_guard<std::mutex> lock(state_mutex_);
     if (queued.generation != generation_) return;  // queued before a reset
@@ -216,7 +299,9 @@ void KeyframeWorker::process(const Queued& queued) {
       std::ostringstream s;
       s << "stamp " << stampText(stamp) << " is " << (duplicate ? "the same as" : "before")
         << " the previous frame's " << stampText(ros::Time(*last_stamp_));
-      statistics_.drop(duplicate ? "duplicate_stamp" : "out_of_order_stamp", s.str(), stamp);
+      statistics_.drop(queued.session, duplicate ? "duplicate_stamp" : "out_of_order_stamp",
+                       s.str(), stamp);
+      changed_since_save_ = true;
       return;
     }
   }
@@ -225,27 +310,29 @@ void KeyframeWorker::process(const Queued& queued) {
   if (verdicts_ && verdicts_->active()) {
     const KeyframeVerdicts::Verdict verdict = verdicts_->wait(stamp);
     if (verdict == KeyframeVerdicts::Verdict::kUnknown)
-      return statistics_.drop("no_keyframe_verdict",
-                              "no stamp on " + verdicts_->describe() + " at or after " +
-                                  stampText(stamp) + " within " +
-                                  std::to_string(config_.keyframe_verdict_timeout) +
-                                  " s (~keyframe_verdict_timeout): the frame's verdict is unknown",
-                              stamp);
+      return drop(queued, "no_keyframe_verdict",
+                  "no stamp on " + verdicts_->describe() + " at or after " + stampText(stamp) +
+                      " within " + std::to_string(config_.keyframe_verdict_timeout) +
+                      " s (~keyframe_verdict_timeout): the frame's verdict is unknown");
     external = verdict == KeyframeVerdicts::Verdict::kKeyframe;
   }
   const PoseLookup lookup = poses_.lookup(normaliseFrameId(frame.image->header.frame_id), stamp);
-  if (!lookup.pose) return statistics_.drop(lookup.reason, lookup.message, stamp);
+  if (!lookup.pose) return drop(queued, lookup.reason, lookup.message);
   if (!lookup.pose->isValid())
-    return statistics_.drop(
-        "bad_pose", "the camera pose is not finite or its quaternion is not unit length", stamp);
+    return drop(queued, "bad_pose",
+                "the camera pose is not finite or its quaternion is not unit length");
 
   std::lock_guard<std::mutex> lock(state_mutex_);
   // A reset while the pose was looked up: the frame belongs to the forgotten session.
   if (queued.generation != generation_) return;
+  // Drops from here on are under the state lock: counted directly, the session marked changed.
+  auto dropLocked = [&](const std::string& reason, const std::string& message) {
+    statistics_.drop(queued.session, reason, message, stamp);
+    changed_since_save_ = true;
+  };
   if (last_stamp_ && !(stamp.toSec() > *last_stamp_))
-    return statistics_.drop("out_of_order_stamp",
-                            "stamp " + stampText(stamp) + " is not after the previous frame's",
-                            stamp);
+    return dropLocked("out_of_order_stamp",
+                      "stamp " + stampText(stamp) + " is not after the previous frame's");
   core::Frame core_frame;
   core_frame.stamp = stamp.toSec();
   core_frame.image_name = keyframeImageName(core_frame.stamp);
@@ -264,7 +351,7 @@ void KeyframeWorker::process(const Queued& queued) {
       core_frame.image =
           points::colourImageOf(rectifiedImage(camera, points::matOf(core_frame.image)));
   } catch (const core::InvalidInput& e) {
-    return statistics_.drop("bad_image", e.what(), stamp);
+    return dropLocked("bad_image", e.what());
   }
   // Feature points use the image alone (as select_views --points features reads no depth).
   if (wanted && frame.depth && config_.point_source != "features") {
@@ -273,28 +360,38 @@ void KeyframeWorker::process(const Queued& queued) {
       if (camera.rectify) metres = rectifiedDepth(camera, metres);
       core_frame.depth = points::depthImageOf(metres);
     } catch (const core::InvalidInput& e) {
-      return statistics_.drop("bad_depth", e.what(), stamp);
+      return dropLocked("bad_depth", e.what());
     }
   }
   core::FrameResult result;
   try {
     result = selector_->addFrame(core_frame);
   } catch (const core::InvalidInput& e) {
-    return statistics_.drop("invalid_frame", e.what(), stamp);
+    return dropLocked("invalid_frame", e.what());
   }
   last_stamp_ = core_frame.stamp;
+  changed_since_save_ = true;
   double insertion = -1.0;
   if (result.outcome == core::FrameOutcome::kKeyframe) {
     if (config_.save_keyframe_images) images_.push_back(frame.image);
-    publishSnapshotLocked();
     insertion = result.points_seconds + result.matrix_seconds;
+    // Counted before the snapshot is published: a reader never sees more keyframes in the
+    // selection than in the statistics.
+    statistics_.frameOffered(queued.session, stamp, insertion);
+    publishSnapshotLocked();
     ROS_DEBUG_STREAM("view_selection: keyframe "
                      << result.id << " at " << stampText(stamp) << ": " << result.points
                      << " points, insertion " << 1e3 * insertion << " ms (points "
                      << 1e3 * result.points_seconds << " ms, matrix " << 1e3 * result.matrix_seconds
                      << " ms), " << selector_->matrix().size() << " keyframes");
+    if (config_.autosave_keyframes > 0 && ++keyframes_since_save_ >= config_.autosave_keyframes &&
+        keeper_.enabled()) {
+      keyframes_since_save_ = 0;
+      keeper_.saveLater(captureStateLocked());  // copied here, written on the keeper's thread
+    }
+    return;
   }
-  statistics_.frameOffered(insertion);
+  statistics_.frameOffered(queued.session, stamp, insertion);
 }
 
 }  // namespace view_selection::ros_node

@@ -81,6 +81,13 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
                   "keep keyframe images so that ~export writes them for COLMAP");
   core::visitReal(v, "marker_scale", marker_scale, 1e-6, 1e6,
                   "frustum depth in RViz [m, scene units]");
+  v.section("State across restarts");
+  core::visitText(v, "state_file", state_file, {},
+                  "the session is saved here and continued from it at start (relative to "
+                  "ROS_HOME, default ~/.ros); \"\" = off");
+  core::visitInteger(v, "autosave_keyframes", autosave_keyframes, 0, 1000000,
+                     "save the session every N new keyframes (also on shutdown and ~save_state); "
+                     "0 = only then");
   selector.visitParameters(v);
   point_params.visitParameters(v);
 }
@@ -168,6 +175,8 @@ NodeConfig loadNodeConfig(const ros::NodeHandle& nh) {
 std::vector<std::string> unknownParameters(const ros::NodeHandle& nh) {
   NameCollector known;
   NodeConfig().visitParameters(known);
+  // image_transport's own ~parameters (TransportHints read them from the private handle).
+  known.names.insert({"image_transport", "depth_image_transport"});
   std::vector<std::string> all, unknown;
   if (!ros::param::getParamNames(all)) return unknown;
   const std::string prefix = nh.getNamespace() + "/";

@@ -30,7 +30,7 @@ PathCorrections::~PathCorrections() {
 void PathCorrections::onPath(const nav_msgs::PathConstPtr& path) {
   const ros::Time stamp = path->header.stamp;
   auto reject = [&](const std::string& why) {
-    statistics_.drop("bad_path", "ignored the path on '" + nh_.resolveName("path") + "': " + why,
+    statistics_.dropInput("bad_path", "ignored the path on '" + nh_.resolveName("path") + "': " + why,
                      stamp);
   };
   const std::string camera =

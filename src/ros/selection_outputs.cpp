@@ -51,7 +51,7 @@ void SelectionOutputs::update() {
   }
   const uint64_t stats_version = statistics_.version();
   if (stats_version != published_stats_version_) {
-    statistics_pub_.publish(statistics_.toMsg(static_cast<uint32_t>(snapshot->selection.size())));
+    statistics_pub_.publish(statistics_.toMsg());
     published_stats_version_ = stats_version;
   }
 }

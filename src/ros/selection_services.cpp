@@ -4,6 +4,7 @@
 #include "view_selection/io/atomic_file.h"
 #include "view_selection/io/export.h"
 #include "view_selection/io/params_json.h"
+#include "view_selection/io/selection_plot.h"
 #include "view_selection/ros/conversions.h"
 
 #include <opencv2/imgcodecs.hpp>
@@ -15,26 +16,31 @@ namespace view_selection::ros_node {
 namespace fs = std::filesystem;
 
 SelectionServices::SelectionServices(const NodeConfig& config, ros::NodeHandle private_nh,
-                                     KeyframeWorker& worker, InputStatistics& statistics,
-                                     PoseProvider& poses, std::function<void()> on_reset)
+                                     KeyframeWorker& worker, PoseProvider& poses,
+                                     StateKeeper& keeper, std::function<void()> on_reset)
     : config_(config),
       worker_(worker),
-      statistics_(statistics),
       poses_(poses),
+      keeper_(keeper),
       on_reset_(std::move(on_reset)),
-      spinner_(1, &queue_) {
-  ros::NodeHandle nh(private_nh);
+      spinner_(1, &queue_),
+      files_spinner_(1, &files_queue_) {
+  ros::NodeHandle nh(private_nh), files(private_nh);
   nh.setCallbackQueue(&queue_);
+  files.setCallbackQueue(&files_queue_);
   next_views_ = nh.advertiseService("get_next_views", &SelectionServices::getNextViews, this);
   selection_ = nh.advertiseService("get_selection", &SelectionServices::getSelection, this);
-  export_ = nh.advertiseService("export", &SelectionServices::exportSelection, this);
   reset_ = nh.advertiseService("reset", &SelectionServices::reset, this);
+  export_ = files.advertiseService("export", &SelectionServices::exportSelection, this);
+  save_state_ = files.advertiseService("save_state", &SelectionServices::saveState, this);
   spinner_.start();
+  files_spinner_.start();
 }
 
 SelectionServices::~SelectionServices() {
   spinner_.stop();
-  for (auto* s : {&next_views_, &selection_, &export_, &reset_}) s->shutdown();
+  files_spinner_.stop();
+  for (auto* s : {&next_views_, &selection_, &export_, &reset_, &save_state_}) s->shutdown();
 }
 
 bool SelectionServices::getNextViews(view_selection::GetNextViews::Request& req,
@@ -76,6 +82,7 @@ int writeKeyframeImages(const std::string& directory, const NodeSnapshot& snapsh
   const std::vector<std::string> names = snapshot.selection.imageNames();
   int written = 0;
   for (size_t i = 0; i < snapshot.images.size() && i < names.size(); ++i) {
+    if (!snapshot.images[i]) continue;  // a keyframe continued from ~state_file: no image kept
     const fs::path path = fs::path(directory) / names[i];
     std::error_code ec;
     fs::create_directories(path.parent_path(), ec);
@@ -88,9 +95,7 @@ int writeKeyframeImages(const std::string& directory, const NodeSnapshot& snapsh
     } catch (const core::InvalidInput& e) {
       throw core::IoError("keyframe " + std::to_string(i) + " image: " + e.what());
     }
-    io::writeAtomically(path.string(), [&](const std::string& tmp) {
-      if (!cv::imwrite(tmp, bgr)) throw core::IoError("cannot write '" + path.string() + "'");
-    });
+    io::writeAtomically(path.string(), [&](const std::string& tmp) { io::writePng(tmp, bgr); });
     ++written;
   }
   return written;
@@ -123,6 +128,10 @@ bool SelectionServices::exportSelection(view_selection::Export::Request& req,
         std::to_string(s.selection.pairs.size()) + " pairs" +
         (config_.save_keyframe_images ? ", " + std::to_string(res.images_written) + " images"
                                       : " (no images: ~save_keyframe_images is false)") +
+        (config_.save_keyframe_images && static_cast<size_t>(res.images_written) < s.size()
+             ? " (" + std::to_string(s.size() - static_cast<size_t>(res.images_written)) +
+                   " keyframes continued from ~state_file have no image)"
+             : std::string()) +
         " to " + req.directory;
   } catch (const std::exception& e) {
     res.success = false;
@@ -132,12 +141,23 @@ bool SelectionServices::exportSelection(view_selection::Export::Request& req,
 }
 
 bool SelectionServices::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
-  const size_t forgotten = worker_.reset();
+  const size_t forgotten = worker_.reset();  // and the statistics, in the same step
   poses_.reset();
-  statistics_.reset();
   if (on_reset_) on_reset_();
   res.success = true;
   res.message = "forgot " + std::to_string(forgotten) + " keyframes and the input statistics";
+  return true;
+}
+
+bool SelectionServices::saveState(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
+  if (!keeper_.enabled()) {
+    res.success = false;
+    res.message = "~state_file is empty: saving is off";
+    return true;
+  }
+  const SaveResult saved = keeper_.saveNow(worker_.captureState());
+  res.success = saved.ok;
+  res.message = saved.message;
   return true;
 }
 

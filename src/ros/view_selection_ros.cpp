@@ -28,11 +28,12 @@ ros::NodeHandle withQueue(ros::NodeHandle nh, ros::CallbackQueue& queue) {
 
 ViewSelectionRos::ViewSelectionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
     : config_(loadAndCheck(private_nh)),
+      keeper_(config_, statistics_, "view_selection_node " + private_nh.getNamespace()),
       poses_(makePoseProvider(config_, nh)),
       verdicts_(config_, nh),
-      worker_(config_, *poses_, statistics_, &verdicts_),
+      worker_(config_, *poses_, statistics_, keeper_, &verdicts_),
       outputs_(config_, nh, private_nh, worker_, statistics_),
-      services_(config_, private_nh, worker_, statistics_, *poses_, [this] { outputs_.update(); }),
+      services_(config_, private_nh, worker_, *poses_, keeper_, [this] { outputs_.update(); }),
       reconfigure_(config_, withQueue(private_nh, services_.queue()), worker_, outputs_),
       corrections_(config_, nh, worker_, statistics_),
       inputs_(config_, nh, private_nh, worker_, statistics_) {
@@ -44,7 +45,9 @@ ViewSelectionRos::ViewSelectionRos(ros::NodeHandle nh, ros::NodeHandle private_n
                   << (config_.point_source == "map" ? " ('" + nh.resolveName("points") + "')"
                                                     : std::string())
                   << ", keyframes " << core::toString(s.keyframes.mode) << ", k " << s.selection.k
-                  << ", completion " << core::toString(s.selection.completion));
+                  << ", completion " << core::toString(s.selection.completion)
+                  << (keeper_.enabled() ? ", session saved in " + keeper_.path()
+                                        : std::string(", session not saved (~state_file empty)")));
 }
 
 }  // namespace view_selection::ros_node

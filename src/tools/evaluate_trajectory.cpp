@@ -74,6 +74,81 @@ std::optional<Eigen::Vector3d> poseForStampName(const std::vector<TumPoseEntry>&
   return best->pose.position;
 }
 
+/// images.txt of a model folder (or the file itself); a binary model gets the conversion command.
+fs::path imagesTxt(fs::path model) {
+  if (!fs::is_directory(model)) return model;
+  if (!fs::exists(model / "images.txt")) {
+    if (fs::exists(model / "images.bin"))
+      throw IoError("'" + model.string() +
+                    "' is a binary COLMAP model; convert it first: colmap model_converter "
+                    "--input_path " +
+                    model.string() + " --output_path OUT --output_type TXT");
+    throw IoError("'" + model.string() + "' has no images.txt");
+  }
+  return model / "images.txt";
+}
+
+/// The registered images that have ground truth, with it; the others by name.
+struct Matched {
+  std::vector<const ColmapImagePose*> used;
+  std::vector<Eigen::Vector3d> truth;
+  std::vector<std::string> unmatched;
+};
+
+Matched matchGroundTruth(const std::vector<ColmapImagePose>& images, const CommandLine& cli,
+                         double tolerance, GroundTruthLookup& lookup) {
+  std::vector<TumPoseEntry> trajectory;
+  if (cli.has("dataset")) {
+    lookup = fromDataset(*cli.text("dataset"), tolerance);
+  } else {
+    trajectory = readTumTrajectory(*cli.text("groundtruth"));
+    lookup.describe =
+        *cli.text("groundtruth") + " (" + std::to_string(trajectory.size()) + " poses)";
+  }
+  Matched m;
+  for (const ColmapImagePose& im : images) {
+    std::optional<Eigen::Vector3d> p;
+    if (cli.has("dataset")) {
+      const auto it = lookup.by_name.find(im.name);
+      if (it != lookup.by_name.end()) p = it->second;
+    } else {
+      p = poseForStampName(trajectory, im.name, tolerance);
+    }
+    if (!p) {
+      m.unmatched.push_back(im.name);
+      continue;
+    }
+    m.used.push_back(&im);
+    m.truth.push_back(*p);
+  }
+  return m;
+}
+
+void writeJson(const std::string& path, const fs::path& model, size_t registered,
+               const Matched& m, const AlignmentConfig& config, const TrajectoryError& r) {
+  nlohmann::json j;
+  j["model"] = model.string();
+  j["registered"] = registered;
+  j["matched"] = m.used.size();
+  j["unmatched"] = m.unmatched;
+  j["alignment"] = {
+      {"type", config.with_scale ? "sim3" : "se3"},
+      {"scale", r.alignment.scale},
+      {"rotation",
+       {{r.alignment.rotation(0, 0), r.alignment.rotation(0, 1), r.alignment.rotation(0, 2)},
+        {r.alignment.rotation(1, 0), r.alignment.rotation(1, 1), r.alignment.rotation(1, 2)},
+        {r.alignment.rotation(2, 0), r.alignment.rotation(2, 1), r.alignment.rotation(2, 2)}}},
+      {"translation",
+       {r.alignment.translation.x(), r.alignment.translation.y(), r.alignment.translation.z()}}};
+  j["ate"] = {{"rmse", r.rmse}, {"mean", r.mean}, {"median", r.median}, {"max", r.max}};
+  nlohmann::json per = nlohmann::json::array();
+  for (size_t i = 0; i < m.used.size(); ++i)
+    per.push_back({{"name", m.used[i]->name}, {"error", r.errors[i]}});
+  j["per_image"] = per;
+  std::ofstream out(path);
+  if (!(out << j.dump(1) << "\n")) throw IoError("cannot write '" + path + "'");
+}
+
 int run(int argc, char** argv) {
   const CommandLine cli(argc, argv,
                         {"model", "dataset", "groundtruth", "max-time-difference", "json"},
@@ -86,69 +161,32 @@ int run(int argc, char** argv) {
   if (cli.has("dataset") == cli.has("groundtruth"))
     throw UsageError("give exactly one of --dataset DIR and --groundtruth FILE (see --help)");
   const double tolerance = cli.real("max-time-difference", 0.02, 1e-9, 1e6);
-  fs::path model = *cli.text("model");
-  if (fs::is_directory(model)) {
-    if (!fs::exists(model / "images.txt")) {
-      if (fs::exists(model / "images.bin"))
-        throw IoError("'" + model.string() +
-                      "' is a binary COLMAP model; convert it first: colmap model_converter "
-                      "--input_path " +
-                      model.string() + " --output_path OUT --output_type TXT");
-      throw IoError("'" + model.string() + "' has no images.txt");
-    }
-    model /= "images.txt";
-  }
+  const fs::path model = imagesTxt(*cli.text("model"));
   const std::vector<ColmapImagePose> images = readColmapImagesTxt(model.string());
 
-  std::vector<TumPoseEntry> trajectory;
   GroundTruthLookup lookup;
-  if (cli.has("dataset")) {
-    lookup = fromDataset(*cli.text("dataset"), tolerance);
-  } else {
-    trajectory = readTumTrajectory(*cli.text("groundtruth"));
-    lookup.describe =
-        *cli.text("groundtruth") + " (" + std::to_string(trajectory.size()) + " poses)";
-  }
-
-  std::vector<const ColmapImagePose*> used;
-  std::vector<Eigen::Vector3d> gt;
-  std::vector<std::string> unmatched;
-  for (const ColmapImagePose& im : images) {
-    std::optional<Eigen::Vector3d> p;
-    if (cli.has("dataset")) {
-      const auto it = lookup.by_name.find(im.name);
-      if (it != lookup.by_name.end()) p = it->second;
-    } else {
-      p = poseForStampName(trajectory, im.name, tolerance);
-    }
-    if (!p) {
-      unmatched.push_back(im.name);
-      continue;
-    }
-    used.push_back(&im);
-    gt.push_back(*p);
-  }
-  if (!unmatched.empty())
+  const Matched m = matchGroundTruth(images, cli, tolerance, lookup);
+  if (!m.unmatched.empty())
     std::fprintf(
         stderr,
         "evaluate_trajectory: %zu registered image(s) without ground truth, left out (first: %s)\n",
-        unmatched.size(), unmatched.front().c_str());
-  if (used.size() < 3)
-    throw InvalidInput("only " + std::to_string(used.size()) + " of " +
+        m.unmatched.size(), m.unmatched.front().c_str());
+  if (m.used.size() < 3)
+    throw InvalidInput("only " + std::to_string(m.used.size()) + " of " +
                        std::to_string(images.size()) + " registered images have ground truth in " +
                        lookup.describe + "; the ATE needs at least 3");
 
-  Eigen::Matrix3Xd est(3, static_cast<Eigen::Index>(used.size())), truth(3, est.cols());
-  for (size_t i = 0; i < used.size(); ++i) {
-    est.col(static_cast<Eigen::Index>(i)) = used[i]->centre;
-    truth.col(static_cast<Eigen::Index>(i)) = gt[i];
+  Eigen::Matrix3Xd est(3, static_cast<Eigen::Index>(m.used.size())), truth(3, est.cols());
+  for (size_t i = 0; i < m.used.size(); ++i) {
+    est.col(static_cast<Eigen::Index>(i)) = m.used[i]->centre;
+    truth.col(static_cast<Eigen::Index>(i)) = m.truth[i];
   }
   AlignmentConfig config;
   config.with_scale = !cli.flag("no-scale");
   const TrajectoryError r = absoluteTrajectoryError(est, truth, config);
 
   std::printf("model        %s: %zu registered images, %zu with ground truth\n", model.c_str(),
-              images.size(), used.size());
+              images.size(), m.used.size());
   std::printf("ground_truth %s\n", lookup.describe.c_str());
   std::printf("alignment    %s, scale %.6g\n", config.with_scale ? "sim3" : "se3",
               r.alignment.scale);
@@ -156,30 +194,7 @@ int run(int argc, char** argv) {
   std::printf("ate_mean     %.6g\n", r.mean);
   std::printf("ate_median   %.6g\n", r.median);
   std::printf("ate_max      %.6g\n", r.max);
-
-  if (cli.has("json")) {
-    nlohmann::json j;
-    j["model"] = model.string();
-    j["registered"] = images.size();
-    j["matched"] = used.size();
-    j["unmatched"] = unmatched;
-    j["alignment"] = {
-        {"type", config.with_scale ? "sim3" : "se3"},
-        {"scale", r.alignment.scale},
-        {"rotation",
-         {{r.alignment.rotation(0, 0), r.alignment.rotation(0, 1), r.alignment.rotation(0, 2)},
-          {r.alignment.rotation(1, 0), r.alignment.rotation(1, 1), r.alignment.rotation(1, 2)},
-          {r.alignment.rotation(2, 0), r.alignment.rotation(2, 1), r.alignment.rotation(2, 2)}}},
-        {"translation",
-         {r.alignment.translation.x(), r.alignment.translation.y(), r.alignment.translation.z()}}};
-    j["ate"] = {{"rmse", r.rmse}, {"mean", r.mean}, {"median", r.median}, {"max", r.max}};
-    nlohmann::json per = nlohmann::json::array();
-    for (size_t i = 0; i < used.size(); ++i)
-      per.push_back({{"name", used[i]->name}, {"error", r.errors[i]}});
-    j["per_image"] = per;
-    std::ofstream out(*cli.text("json"));
-    if (!(out << j.dump(1) << "\n")) throw IoError("cannot write '" + *cli.text("json") + "'");
-  }
+  if (cli.has("json")) writeJson(*cli.text("json"), model, images.size(), m, config, r);
   return 0;
 }
 

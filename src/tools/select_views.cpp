@@ -8,6 +8,7 @@
 #include "view_selection/io/export.h"
 #include "view_selection/io/params_json.h"
 #include "view_selection/io/selection_io.h"
+#include "view_selection/io/state_file.h"
 #include "view_selection/io/tum_frames.h"
 #include "view_selection/points/point_source_factory.h"
 
@@ -17,6 +18,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <map>
 #include <set>
@@ -34,9 +36,13 @@ using view_selection::tools::UsageError;
 namespace {
 
 const char* kUsage = R"(usage: select_views --dataset DIR [options] [parameters]
+       select_views --state FILE [--out DIR] [selection and matrix parameters]
 
 Error-resistant view selection on a TUM RGB-D layout folder (rgb.txt, depth.txt if any,
 groundtruth.txt, camera.yaml). Writes selection.json, pairs.txt and selection.png.
+With --state, re-selects the keyframes of a session saved by view_selection_node (~state_file):
+the saved parameters, changed by the selection and matrix parameters given (the matrix is
+recomputed when a gate changes; keyframe and point-source parameters cannot change).
 
 options:
   --every N                 every Nth frame becomes a keyframe (--every 1: every frame); short
@@ -74,6 +80,9 @@ double seconds(std::chrono::steady_clock::time_point since) {
 
 struct Options {
   std::string dataset;
+  std::string state;  ///< --state FILE
+  /// --state: applies the method parameters given on the command line to the saved ones.
+  std::function<void(ViewSelectorConfig&)> override_saved;
   fs::path out;
   ViewSelectorConfig config;
   std::string points;
@@ -99,10 +108,42 @@ std::vector<std::string> expandAliases(int argc, char** argv) {
   return args;
 }
 
+/// --state FILE: only the options that re-selecting saved keyframes can honour.
+Options parseState(const CommandLine& cli, const std::set<std::string>& point_options, Options o) {
+  std::set<std::string> refused = {
+      "dataset",  "every",     "max-frames",        "points",
+      "strategy", "nearest-k", "nearest-max-angle", "max-time-difference"};
+  refused.insert(point_options.begin(), point_options.end());
+  const std::set<std::string> keyframes =
+      view_selection::tools::parameterOptions(KeyframePolicyConfig{});
+  refused.insert(keyframes.begin(), keyframes.end());
+  for (const std::string& name : refused)
+    if (cli.has(name))
+      throw UsageError("--" + name +
+                       " does not apply with --state (the saved keyframes and their points are "
+                       "re-selected as they are)");
+  o.state = *cli.text("state");
+  const bool no_occlusion = cli.flag("no-occlusion");
+  o.override_saved = [cli, no_occlusion](ViewSelectorConfig& config) {
+    view_selection::tools::readParameters(cli, config);
+    if (no_occlusion) config.matrix.occlusion.enabled = false;
+    try {
+      config.validate();
+    } catch (const InvalidArgument& e) {
+      throw UsageError(e.what());
+    }
+  };
+  o.dump_points = cli.flag("dump-points");
+  o.print_sets = cli.integer("print-sets", 40, 0, 100000000);
+  o.quiet = cli.flag("quiet");
+  return o;
+}
+
 Options parse(int argc, char** argv) {
   std::set<std::string> options = {
       "dataset", "every",      "max-frames", "points",    "max-time-difference",
-      "out",     "print-sets", "strategy",   "nearest-k", "nearest-max-angle"};
+      "out",     "print-sets", "strategy",   "nearest-k", "nearest-max-angle",
+      "state"};
   const std::set<std::string> method =
       view_selection::tools::parameterOptions(ViewSelectorConfig{});
   const std::set<std::string> sources =
@@ -120,9 +161,11 @@ Options parse(int argc, char** argv) {
     std::exit(0);
   }
   Options o;
-  if (!cli.has("dataset")) throw UsageError("--dataset DIR is required (see --help)");
-  o.dataset = *cli.text("dataset");
   o.out = cli.text("out", "view_selection_output");
+  if (cli.has("state")) return parseState(cli, sources, std::move(o));
+  if (!cli.has("dataset"))
+    throw UsageError("--dataset DIR or --state FILE is required (see --help)");
+  o.dataset = *cli.text("dataset");
 
   if (cli.has("every") && (cli.has("min-translation") || cli.has("min-rotation-deg") ||
                            cli.has("keyframe-policy") || cli.has("every-n")))
@@ -329,7 +372,52 @@ void printSummary(const Options& o, const TumDataset& dataset, const ViewSelecto
   printSets(selection, static_cast<size_t>(o.print_sets));
 }
 
+/// --state: the saved session's keyframes, re-selected (with the parameters given) and exported.
+int runFromState(const Options& o) {
+  const auto t_start = std::chrono::steady_clock::now();
+  const SessionState state = readStateFile(o.state);
+  const double read_seconds = seconds(t_start);
+  std::unique_ptr<ViewSelector> selector = selectorFor(state);
+  ViewSelectorConfig config = selector->config();
+  o.override_saved(config);
+  const auto t_matrix = std::chrono::steady_clock::now();
+  selector->setConfig(config);  // recomputes E only when a gate changed
+  const double matrix_seconds = seconds(t_matrix);
+  const SelectionSnapshot snapshot = selector->snapshot();
+  nlohmann::json params = toJson(snapshot.params);
+  params["source"] = "select_views --state";
+  params["state_file"] = o.state;
+  params["image_path"] = "";
+  ExportOptions options;
+  options.title = fs::path(o.state).filename().string() +
+                  ", k = " + std::to_string(config.selection.k) +
+                  ", completion: " + toString(config.selection.completion);
+  options.points = o.dump_points ? &selector->matrix() : nullptr;
+  const ExportResult written = exportSelection(o.out.string(), snapshot, params, options);
+  const Selection& selection = snapshot.selection;
+  const size_t n = selector->matrix().size();
+  std::printf("state       %s: written by %s, %zu keyframes, %llu frames offered, points: %s\n",
+              o.state.c_str(), state.producer.c_str(), n,
+              static_cast<unsigned long long>(state.statistics.frames_offered),
+              state.points.name.c_str());
+  std::printf("matrix      %zu finite entries%s\n", selector->matrix().table().finiteCount(),
+              config.matrix == state.selector.config.matrix ? " (as saved)" : " (recomputed)");
+  std::printf(
+      "selection   k %d, completion %s: start view %d, traversal reached %zu, completed %zu, "
+      "isolated %zu\n",
+      config.selection.k, toString(config.selection.completion).c_str(), selection.start_view,
+      selection.order.size(), selection.completed.size(), selection.isolated.size());
+  std::printf("pairs       %zu to match\n", selection.pairs.size());
+  std::printf("time        read %.3f s | matrix %.3f s | total %.3f s\n", read_seconds,
+              matrix_seconds, seconds(t_start));
+  std::printf("wrote       %s, %s, %s\n", written.selection_json.c_str(), written.pairs_txt.c_str(),
+              written.plot_png.c_str());
+  printSets(selection, static_cast<size_t>(o.print_sets));
+  return 0;
+}
+
 int run(const Options& o) {
+  if (!o.state.empty()) return runFromState(o);
   const auto t_start = std::chrono::steady_clock::now();
   TumDatasetOptions dataset_options;
   dataset_options.max_time_difference = o.max_time_difference;

@@ -6,6 +6,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cstring>
+#include <vector>
+
 #include <cmath>
 #include <random>
 #include <vector>
@@ -67,6 +70,40 @@ TEST(ErrorResistance, ClosedFormMatchesBruteForceTriangulation) {
     ++compared;
   }
   EXPECT_EQ(compared, 3000);
+}
+
+TEST(ErrorResistance, BatchedEqualsOnePointAtATimeToTheLastBit) {
+  // The batched form feeds the matrix; it must give operator()'s values exactly (the paper's
+  // gate is held bit for bit against earlier output), on good points and on every way a point
+  // can fail: behind j, on the baseline, beyond the rays' meeting, NaN.
+  std::mt19937 rng(77);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  size_t finite = 0, infinite = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    const RandomPair c = randomPair(rng);
+    const PairErrorResistance pair(c.pose_i.position, c.k_j, c.pose_j);
+    std::vector<double> x, y, z;
+    for (int q = 0; q < 257; ++q) {  // not a multiple of any vector width
+      Eigen::Vector3d p = c.pose_j.worldToCamera(c.point + Eigen::Vector3d(uni(rng) - 0.5, uni(rng) - 0.5, uni(rng) - 0.5));
+      if (q % 17 == 3) p.z() = -p.z();                     // behind camera j
+      if (q % 31 == 5) p = 0.5 * pair.originICam();        // on the baseline
+      if (q % 61 == 7) p.x() = std::nan("");
+      if (q % 43 == 9) p = 40.0 * pair.originICam() + Eigen::Vector3d(0.01, 0.0, 0.0);  // little parallax
+      x.push_back(p.x());
+      y.push_back(p.y());
+      z.push_back(p.z());
+    }
+    std::vector<double> out(x.size());
+    pair.evaluate(x.data(), y.data(), z.data(), x.size(), out.data());
+    for (size_t q = 0; q < x.size(); ++q) {
+      const double one = pair(Eigen::Vector3d(x[q], y[q], z[q]));
+      ASSERT_EQ(std::memcmp(&one, &out[q], sizeof(double)), 0)
+          << "trial " << trial << " point " << q << ": " << one << " vs " << out[q];
+      (std::isfinite(one) ? finite : infinite) += 1;
+    }
+  }
+  EXPECT_GT(finite, 10000u);
+  EXPECT_GT(infinite, 1000u);
 }
 
 TEST(ErrorResistance, EpipoleAtInfinityUsesTheProjectedBaseline) {

@@ -2,6 +2,8 @@
 // insertion order, row-only recomputation, gates, occlusion, median, against a naive reference.
 #include "view_selection/core/error_resistance_matrix.h"
 
+#include "view_selection/core/camera_grid.h"
+
 #include "view_selection/core/error_resistance.h"
 #include "view_selection/core/exceptions.h"
 
@@ -10,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 #include <numeric>
 #include <random>
@@ -217,6 +220,7 @@ TEST(ErrorResistanceMatrix, IncrementalEqualsFromScratchInAnyInsertionOrder) {
   const size_t n = scene.keyframes.size();
   ErrorResistanceConfig config;
   config.max_view_angle_deg = 100.0;  // exercise the optional gate too
+  config.min_covisible_ratio = 0.2;   // enough finite entries in this small room to compare
   std::mt19937 rng(99);
   for (int trial = 0; trial < 4; ++trial) {
     std::vector<size_t> perm(n);
@@ -346,6 +350,159 @@ TEST(ErrorResistanceMatrix, SetPosesRejectsBadInputAndKeepsState) {
   EXPECT_EQ(matrix.keyframe(1).pose.position, scene.keyframes[1].pose.position);
 }
 
+TEST(ErrorResistanceMatrix, SpatialIndexSkipsOnlyPairsTheFootprintGateRejects) {
+  // Rooms side by side at growing distances, cameras of different focal lengths: with the
+  // footprint-ratio gate on, insertion looks only at the keyframes the camera grid returns.
+  // Every entry must still equal the naive definition, including pairs across rooms that are
+  // just within the reach bound, under tight and loose ratios.
+  std::vector<Keyframe> keyframes;
+  const double offsets[] = {0.0, 7.0, 15.0, 40.0, 41.5, 200.0};
+  unsigned seed = 31;
+  for (const double dx : offsets) {
+    Scene room = makeScene(seed++, 6, true);
+    for (auto& kf : room.keyframes) {
+      kf.pose.position.x() += dx;
+      kf.points.row(0).array() += dx;
+      keyframes.push_back(std::move(kf));
+    }
+  }
+  const size_t n = keyframes.size();
+  for (const double ratio : {1.2, 1.6, 3.0, 20.0}) {
+    ErrorResistanceConfig config;
+    config.max_scale_ratio = ratio;
+    config.max_parallax_deg = 0.0;  // the footprint gate alone bounds the distance
+    config.min_covisible_ratio = 0.05;
+    ErrorResistanceMatrix matrix(config);
+    for (const auto& kf : keyframes) matrix.addKeyframe(kf);
+    int finite = 0;
+    for (size_t a = 0; a < n; ++a)
+      for (size_t b = 0; b < n; ++b) {
+        if (a == b) continue;
+        const double expected = naiveEntry(keyframes[a], keyframes[b], config);
+        const double got = matrix.at(static_cast<ViewId>(a), static_cast<ViewId>(b));
+        if (std::isfinite(expected)) {
+          ++finite;
+          ASSERT_NEAR(got, expected, 1e-12 * expected) << "ratio " << ratio << " at " << a << "," << b;
+        } else {
+          ASSERT_EQ(got, kInfinity) << "ratio " << ratio << " at " << a << "," << b;
+        }
+      }
+    EXPECT_GT(finite, static_cast<int>(n) / 2) << "ratio " << ratio;
+    // The far room (200 m away) is never evaluated against the others under a tight ratio.
+    if (ratio <= 1.6) {
+      EXPECT_LT(matrix.pairsEvaluated(), n * (n - 1) - 2 * 6 * (n - 6));
+    }
+  }
+}
+
+TEST(CameraGrid, QueryEqualsBruteForceAtEveryRadius) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> uni(-50.0, 50.0);
+  std::vector<Eigen::Vector3d> centres;
+  CameraGrid grid;
+  for (int q = 0; q < 600; ++q) {
+    // Clusters and a spread, so some cells hold many centres and some none.
+    const Eigen::Vector3d c = q % 3 ? Eigen::Vector3d(uni(rng), uni(rng), 0.01 * uni(rng))
+                                    : Eigen::Vector3d(0.02 * uni(rng), 0.02 * uni(rng), 0.0);
+    grid.insert(static_cast<ViewId>(q), c);
+    centres.push_back(c);
+  }
+  std::vector<ViewId> got;
+  // Radii that start small (fine cells) then grow past the regrid limit, and shrink again.
+  for (const double radius : {0.5, 2.0, 0.1, 10.0, 40.0, 1.0, 120.0, 0.01}) {
+    for (int trial = 0; trial < 20; ++trial) {
+      const Eigen::Vector3d at(uni(rng), uni(rng), uni(rng) * 0.01);
+      grid.query(at, radius, got);
+      std::vector<ViewId> expected;
+      for (size_t q = 0; q < centres.size(); ++q)
+        if ((centres[q] - at).norm() <= radius) expected.push_back(static_cast<ViewId>(q));
+      ASSERT_EQ(got, expected) << "radius " << radius << " trial " << trial;
+    }
+  }
+  EXPECT_EQ(grid.size(), centres.size());
+}
+
+TEST(CameraGrid, MovedCentresAreFoundWhereTheyAreNow) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> uni(-30.0, 30.0);
+  std::vector<Eigen::Vector3d> centres;
+  CameraGrid grid;
+  std::vector<ViewId> got;
+  for (int q = 0; q < 300; ++q) {
+    centres.emplace_back(uni(rng), uni(rng), 0.1 * uni(rng));
+    grid.insert(static_cast<ViewId>(q), centres.back());
+  }
+  grid.query(Eigen::Vector3d::Zero(), 2.0, got);  // fixes the cell size
+  for (int round = 0; round < 5; ++round) {
+    for (int m = 0; m < 60; ++m) {  // far moves (other cells) and small ones (the same cell)
+      const size_t id = static_cast<size_t>(rng() % centres.size());
+      const Eigen::Vector3d to = m % 2 ? Eigen::Vector3d(uni(rng), uni(rng), 0.1 * uni(rng))
+                                       : Eigen::Vector3d(centres[id] + 0.01 * Eigen::Vector3d::Ones());
+      grid.move(static_cast<ViewId>(id), to);
+      centres[id] = to;
+    }
+    for (const double radius : {1.0, 3.0, 12.0}) {
+      for (int trial = 0; trial < 20; ++trial) {
+        const Eigen::Vector3d at(uni(rng), uni(rng), 0.0);
+        grid.query(at, radius, got);
+        std::vector<ViewId> expected;
+        for (size_t q = 0; q < centres.size(); ++q)
+          if ((centres[q] - at).norm() <= radius) expected.push_back(static_cast<ViewId>(q));
+        ASSERT_EQ(got, expected) << "round " << round << " radius " << radius;
+      }
+    }
+  }
+}
+
+TEST(ErrorResistanceMatrix, CorrectionsThatMoveKeyframesFarKeepTheSpatialIndexExact) {
+  // Keyframes of one room moved (a loop closure) into a room 40 m away, then more keyframes of
+  // that room inserted: with the footprint-ratio gate's spatial index, every entry must equal
+  // the naive definition on the keyframes as they are now, so the index must follow the moves.
+  // One room's keyframes: the first 8 stay, the other 12 are of the same room 40 m along x.
+  const Scene room = makeScene(41, 20, true);
+  Scene near, far;
+  near.keyframes.assign(room.keyframes.begin(), room.keyframes.begin() + 8);
+  far.keyframes.assign(room.keyframes.begin() + 8, room.keyframes.end());
+  const double dx = 40.0;
+  for (auto& kf : far.keyframes) {
+    kf.pose.position.x() += dx;
+    kf.points.row(0).array() += dx;
+  }
+  ErrorResistanceConfig config;
+  config.max_parallax_deg = 0.0;
+  config.min_covisible_ratio = 0.05;
+  ErrorResistanceMatrix matrix(config);
+  for (const auto& kf : near.keyframes) matrix.addKeyframe(kf);
+  for (int q = 0; q < 6; ++q) matrix.addKeyframe(far.keyframes[static_cast<size_t>(q)]);
+  // The first four keyframes of the near room were really in the far room: shifted by dx.
+  std::vector<std::pair<ViewId, CameraPose>> moves;
+  for (ViewId id = 0; id < 4; ++id) {
+    CameraPose p = matrix.keyframe(id).pose;
+    p.position.x() += dx;
+    moves.emplace_back(id, p);
+  }
+  matrix.setPoses(moves);
+  for (size_t q = 6; q < far.keyframes.size(); ++q) matrix.addKeyframe(far.keyframes[q]);
+  const size_t n = matrix.size();
+  int finite_across = 0;
+  for (size_t a = 0; a < n; ++a)
+    for (size_t b = 0; b < n; ++b) {
+      if (a == b) continue;
+      const double expected =
+          naiveEntry(matrix.keyframe(static_cast<ViewId>(a)), matrix.keyframe(static_cast<ViewId>(b)), config);
+      const double got = matrix.at(static_cast<ViewId>(a), static_cast<ViewId>(b));
+      if (std::isfinite(expected)) {
+        ASSERT_NEAR(got, expected, 1e-9 * expected) << a << "," << b;
+        // A moved keyframe and one inserted after the move: found only through the moved centre.
+        if ((a < 4 && b >= near.keyframes.size() + 6) || (b < 4 && a >= near.keyframes.size() + 6))
+          ++finite_across;
+      } else {
+        ASSERT_EQ(got, kInfinity) << a << "," << b;
+      }
+    }
+  EXPECT_GT(finite_across, 0) << "the test needs pairs between moved and later keyframes";
+}
+
 TEST(ErrorResistanceMatrix, ChangingPointsRecomputesOnlyThatRow) {
   Scene scene = makeScene(3, 16, true);
   const size_t n = scene.keyframes.size();
@@ -468,6 +625,27 @@ TEST(ErrorResistanceMatrix, OcclusionAgainstTheOtherViewsDepthMap) {
   unknown->depth.assign(80 * 60, 0.0f);
   b.depth = unknown;
   EXPECT_TRUE(std::isfinite(computeErrorResistance(a, b, paperGate())));
+}
+
+// The lookup is defined for any pixel and any consistent map (a state file may hold odd cells).
+TEST(ErrorResistanceMatrix, DepthMapLookupIsDefinedForAnyPixel) {
+  DepthMap map;
+  map.cols = 4;
+  map.rows = 3;
+  map.cell_width = map.cell_height = 8.0;
+  map.depth.assign(12, 2.0f);
+  map.depth[2 * 4 + 3] = 5.0f;
+  EXPECT_EQ(map.at(31.9, 23.9), 5.0f);
+  EXPECT_EQ(map.at(0.0, 0.0), 2.0f);
+  EXPECT_EQ(map.at(32.0, 0.0), 0.0f);
+  EXPECT_EQ(map.at(-0.5, 0.0), 0.0f);
+  EXPECT_EQ(map.at(0.0, 1e300), 0.0f);
+  EXPECT_EQ(map.at(std::nan(""), 1.0), 0.0f);
+  EXPECT_EQ(map.at(1.0, std::numeric_limits<double>::infinity()), 0.0f);
+  map.cell_width = map.cell_height = 1e-256;  // positive and finite: consistent, and tiny
+  ASSERT_TRUE(map.isConsistent());
+  EXPECT_EQ(map.at(100.0, 100.0), 0.0f);
+  EXPECT_EQ(map.at(0.0, 0.0), 2.0f);
 }
 
 TEST(ErrorResistanceMatrix, ViewAngleGateAndDiagonal) {

@@ -266,7 +266,7 @@ TEST(Selection, TableKeepsEachRowsBestEntriesThroughEveryKindOfChange) {
           entries.push_back({static_cast<ViewId>(q), std::round(uni(rng) * 30) / 30});
       e.replaceRow(i, entries);
     }
-    check(step);
+    ASSERT_NO_FATAL_FAILURE(check(step));  // the first wrong row stops the walk
   }
   // Larger k than the cache holds takes the scan: the same sets as a full sort.
   const Selection s = selectViews(
@@ -280,6 +280,144 @@ TEST(Selection, TableKeepsEachRowsBestEntriesThroughEveryKindOfChange) {
     ASSERT_EQ(s.next_views[i].size(), row.size());
     for (size_t q = 0; q < row.size(); ++q) ASSERT_EQ(s.next_views[i][q], row[q].view);
   }
+}
+
+void expectSameSelection(const Selection& got, const Selection& want, const std::string& where) {
+  EXPECT_EQ(got.next_views, want.next_views) << where;
+  EXPECT_EQ(got.final_next_views, want.final_next_views) << where;
+  EXPECT_EQ(got.start_view, want.start_view) << where;
+  EXPECT_EQ(got.order, want.order) << where;
+  EXPECT_EQ(got.completed, want.completed) << where;
+  EXPECT_EQ(got.isolated, want.isolated) << where;
+  EXPECT_EQ(got.pairs, want.pairs) << where;
+}
+
+TEST(Selection, CacheEqualsFullSelectionAfterAnySequenceOfChanges) {
+  // The incremental path against the plain definition, after every step of a random evolution:
+  // keyframes added (growing tables, entries toward and from the new view), entries changed and
+  // removed (rows recomputed), whole rows replaced, parameters changed, a reset. Sparse tables
+  // leave views unreached, so completion runs in both modes; ties are frequent on purpose.
+  std::mt19937 rng(2024);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  int completed_seen = 0, isolated_seen = 0;
+  for (const int k : {1, 2, 5, 20}) {
+    for (const CompletionMode mode : {CompletionMode::kPaper, CompletionMode::kReachable}) {
+      const SelectionConfig config{k, mode};
+      ErrorResistanceTable e;
+      SelectionCache cache;
+      for (int step = 0; step < 400; ++step) {
+        const double op = uni(rng);
+        const size_t n = e.size();
+        if (n < 3 || op < 0.3) {  // a new keyframe with a few entries each way
+          e.resize(n + 1);
+          const auto added = static_cast<ViewId>(n);
+          for (size_t q = 0; q < n; ++q) {
+            if (uni(rng) < 0.15) e.set(added, static_cast<ViewId>(q), std::round(uni(rng) * 20) / 20);
+            if (uni(rng) < 0.15) e.set(static_cast<ViewId>(q), added, std::round(uni(rng) * 20) / 20);
+          }
+        } else if (op < 0.75) {
+          const auto i = static_cast<ViewId>(uni(rng) * n), j = static_cast<ViewId>(uni(rng) * n);
+          e.set(i, j, uni(rng) < 0.7 ? std::round(uni(rng) * 20) / 20 : kInfinity);
+        } else if (op < 0.95) {
+          std::vector<TableEntry> entries;
+          for (size_t q = 0; q < n; ++q)
+            if (uni(rng) < 0.1) entries.push_back({static_cast<ViewId>(q), std::round(uni(rng) * 20) / 20});
+          e.replaceRow(static_cast<ViewId>(uni(rng) * n), entries);
+        } else if (op < 0.98) {  // the same table under other parameters and back
+          const SelectionConfig other{k == 1 ? 3 : 1, mode};
+          expectSameSelection(cache.update(e, other), selectViews(e, other), "other config");
+        } else {
+          e.clear();
+        }
+        const Selection& got = cache.update(e, config);
+        const Selection want = selectViews(e, config);
+        expectSameSelection(got, want,
+                            "k " + std::to_string(k) + " mode " + toString(mode) + " step " +
+                                std::to_string(step) + " n " + std::to_string(e.size()));
+        if (::testing::Test::HasFailure()) return;
+        completed_seen += static_cast<int>(!want.completed.empty());
+        isolated_seen += static_cast<int>(!want.isolated.empty());
+      }
+    }
+  }
+  // Both completion paths and isolated views must have been exercised.
+  EXPECT_GT(completed_seen, 100);
+  EXPECT_GT(isolated_seen, 100);
+}
+
+TEST(Selection, CacheFollowsACopiedTable) {
+  // Row versions are unique across tables: a cache fed a copy, then the original changed in
+  // another way, still gives the definition's answer.
+  ErrorResistanceTable a(4);
+  a.set(0, 1, 1.0);
+  a.set(1, 2, 2.0);
+  a.set(2, 3, 3.0);
+  ErrorResistanceTable b = a;
+  SelectionCache cache;
+  const SelectionConfig config{2, CompletionMode::kReachable};
+  cache.update(a, config);
+  b.set(0, 1, kInfinity);
+  b.set(0, 3, 0.5);
+  expectSameSelection(cache.update(b, config), selectViews(b, config), "copy changed");
+  a.set(3, 0, 0.25);
+  expectSameSelection(cache.update(a, config), selectViews(a, config), "original changed");
+}
+
+TEST(Selection, TableCopiesStayAsTheyWereWhileTheOriginalChanges) {
+  // Copies share their lists with the original until one side changes (copy on write): every
+  // copy must keep exactly the entries, columns and best entries it had when taken, whatever
+  // happens to the original or to other copies afterwards.
+  std::mt19937 rng(77);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  const size_t n = 25;
+  ErrorResistanceTable e(n);
+  struct Kept {
+    ErrorResistanceTable copy;
+    std::vector<std::vector<double>> dense;
+    std::vector<std::vector<TableEntry>> columns, tops;
+  };
+  auto capture = [&](const ErrorResistanceTable& t) {
+    Kept k{t, t.dense(), {}, {}};
+    for (size_t i = 0; i < n; ++i) {
+      k.columns.push_back(t.column(static_cast<ViewId>(i)));
+      k.tops.push_back(t.top(static_cast<ViewId>(i)));
+    }
+    return k;
+  };
+  auto same = [&](const Kept& k, const ErrorResistanceTable& t) {
+    if (t.dense() != k.dense) return false;
+    for (size_t i = 0; i < n; ++i)
+      if (t.column(static_cast<ViewId>(i)) != k.columns[i] || t.top(static_cast<ViewId>(i)) != k.tops[i])
+        return false;
+    return true;
+  };
+  std::vector<Kept> kept;
+  for (int step = 0; step < 3000; ++step) {
+    const auto i = static_cast<ViewId>(uni(rng) * n), j = static_cast<ViewId>(uni(rng) * n);
+    const double op = uni(rng);
+    if (op < 0.6) {
+      e.set(i, j, std::round(uni(rng) * 30) / 30);
+    } else if (op < 0.9) {
+      e.set(i, j, kInfinity);
+    } else if (op < 0.95) {
+      std::vector<TableEntry> entries;
+      for (size_t q = 0; q < n; ++q)
+        if (uni(rng) < 0.3) entries.push_back({static_cast<ViewId>(q), uni(rng)});
+      e.replaceRow(i, entries);
+    } else if (!kept.empty() && op < 0.97) {
+      // A copy changes too: neither the original nor the other copies may see it.
+      const Kept before = capture(e);
+      Kept& victim = kept[static_cast<size_t>(uni(rng) * kept.size())];
+      victim.copy.set(i, j, 0.5);
+      victim = capture(victim.copy);
+      ASSERT_TRUE(same(before, e)) << "a change to a copy reached the original at step " << step;
+    } else {
+      kept.push_back(capture(e));
+    }
+    for (size_t q = 0; q < kept.size(); ++q)
+      ASSERT_TRUE(same(kept[q], kept[q].copy)) << "copy " << q << " changed at step " << step;
+  }
+  EXPECT_GT(kept.size(), 50u);
 }
 
 }  // namespace

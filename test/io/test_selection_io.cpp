@@ -9,6 +9,8 @@
 
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <random>
 #include <sstream>
 #include "support/layers.h"
 
@@ -110,6 +112,34 @@ TEST(SelectionIo, CompletionAndNullStartAreWritten) {
   const auto doc = readSelectionJson((dir / "s.json").string());
   EXPECT_TRUE(doc["start_view"].is_null());
   EXPECT_TRUE(doc["keyframes"].empty());
+  ASSERT_TRUE(doc["completed"].is_array());
+  EXPECT_TRUE(doc["completed"].empty());
+
+  // k = 1: views 0 and 1 choose each other, view 2 chooses 0 but no set reaches 2, so
+  // completion must bring it back; the file must say which view went into which set.
+  const double inf = std::numeric_limits<double>::infinity();
+  SelectionSnapshot snapshot;
+  snapshot.table =
+      ErrorResistanceTable::fromDense({{inf, 1.0, 3.0}, {1.0, inf, 4.0}, {2.0, 5.0, inf}});
+  snapshot.config.k = 1;
+  snapshot.config.completion = CompletionMode::kPaper;
+  for (int i = 0; i < 3; ++i) {
+    KeyframeSummary k;
+    k.stamp = i;
+    k.image_name = std::to_string(i) + ".png";
+    k.intrinsics = vgaIntrinsics();
+    snapshot.keyframes.push_back(k);
+  }
+  snapshot.selection = selectViews(snapshot.table, snapshot.config);
+  ASSERT_FALSE(snapshot.selection.completed.empty()) << "the example must need completion";
+  writeSelectionJson((dir / "c.json").string(), snapshot, {});
+  const auto completed = readSelectionJson((dir / "c.json").string())["completed"];
+  ASSERT_EQ(completed.size(), snapshot.selection.completed.size());
+  for (size_t q = 0; q < completed.size(); ++q) {
+    EXPECT_EQ(completed[q]["view"], snapshot.selection.completed[q].view);
+    EXPECT_EQ(completed[q]["added_to"], snapshot.selection.completed[q].added_to);
+  }
+  EXPECT_EQ(completed[0]["view"], 2);
   fs::remove_all(dir);
 }
 
@@ -161,6 +191,65 @@ TEST(SelectionIo, MvsPairTxtListsTheFinalSetsWithInverseErrorResistance) {
   EXPECT_TRUE(in.good() || in.eof());
   EXPECT_GT(listed, 0u);
   EXPECT_THROW(writeMvsPairTxt((dir / "no" / "such" / "pair.txt").string(), snap), IoError);
+}
+
+TEST(SelectionIo, SparseFormatAboveTheThresholdReadsBackTheSameSelection) {
+  // A selection larger than kDenseFormatMaxKeyframes is written as view_selection/2 (finite
+  // entries only); both formats read back into the same table, and every other key is the same.
+  const size_t n = kDenseFormatMaxKeyframes + 7;
+  SelectionSnapshot snap;
+  snap.table = ErrorResistanceTable(n);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  for (size_t i = 0; i < n; ++i) {
+    KeyframeSummary kf;
+    kf.stamp = 1000.0 + static_cast<double>(i);
+    kf.image_name = std::to_string(i) + ".png";
+    kf.intrinsics = vgaIntrinsics();
+    kf.pose = lookAt({0.1 * static_cast<double>(i), 0, 0}, {0, 0, 3});
+    snap.keyframes.push_back(kf);
+    for (int q = 0; q < 4; ++q)  // a few neighbours each, exact binary fractions and not
+      snap.table.set(static_cast<ViewId>(i), static_cast<ViewId>(uni(rng) * n), 0.001 + uni(rng) / 3.0);
+  }
+  snap.config = {2, CompletionMode::kReachable};  // sets smaller than the rows: completion runs
+  snap.selection = selectViews(snap.table, snap.config);
+  const nlohmann::json params = {{"k", 5}};
+  const fs::path dir = freshDir("sparse");
+  writeSelectionJson((dir / "auto.json").string(), snap, params);
+  writeSelectionJson((dir / "dense.json").string(), snap, params, nullptr, JsonFormat::kDense);
+  const auto sparse = readSelectionJson((dir / "auto.json").string());
+  const auto dense = readSelectionJson((dir / "dense.json").string());
+  EXPECT_EQ(sparse["format"], "view_selection/2");
+  EXPECT_EQ(dense["format"], "view_selection/1");
+  EXPECT_EQ(tableFromJson(sparse), snap.table);
+  EXPECT_EQ(tableFromJson(dense), snap.table);
+  ASSERT_EQ(sparse["error_resistance"].size(), n);
+  const auto& row = snap.table.row(3);
+  ASSERT_EQ(sparse["error_resistance"][3].size(), row.size());  // finite entries only, by j
+  for (size_t q = 0; q < row.size(); ++q)
+    EXPECT_EQ(sparse["error_resistance"][3][q], nlohmann::json({row[q].view, row[q].value}));
+  for (const char* key : {"params", "keyframes", "next_views", "start_view", "initial_pair", "order",
+                          "completed", "isolated", "final_next_views", "pairs"})
+    EXPECT_EQ(sparse[key], dense[key]) << key;
+  EXPECT_FALSE(sparse["completed"].empty());  // the random table leaves views to complete
+  // The sparse file is a small fraction of the dense one.
+  EXPECT_LT(fs::file_size(dir / "auto.json") * 10, fs::file_size(dir / "dense.json"));
+  // Small selections stay dense unless asked.
+  EXPECT_FALSE(sparseFormatFor(kDenseFormatMaxKeyframes, JsonFormat::kAuto));
+  EXPECT_TRUE(sparseFormatFor(3, JsonFormat::kSparse));
+
+  // Malformed rows are refused with a reason.
+  nlohmann::json bad = sparse;
+  bad["error_resistance"][0] = nlohmann::json::array({nlohmann::json::array({static_cast<int>(n), 0.5})});
+  EXPECT_THROW(tableFromJson(bad), IoError);
+  bad["error_resistance"][0] = nlohmann::json::array({0.5});
+  EXPECT_THROW(tableFromJson(bad), IoError);
+  nlohmann::json short_row = dense;
+  short_row["error_resistance"][1].erase(0);
+  EXPECT_THROW(tableFromJson(short_row), IoError);
+  std::ofstream(dir / "foreign.json") << R"({"format": "something/3"})";
+  EXPECT_THROW(readSelectionJson((dir / "foreign.json").string()), IoError);
+  fs::remove_all(dir);
 }
 
 }  // namespace

@@ -4,6 +4,8 @@
 
 #include "view_selection/core/exceptions.h"
 
+#include "support/real_data.h"
+
 #include <gtest/gtest.h>
 
 #include <unistd.h>
@@ -662,10 +664,9 @@ std::pair<double, double> firstAndLastStamp(const fs::path& list) {
 }
 
 TEST(TumRealData, RedKitchen) {
-  const fs::path root = "../shared/data/redkitchen-0-499";
-  if (!fs::exists(root / "rgb.txt")) {
-    GTEST_SKIP() << root << " not present";
-  }
+  const auto data = test::realData("redkitchen-0-499", "TumRealData.RedKitchen");
+  if (!data) GTEST_SKIP() << "no real data: ../shared/data/redkitchen-0-499 not present";
+  const fs::path root = *data;
   const TumDataset ds = loadTumDataset(root.string());
   EXPECT_EQ(ds.frames.size(), 500u);
   EXPECT_EQ(ds.rgb_entries, 500u);
@@ -693,10 +694,9 @@ TEST(TumRealData, RedKitchen) {
 }
 
 TEST(TumRealData, DtuScan24) {
-  const fs::path root = "../shared/data/dtu-scan24";
-  if (!fs::exists(root / "rgb.txt")) {
-    GTEST_SKIP() << root << " not present";
-  }
+  const auto data = test::realData("dtu-scan24", "TumRealData.DtuScan24");
+  if (!data) GTEST_SKIP() << "no real data: ../shared/data/dtu-scan24 not present";
+  const fs::path root = *data;
   const TumDataset ds = loadTumDataset(root.string());
   EXPECT_EQ(ds.frames.size(), 49u);
   EXPECT_FALSE(ds.has_depth);

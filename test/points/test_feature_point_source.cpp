@@ -7,6 +7,7 @@
 #include "view_selection/points/feature_point_source.h"
 #include "view_selection/points/point_source_factory.h"
 
+#include "support/real_data.h"
 #include "support/test_support.h"
 #include "support/textured_room.h"
 
@@ -391,9 +392,10 @@ TEST(PointSourceFactory, NamesAndAuto) {
 }
 
 TEST(FeaturePointSourceRealData, DtuScan24EveryViewGetsNextViews) {
-  const std::filesystem::path root =
-      std::filesystem::path(VIEW_SELECTION_SOURCE_DIR) / ".." / "shared" / "data" / "dtu-scan24";
-  if (!std::filesystem::exists(root / "rgb.txt")) GTEST_SKIP() << root << " not present";
+  const auto data =
+      test::realData("dtu-scan24", "FeaturePointSourceRealData.DtuScan24EveryViewGetsNextViews");
+  if (!data) GTEST_SKIP() << "no real data: ../shared/data/dtu-scan24 not present";
+  const std::filesystem::path root = *data;
   const TumDataset ds = loadTumDataset(root.string());
   ASSERT_FALSE(ds.has_depth);
   ViewSelector selector(everyFrame(), makePointSource("features"));

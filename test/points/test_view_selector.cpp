@@ -147,5 +147,23 @@ TEST(ViewSelector, WantsFrameAsksThePolicyWithoutChangingIt) {
   EXPECT_EQ(selector.matrix().size(), 3u);
 }
 
+// A restored selector acts and reports as one built with the same config: with the paper's
+// gate, the gate's values in force whatever the saved config says (as the constructor does).
+TEST(ViewSelector, RestoreAppliesTheGateAsTheConstructorDoes) {
+  ViewSelectorConfig config = everyFrame();
+  config.matrix.gate = Gate::kPaper;
+  config.matrix.min_covisible_ratio = 0.4;
+  config.matrix.max_parallax_deg = 15.0;
+  ViewSelector built(config, depthSource());
+  for (int q = 0; q < 4; ++q) built.addFrame(frameAt(q, q * 0.15));
+  ViewSelectorState state = built.state();
+  state.config = config;  // as requested, not as in force
+  ViewSelector restored(everyFrame(), depthSource());
+  restored.restore(state);
+  EXPECT_EQ(restored.config().matrix.min_covisible_ratio, 0.1);
+  EXPECT_EQ(restored.config().matrix.max_parallax_deg, 0.0);
+  EXPECT_EQ(toJson(restored.params()), toJson(built.params()));
+}
+
 }  // namespace
 }  // namespace view_selection

@@ -21,6 +21,8 @@
 #include "view_selection/points/map_point_source.h"
 #include "view_selection/points/point_source_factory.h"
 
+#include "../support/real_data.h"
+
 #include <geometry_msgs/PoseStamped.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
@@ -29,6 +31,7 @@
 #include <std_srvs/Trigger.h>
 #include <tf2_msgs/TFMessage.h>
 #include <visualization_msgs/MarkerArray.h>
+#include <boost/make_shared.hpp>
 
 #include <unistd.h>
 
@@ -149,7 +152,6 @@ class BadInputTest : public ::testing::Test {
     return false;
   }
 
-  /// Publishes one frame and waits (bounded) until the node has offered or dropped it.
   struct Send {
     ros::Time stamp;
     sensor_msgs::ImagePtr image, depth;
@@ -187,7 +189,9 @@ class BadInputTest : public ::testing::Test {
     s.pose = g.pose;
     return s;
   }
-  void publish(const Send& s, uint64_t expect_handled) {
+  /// Publishes one frame and waits (bounded) until the node has offered or dropped it. Returns a
+  /// failure (for ASSERT_TRUE at the call site) when it did not within 10 s.
+  [[nodiscard]] ::testing::AssertionResult publish(const Send& s, uint64_t expect_handled) {
     if (!s.camera_frame.empty()) {
       if (pose_source_ == "tf") {
         geometry_msgs::TransformStamped t;
@@ -212,7 +216,9 @@ class BadInputTest : public ::testing::Test {
     const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(10.0);
     while (handled() < expect_handled && ros::WallTime::now() < deadline)
       ros::WallDuration(0.01).sleep();
-    ASSERT_GE(handled(), expect_handled) << "the node did not handle the frame at " << s.stamp;
+    if (handled() >= expect_handled) return ::testing::AssertionSuccess();
+    return ::testing::AssertionFailure()
+           << "the node did not handle the frame at " << s.stamp << " within 10 s";
   }
 
   ros::NodeHandle nh_;
@@ -226,13 +232,13 @@ class BadInputTest : public ::testing::Test {
 
 TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames) {
   if (point_source_ == "map") GTEST_SKIP() << "map_input.test runs MapPointsReplaceAndUpdateRows";
-  const fs::path data =
-      fs::path(VIEW_SELECTION_SOURCE_DIR).parent_path() / "shared" / "data" / "redkitchen-0-499";
   bool synthetic = false;  // ~synthetic forces the built-in frames even when the data is there
   ros::NodeHandle("~").param("synthetic", synthetic, false);
-  std::vector<GoodFrame> good = !synthetic && fs::exists(data / "rgb.txt")
-                                    ? realFrames(data.string(), 6, 15)
-                                    : syntheticFrames(6);
+  const auto data =
+      synthetic ? std::nullopt
+                : view_selection::test::realData(
+                      "redkitchen-0-499", "BadInputTest (" + pose_source_ + "): synthetic frames");
+  std::vector<GoodFrame> good = data ? realFrames(data->string(), 6, 15) : syntheticFrames(6);
   ASSERT_EQ(good.size(), 6u);
   // One good frame in 16UC1 millimetres, the other path the node reads.
   {
@@ -260,56 +266,64 @@ TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames
     Send s = next(good[i]);
     expected.push_back(good[i]);
     expected_stamps.push_back(s.stamp);
-    publish(s, ++sent);
+    return publish(s, ++sent);
   };
   auto sendBad = [&](Send s, const std::string& reason) {
     ++expected_drops[reason];
-    publish(s, ++sent);
+    return publish(s, ++sent);
   };
 
-  sendGood(0);
+  ASSERT_TRUE(sendGood(0));
   {  // a depth-like encoding on the image topic
     Send s = next(good[1]);
     s.image->encoding = "32FC1";
     s.image->step = s.image->width * 4;
     s.image->data.resize(s.image->step * s.image->height);
-    sendBad(s, "bad_image");
+    ASSERT_TRUE(sendBad(s, "bad_image"));
   }
   {  // an encoding nobody knows
     Send s = next(good[1]);
     s.image->encoding = "not_an_encoding";
-    sendBad(s, "bad_image");
+    ASSERT_TRUE(sendBad(s, "bad_image"));
   }
-  sendGood(1);
+  ASSERT_TRUE(sendGood(1));
   {  // an empty image
     Send s = next(good[2]);
     s.image->width = s.image->height = 0;
     s.image->step = 0;
     s.image->data.clear();
-    sendBad(s, "bad_image");
+    ASSERT_TRUE(sendBad(s, "bad_image"));
   }
   {  // a truncated image
     Send s = next(good[2]);
     s.image->data.resize(s.image->data.size() / 2);
-    sendBad(s, "bad_image");
+    ASSERT_TRUE(sendBad(s, "bad_image"));
   }
   {  // colour on the depth topic
     Send s = next(good[2]);
     s.depth = cv_bridge::CvImage(s.image->header, sensor_msgs::image_encodings::BGR8, good[2].image)
                   .toImageMsg();
-    sendBad(s, "bad_depth");
+    ASSERT_TRUE(sendBad(s, "bad_depth"));
   }
-  sendGood(2);
+  {  // 32FC1 depth whose rows are not whole floats apart (found by fuzz_messages: OpenCV threw)
+    Send s = next(good[2]);
+    auto depth = boost::make_shared<sensor_msgs::Image>(*s.depth);
+    depth->step = depth->width * 4 + 2;
+    depth->data.assign(static_cast<size_t>(depth->step) * depth->height, 0);
+    s.depth = depth;
+    ASSERT_TRUE(sendBad(s, "bad_depth"));
+  }
+  ASSERT_TRUE(sendGood(2));
   {  // camera_info with zero focal length
     Send s = next(good[3]);
     s.info.K[0] = 0.0;
     s.info.K[4] = 0.0;
-    sendBad(s, "bad_camera_info");
+    ASSERT_TRUE(sendBad(s, "bad_camera_info"));
   }
   {  // a NaN pose (tf2 refuses it, so under tf the frame finds no pose)
     Send s = next(good[3]);
     s.pose.position.x() = std::numeric_limits<double>::quiet_NaN();
-    sendBad(s, pose_source_ == "tf" ? "no_pose" : "bad_pose");
+    ASSERT_TRUE(sendBad(s, pose_source_ == "tf" ? "no_pose" : "bad_pose"));
   }
   {  // an unknown frame: the image's frame has no transform / the pose is in another frame
     Send s = next(good[3]);
@@ -317,20 +331,20 @@ TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames
       s.camera_frame.clear();  // nothing is published for it
     else
       s.pose_frame = "mars";
-    sendBad(s, pose_source_ == "tf" ? "no_pose" : "bad_pose");
+    ASSERT_TRUE(sendBad(s, pose_source_ == "tf" ? "no_pose" : "bad_pose"));
   }
-  sendGood(3);
+  ASSERT_TRUE(sendGood(3));
   {  // the same stamp again
     Send s = makeSend(good[4], expected_stamps.back(), "cam_" + std::to_string(camera++));
-    sendBad(s, "duplicate_stamp");
+    ASSERT_TRUE(sendBad(s, "duplicate_stamp"));
   }
   {  // a stamp before the last good one
     Send s = makeSend(good[4], expected_stamps[1] + ros::Duration(0.05),
                       "cam_" + std::to_string(camera++));
-    sendBad(s, "out_of_order_stamp");
+    ASSERT_TRUE(sendBad(s, "out_of_order_stamp"));
   }
-  sendGood(4);
-  sendGood(5);
+  ASSERT_TRUE(sendGood(4));
+  ASSERT_TRUE(sendGood(5));
 
   // The statistics name every reason with its count.
   const auto s = stats();
@@ -453,7 +467,7 @@ TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames
   const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(10.0);
   while (handled() != 0 && ros::WallTime::now() < deadline) ros::WallDuration(0.01).sleep();
   ASSERT_EQ(handled(), 0u) << "statistics were not reset";
-  publish(makeSend(good[0], ros::Time(t0), "cam_" + std::to_string(camera++)), 1);
+  ASSERT_TRUE(publish(makeSend(good[0], ros::Time(t0), "cam_" + std::to_string(camera++)), 1));
   ASSERT_TRUE(ros::service::call(node_ + "/get_selection", srv));
   EXPECT_EQ(srv.response.selection.keyframes.size(), 1u);
 }
@@ -467,7 +481,7 @@ TEST_F(BadInputTest, MapPointsReplaceAndUpdateRows) {
   std::vector<ros::Time> stamps;
   for (size_t i = 0; i < good.size(); ++i) {
     stamps.push_back(ros::Time(2000.0 + 0.1 * static_cast<double>(i)));
-    publish(makeSend(good[i], stamps.back(), "cam"), i + 1);
+    ASSERT_TRUE(publish(makeSend(good[i], stamps.back(), "cam"), i + 1));
   }
   view_selection::GetSelection srv;
   ASSERT_TRUE(ros::service::call(node_ + "/get_selection", srv));

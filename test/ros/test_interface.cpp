@@ -36,16 +36,19 @@ bool call(const std::string& name, Srv& srv) {
   return ros::service::call(name, srv);
 }
 
-// Names of topics with at least one subscriber / publisher, from the master.
-void systemState(std::vector<std::string>& published, std::vector<std::string>& subscribed) {
+// Names of topics with at least one subscriber / publisher, from the master; false when the
+// master does not answer.
+[[nodiscard]] bool systemState(std::vector<std::string>& published,
+                               std::vector<std::string>& subscribed) {
   XmlRpc::XmlRpcValue args, result, payload;
   args[0] = ros::this_node::getName();
-  ASSERT_TRUE(ros::master::execute("getSystemState", args, result, payload, true));
+  if (!ros::master::execute("getSystemState", args, result, payload, true)) return false;
   for (int kind = 0; kind < 2; ++kind) {
     auto& out = kind == 0 ? published : subscribed;
     for (int i = 0; i < payload[kind].size(); ++i)
       out.push_back(static_cast<std::string>(payload[kind][i][0]));
   }
+  return true;
 }
 
 bool contains(const std::vector<std::string>& list, const std::string& item) {
@@ -62,7 +65,7 @@ TEST(Interface, AdvertisesTopicsAndSubscribesToInputs) {
   do {
     published.clear();
     subscribed.clear();
-    systemState(published, subscribed);
+    ASSERT_TRUE(systemState(published, subscribed)) << "the master did not answer getSystemState";
     if (contains(subscribed, "/camera/depth") && contains(published, node + "/statistics")) break;
     ros::WallDuration(0.1).sleep();
   } while (ros::WallTime::now() < deadline);

@@ -7,6 +7,7 @@
 #include <Eigen/Core>
 
 #include <cmath>
+#include <cstddef>
 #include <limits>
 #include <optional>
 
@@ -43,6 +44,12 @@ class PairErrorResistance {
   /// the baseline, or a perturbed ray does not meet the ray from O_i in front of both cameras.
   double operator()(const Eigen::Vector3d& p_cam_j) const;
 
+  /// The same for `count` points in structure-of-arrays form (x[q], y[q], z[q], camera-j
+  /// coordinates) into out[q]: the same arithmetic, operation for operation, without branches,
+  /// so that the compiler vectorises it and every value equals operator()'s to the last bit.
+  void evaluate(const double* x, const double* y, const double* z, std::size_t count,
+                double* out) const;
+
   /// O_i in camera-j coordinates.
   const Eigen::Vector3d& originICam() const { return o_i_cam_; }
 
@@ -51,6 +58,7 @@ class PairErrorResistance {
   Eigen::Vector3d o_i_cam_;    // O_i in camera-j coordinates (the baseline from O_j)
   Eigen::Vector3d epipole_h_;  // K_j * o_i_cam_
   double inv_fx_ = 0.0, inv_fy_ = 0.0;
+  double epipole_xy_norm_ = 0.0;  // |epipole_h_.head<2>()|
 };
 
 /// r(P; i -> j) for a world point, closed form (ray intersection, as PairErrorResistance).

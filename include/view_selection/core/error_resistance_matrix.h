@@ -3,6 +3,7 @@
 // depends on X_a, camera i and i's depth map, never on X_i).
 #pragma once
 
+#include "view_selection/core/camera_grid.h"
 #include "view_selection/core/error_resistance_table.h"
 #include "view_selection/core/occlusion_map.h"
 #include "view_selection/core/parameters.h"
@@ -10,6 +11,7 @@
 
 #include <Eigen/Core>
 
+#include <cstdint>
 #include <utility>
 #include <vector>
 
@@ -30,13 +32,13 @@ struct ErrorResistanceConfig {
   Gate gate = Gate::kMatchable;
   /// A point counts only where the angle at it between the rays to O_i and O_j is at most this
   /// [deg]; 0 switches the test off.
-  double max_parallax_deg = 15.0;
+  double max_parallax_deg = 20.0;
   /// ... and where s = (|O_j X| / f_j) / (|O_i X| / f_i) has max(s, 1/s) at most this; 0: off.
   double max_scale_ratio = 1.6;
   /// E[i][j] is +inf when fewer than max(min_covisible_points, min_covisible_ratio * |X_i|)
   /// points of X_i count.
   int min_covisible_points = 10;
-  double min_covisible_ratio = 0.4;
+  double min_covisible_ratio = 0.5;
   /// Optional gate: +inf when the optical axes differ by more than this [deg]; 0 disables it
   /// (the paper's mode).
   double max_view_angle_deg = 0.0;
@@ -78,6 +80,11 @@ class ErrorResistanceMatrix {
   void setPoses(const std::vector<std::pair<ViewId, CameraPose>>& poses);
   /// Forgets every keyframe.
   void clear();
+  /// Replaces everything with saved keyframes and their finite rows of E (rows[i]: entries of
+  /// row i, any order), without recomputing an entry: a saved session continues exactly. Throws
+  /// InvalidInput (nothing changes then) for an invalid keyframe or entry (unknown column, the
+  /// diagonal, a repeated column, a non-finite or negative value).
+  void restore(std::vector<Keyframe> keyframes, const std::vector<std::vector<TableEntry>>& rows);
   /// New parameters (throws InvalidArgument; nothing changes then); when they differ from the
   /// current ones, every entry is recomputed with them.
   void setConfig(const ErrorResistanceConfig& config);
@@ -94,37 +101,52 @@ class ErrorResistanceMatrix {
   struct PointGroup {
     Eigen::Vector3d centre;
     double radius = 0.0;
-    Eigen::Index begin = 0, end = 0;  // columns of View::grouped_points
+    std::uint32_t begin = 0, end = 0;  // range of View::point_order
   };
 
-  /// Per-keyframe data computed once (rotation, frustum, points grouped for culling).
+  /// Per-keyframe data computed once (rotation, frustum, points grouped for culling). The
+  /// points are the keyframe's own, held once; the groups index them through point_order.
   struct View {
     Keyframe keyframe;
     Eigen::Matrix3d world_to_camera;              // R^T
     Eigen::Vector3d sphere_centre;                // of all of X_i, world
     double sphere_radius = -1.0;                  // < 0: no points
+    double reach = 0.0;                           // farthest point from the camera centre
+    double focal = 0.0;                           // sqrt(fx fy)
     Eigen::Matrix<double, 3, 5> frustum_normals;  // camera frame, inward unit normals
-    Eigen::Matrix3Xd grouped_points;              // X_i reordered so each group is contiguous
+    std::vector<std::uint32_t> point_order;       // columns of keyframe.points, groups contiguous
     std::vector<PointGroup> groups;               // kd-tree leaves of at most kGroupSize points
   };
-  static constexpr Eigen::Index kGroupSize = 16;
+  static constexpr std::uint32_t kGroupSize = 16;
   static View makeView(Keyframe keyframe);
 
   /// Reused storage for one pair's visible points and their r values.
   struct Scratch {
-    std::vector<Eigen::Vector3d> points_cam;
+    std::vector<double> x, y, z;  // the counted points in camera-j coordinates (arrays, for r())
     std::vector<double> values;
     std::vector<const PointGroup*> groups;
   };
 
  private:
   double entry(const View& view_i, const View& view_j);
+  /// The views whose pair with `view` (either direction, as `row` says) can be finite: by the
+  /// footprint-ratio gate's reach bound through the camera grid, or every view without it.
+  /// Ascending ids, `view`'s own excluded.
+  void candidates(ViewId id, bool row, std::vector<ViewId>& out);
+  /// Adds view `id` to the camera grid and the reach and focal-length bounds.
+  void index(ViewId id);
+  /// The row of `id` from scratch, over its candidates.
+  std::vector<TableEntry> computeRow(ViewId id);
 
   ErrorResistanceConfig config_;
   std::vector<View> views_;
   ErrorResistanceTable table_;
   Scratch scratch_;
   size_t pairs_evaluated_ = 0;
+  CameraGrid grid_;                 // camera centres, for candidates()
+  double max_reach_ = 0.0;          // of every view so far
+  double min_focal_ = 0.0, max_focal_ = 0.0;
+  std::vector<ViewId> candidates_;  // reused
 };
 
 /// The pair computation behind both computeErrorResistance and the matrix, with `config` as it

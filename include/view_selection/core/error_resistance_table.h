@@ -5,7 +5,10 @@
 
 #include "view_selection/core/types.h"
 
+#include <atomic>
 #include <cstddef>
+#include <cstdint>
+#include <memory>
 #include <vector>
 
 namespace view_selection::core {
@@ -15,6 +18,34 @@ struct TableEntry {
   ViewId view;
   double value;
   bool operator==(const TableEntry& o) const { return view == o.view && value == o.value; }
+};
+
+/// A list of entries shared between copies of a table until one of them changes it (copy on
+/// write): copying a table, as every snapshot for the outputs does, costs a pointer a list, not
+/// the entries. Only the thread that owns a table changes it; copies may be read anywhere.
+class SharedEntries {
+ public:
+  const std::vector<TableEntry>& get() const { return list_ ? *list_ : empty(); }
+  /// The list to change, copied first when another table still shares it.
+  std::vector<TableEntry>& edit() {
+    if (!list_) {
+      list_ = std::make_shared<std::vector<TableEntry>>();
+    } else if (list_.use_count() > 1) {
+      list_ = std::make_shared<std::vector<TableEntry>>(*list_);
+    } else {
+      // Sole owner: a copy released on another thread must be done reading before we write.
+      std::atomic_thread_fence(std::memory_order_acquire);
+    }
+    return *list_;
+  }
+  bool operator==(const SharedEntries& o) const { return get() == o.get(); }
+
+ private:
+  static const std::vector<TableEntry>& empty() {
+    static const std::vector<TableEntry> none;
+    return none;
+  }
+  std::shared_ptr<std::vector<TableEntry>> list_;
 };
 
 class ErrorResistanceTable {
@@ -37,16 +68,19 @@ class ErrorResistanceTable {
   void replaceRow(ViewId i, std::vector<TableEntry> entries);
 
   /// Finite entries of row i, ascending by column.
-  const std::vector<TableEntry>& row(ViewId i) const { return rows_[static_cast<size_t>(i)]; }
+  const std::vector<TableEntry>& row(ViewId i) const { return rows_[static_cast<size_t>(i)].get(); }
   /// Finite entries of column j, ascending by row.
-  const std::vector<TableEntry>& column(ViewId j) const { return cols_[static_cast<size_t>(j)]; }
+  const std::vector<TableEntry>& column(ViewId j) const { return cols_[static_cast<size_t>(j)].get(); }
 
   size_t finiteCount() const { return finite_count_; }
 
   /// The best min(kTopCapacity, |row i|) entries of row i, ascending by (value, view): kept up
   /// to date on every change, so next view sets with k <= kTopCapacity cost O(k) a row.
   static constexpr size_t kTopCapacity = 16;
-  const std::vector<TableEntry>& top(ViewId i) const { return top_[static_cast<size_t>(i)]; }
+  const std::vector<TableEntry>& top(ViewId i) const { return top_[static_cast<size_t>(i)].get(); }
+  /// Changes whenever row i changes, to a value no other row of any table ever had: equal
+  /// versions mean equal rows, also across copies (SelectionCache keys on it). 0: never set.
+  std::uint64_t rowVersion(ViewId i) const { return row_version_[static_cast<size_t>(i)]; }
   /// Dense copy, +inf for absent entries.
   std::vector<std::vector<double>> dense() const;
 
@@ -60,9 +94,11 @@ class ErrorResistanceTable {
   void updateTop(size_t i, ViewId j, double value);
   void rescanTop(size_t i);
 
-  std::vector<std::vector<TableEntry>> rows_;
-  std::vector<std::vector<TableEntry>> cols_;
-  std::vector<std::vector<TableEntry>> top_;
+  std::vector<SharedEntries> rows_;
+  std::vector<SharedEntries> cols_;
+  std::vector<SharedEntries> top_;
+  std::vector<std::uint64_t> row_version_;
+  void touch(size_t i);
   size_t finite_count_ = 0;
 };
 

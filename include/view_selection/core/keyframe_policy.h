@@ -59,6 +59,15 @@ class KeyframePolicy {
   }
   const KeyframePolicyConfig& config() const { return config_; }
 
+  /// Where the policy is: what a saved session needs to continue exactly.
+  struct State {
+    long frames_offered = 0;                  ///< frames offered so far (every_nth counts them)
+    std::optional<CameraPose> last_keyframe;  ///< motion: the reference pose
+  };
+  State state() const { return {frames_offered_, last_keyframe_}; }
+  /// Continues from `state` (throws InvalidInput for a negative count or an invalid pose).
+  void restore(const State& state);
+
  private:
   KeyframePolicyConfig config_;
   long frames_offered_ = 0;

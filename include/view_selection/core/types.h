@@ -67,16 +67,19 @@ struct DepthMap {
   std::vector<float> depth;  ///< row-major, metres, 0 = unknown
 
   bool empty() const { return depth.empty(); }
-  /// Depth [m] at a full-resolution pixel, 0 when unknown or outside.
+  /// Sizes agree (depth holds cols x rows values), cells are positive, depths finite and >= 0.
+  bool isConsistent() const;
+  /// Depth [m] at a full-resolution pixel, 0 when unknown or outside (or NaN).
   float at(double u, double v) const {
-    if (u < 0.0 || v < 0.0) return 0.0f;
     // Multiplying by the inverse is exact for the power-of-two cells used in practice and this
     // lookup is the inner loop of the matrix; for other sizes a pixel on a cell border may
     // fall into its neighbour, which the occlusion tolerance absorbs.
-    const int c = static_cast<int>(u * (1.0 / cell_width));
-    const int r = static_cast<int>(v * (1.0 / cell_height));
-    if (c >= cols || r >= rows) return 0.0f;
-    return depth[static_cast<size_t>(r) * cols + c];
+    const double c = u * (1.0 / cell_width);
+    const double r = v * (1.0 / cell_height);
+    // Bounds checked before the conversion to int, which no value may overflow (a state file's
+    // tiny cell, fuzz/regressions/state_file).
+    if (!(c >= 0.0 && r >= 0.0 && c < cols && r < rows)) return 0.0f;
+    return depth[static_cast<size_t>(static_cast<int>(r)) * cols + static_cast<int>(c)];
   }
 };
 

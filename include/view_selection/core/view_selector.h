@@ -42,6 +42,16 @@ struct FrameResult {
   double matrix_seconds = 0.0;       ///< time inserting into the matrix (row, column, updates)
 };
 
+/// Everything of a ViewSelector but its point source, for saving a session and continuing it
+/// exactly (io/state_file saves it with the point source's own state).
+struct ViewSelectorState {
+  ViewSelectorConfig config;
+  std::vector<Keyframe> keyframes;            ///< by id, with points and occlusion depth maps
+  std::vector<std::vector<TableEntry>> rows;  ///< E's finite entries, row by row
+  KeyframePolicy::State policy;
+  std::optional<double> last_stamp;  ///< of the last valid frame offered
+};
+
 class ViewSelector {
  public:
   /// Takes ownership of the point source (points::makePointSource makes one by name). Throws
@@ -56,11 +66,17 @@ class ViewSelector {
   /// Lets callers skip loading depth and images for frames that will not become keyframes
   /// (they still pass those frames to addFrame, without depth, to keep counts and stamps).
   bool wantsFrame(const CameraPose& pose, bool external_keyframe = false) const;
-  /// The selection for the keyframes so far.
+  /// The selection for the keyframes so far (selectViews, kept current incrementally).
   Selection select() const;
   /// The keyframes, E, select() and params() together, for outputs.
   SelectionSnapshot snapshot() const;
   void reset();
+  /// The whole state but the point source's (copies the keyframes; depth maps are shared).
+  ViewSelectorState state() const;
+  /// Continues from a saved state, with its config: keyframes and E as saved (no entry
+  /// recomputed), the policy and the last stamp. The point source is the caller's to restore.
+  /// Throws InvalidArgument / InvalidInput (nothing changes then).
+  void restore(const ViewSelectorState& state);
   /// New parameters for what comes next (throws InvalidArgument; nothing changes then): the
   /// keyframe policy keeps its place, the matrix is recomputed only when its parameters differ,
   /// the selection follows. Keyframes and their points stay.
@@ -91,6 +107,9 @@ class ViewSelector {
   KeyframePolicy policy_;
   ErrorResistanceMatrix matrix_;
   std::optional<double> last_stamp_;  // of the last valid frame offered
+  // What select() last returned, updated from the rows that changed since. Not shared between
+  // threads: like every other member, one thread at a time drives a ViewSelector.
+  mutable SelectionCache selection_;
 };
 
 }  // namespace view_selection::core

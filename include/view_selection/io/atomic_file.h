@@ -3,6 +3,8 @@
 #pragma once
 
 #include <functional>
+#include <memory>
+#include <ostream>
 #include <string>
 
 namespace view_selection::io {
@@ -11,5 +13,17 @@ namespace view_selection::io {
 /// then syncs it and renames it to `path`. On any failure the temporary file is removed, `path`
 /// is untouched, and core::IoError says why (the writer's own exception is rethrown as is).
 void writeAtomically(const std::string& path, const std::function<void(const std::string&)>& write);
+
+/// Creates (or truncates) `path` and writes `size` bytes into it; throws core::IoError with the
+/// system's reason ("No space left on device", ...). For writers inside writeAtomically.
+void writeFileContents(const std::string& path, const void* data, size_t size);
+inline void writeFileContents(const std::string& path, const std::string& text) {
+  writeFileContents(path, text.data(), text.size());
+}
+
+/// writeFileContents for text produced piece by piece (a selection.json of 100k keyframes is not
+/// built in memory first): `write(stream)` fills the file through a buffer; a failed write stops
+/// the stream and core::IoError carries the system's reason, as writeFileContents does.
+void writeFileStreaming(const std::string& path, const std::function<void(std::ostream&)>& write);
 
 }  // namespace view_selection::io

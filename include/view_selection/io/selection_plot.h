@@ -16,6 +16,10 @@ cv::Mat renderSelectionPlot(const core::SelectionSnapshot& snapshot, int size = 
                             const std::string& title = "");
 
 /// renderSelectionPlot(...) written as a PNG; throws IoError when it cannot be written.
+/// Encodes `image` as PNG and writes it to `path`; throws core::IoError with the reason (a full
+/// disk, a read-only folder). For use inside io::writeAtomically.
+void writePng(const std::string& path, const cv::Mat& image);
+
 void writeSelectionPlot(const std::string& path, const core::SelectionSnapshot& snapshot,
                         const std::string& title = "");
 

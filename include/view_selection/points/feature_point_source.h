@@ -70,6 +70,35 @@ class FeaturePointSource : public core::PointSource {
   /// Tracks with an accepted point.
   size_t validTracks() const;
 
+  /// What a keyframe holds in this source.
+  struct ViewState {
+    core::ViewId id = -1;
+    core::PinholeIntrinsics intrinsics;
+    core::CameraPose pose;  ///< as given to process() (normalised)
+    std::vector<cv::KeyPoint> keypoints;
+    cv::Mat descriptors;        ///< one row per keypoint (ORB: 32 x CV_8U, SIFT: 128 x CV_32F)
+    std::vector<int> track_of;  ///< per feature, -1 when in no track
+    double median_depth = 0.0;  ///< of its points, 0 while it has none
+    Eigen::Matrix3Xd emitted;   ///< the point set last reported for it
+  };
+  struct Track {
+    std::vector<std::pair<int, int>> obs;  ///< (view index, feature)
+    Eigen::Vector3d point = Eigen::Vector3d::Zero();
+    bool valid = false;
+    bool alive = true;
+  };
+  /// Everything this source keeps (features, descriptors, tracks), for saving a session and
+  /// continuing it exactly. Descriptors are shared with the source, never written by it.
+  struct State {
+    std::vector<ViewState> views;  ///< arrival order, ascending id
+    std::vector<Track> tracks;
+  };
+  State state() const;
+  /// Throws InvalidInput (nothing changes then) for inconsistent data: ids that do not ascend,
+  /// descriptors that do not fit the detector or the keypoints, a track or feature index out of
+  /// range, a feature and its track that disagree.
+  void restore(State state);
+
   /// Estimated share of the two frusta that see the same scene, in [0, 1]: grids of pixels of
   /// each view, back-projected to `depths`, counted where the other view sees them.
   static double frustumOverlap(const TriangulationCamera& a, const TriangulationCamera& b,
@@ -92,20 +121,8 @@ class FeaturePointSource : public core::PointSource {
     void near(const Eigen::Vector3d& line, double band, const std::vector<cv::KeyPoint>& keypoints,
               std::vector<int>& out) const;
   };
-  struct View {
-    core::ViewId id = -1;
-    StripIndex index;
-    std::vector<cv::KeyPoint> keypoints;
-    cv::Mat descriptors;
-    std::vector<int> track_of;  ///< per feature, -1 when in no track
-    double median_depth = 0.0;  ///< of its points, 0 while it has none
-    Eigen::Matrix3Xd emitted;   ///< the point set last reported for it
-  };
-  struct Track {
-    std::vector<std::pair<int, int>> obs;  ///< (view index, feature)
-    Eigen::Vector3d point = Eigen::Vector3d::Zero();
-    bool valid = false;
-    bool alive = true;
+  struct View : ViewState {
+    StripIndex index;  ///< built from keypoints
   };
 
   /// Features of the other view within kBandFactor * max_sampson_px of the epipolar line are a

@@ -52,15 +52,26 @@ class MapPointSource : public core::PointSource {
   /// Keyframes whose updates are pending (ascending).
   std::vector<core::ViewId> pendingUpdates() const;
 
- private:
+  /// What a keyframe holds in this source.
   struct View {
     core::ViewId id = -1;
     core::PinholeIntrinsics intrinsics;
     core::CameraPose pose;
-    std::shared_ptr<const core::DepthMap> depth;
-    Eigen::Matrix3Xd assigned;
-    bool pending = false;
+    std::shared_ptr<const core::DepthMap> depth;  ///< its occlusion map, or null
+    Eigen::Matrix3Xd assigned;                    ///< the map points it sees
+    bool pending = false;                         ///< assigned changed, not yet taken
   };
+  /// Everything this source keeps, for saving a session and continuing it exactly.
+  struct State {
+    Eigen::Matrix3Xd map = Eigen::Matrix3Xd(3, 0);
+    std::vector<View> views;  ///< ascending id
+  };
+  State state() const { return {map_, views_}; }
+  /// Throws InvalidInput (nothing changes then) for non-finite points, ids that do not ascend,
+  /// invalid intrinsics or poses, or an inconsistent depth map.
+  void restore(State state);
+
+ private:
   MapPointSourceConfig config_;
   Eigen::Matrix3Xd map_ = Eigen::Matrix3Xd(3, 0);
   std::vector<View> views_;

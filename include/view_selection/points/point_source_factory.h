@@ -36,6 +36,7 @@ class AutoPointSource : public core::PointSource {
   core::Params params() const override;
 
   const FeaturePointSource& features() const { return features_; }
+  FeaturePointSource& features() { return features_; }
 
  private:
   DepthPointSource depth_;

@@ -13,6 +13,7 @@
 #include <geometry_msgs/Transform.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <sensor_msgs/PointCloud2.h>
 #include <opencv2/core.hpp>
 
 #include <string>
@@ -24,13 +25,13 @@ namespace view_selection::ros_node {
 core::PinholeIntrinsics intrinsicsFromCameraInfo(const sensor_msgs::CameraInfo& info);
 
 /// Checks an image message's shape before anything reads its pixels: non-zero size, a known
-/// encoding, step >= width * pixel size and data holding step * height bytes. `what` names the
-/// input in the message ("image", "depth"); for "image" the encoding must also be a colour, grey
-/// or Bayer one. Throws InvalidInput.
+/// encoding, step >= width * pixel size and a whole number of channel elements, and data
+/// holding step * height bytes. `what` names the input in the message ("image", "depth"); for
+/// "image" the encoding must also be a colour, grey or Bayer one. Throws InvalidInput.
 void checkImageMessage(const sensor_msgs::Image& msg, const std::string& what);
 
 /// A cv::Mat header over the message's pixels (no copy), in the message's own encoding.
-/// The message must outlive the Mat. Call checkImageMessage first.
+/// The message must outlive the Mat. Call checkImageMessage first (InvalidInput otherwise).
 cv::Mat imageView(const sensor_msgs::Image& msg);
 
 /// The image as the core wants it: BGR (8 bit) for colour encodings, grey for mono8.
@@ -47,6 +48,11 @@ core::ColourImage borrowedImageView(const sensor_msgs::ImageConstPtr& msg);
 cv::Mat depthToMetres(const sensor_msgs::Image& msg, double metres_per_unit_16u);
 /// Throws InvalidInput unless the depth encoding is one depthToMetres accepts.
 void checkDepthEncoding(const sensor_msgs::Image& msg);
+
+/// The finite points of a cloud with FLOAT32 fields x, y and z (NaN padding of organised clouds
+/// skipped). Throws InvalidInput when the fields are missing, of another type, outside a point,
+/// big-endian, or the data is shorter than width, height and the steps say.
+Eigen::Matrix3Xd mapPointsFromCloud(const sensor_msgs::PointCloud2& cloud);
 
 core::CameraPose poseFromMsg(const geometry_msgs::Pose& pose);
 core::CameraPose poseFromTransform(const geometry_msgs::Transform& transform);

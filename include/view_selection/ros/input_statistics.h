@@ -1,6 +1,10 @@
 // What the node did with its input: frames received, offered, dropped by reason, insertion
-// times. Thread-safe; every drop is counted and logged, throttled per reason.
+// times. Thread-safe; every drop is counted and logged, throttled per reason. Counts belong to a
+// session (a ~reset starts the next): the outcome of a frame received in an earlier session is
+// not counted in the current one, so frames_offered + frame drops never exceed frames_received.
 #pragma once
+
+#include "view_selection/io/state_file.h"
 
 #include <ros/time.h>
 #include <view_selection/InputStatistics.h>
@@ -26,13 +30,17 @@ class InputStatistics {
     uint64_t paths_applied = 0;           ///< loop-closure paths applied
     uint64_t keyframes_corrected = 0;     ///< keyframe pose corrections, over all paths
     uint64_t frames_offered = 0;
+    uint64_t keyframes = 0;  ///< offered frames that became keyframes
     std::map<std::string, uint64_t> dropped;
     std::string last_error;
     ros::Time last_error_stamp;
+    ros::Time last_frame_stamp;  ///< of the last frame offered or dropped (zero: none)
     double last_insertion_seconds = 0.0;
     double max_insertion_seconds = 0.0;
     ros::WallTime last_insertion;  ///< when the last keyframe was inserted (zero: none yet)
     uint64_t dropped_total() const;
+    /// Drops of frames (all reasons but "bad_map", which counts map clouds).
+    uint64_t frames_dropped() const;
   };
 
   /// A message reached the subscriber callback of one of the synchroniser's inputs.
@@ -41,21 +49,36 @@ class InputStatistics {
   void setImagesInSynchroniser(uint64_t images);
   /// A loop-closure path was applied and moved `keyframes` keyframes.
   void pathApplied(uint64_t keyframes);
-  /// A synchronised frame reached the node.
-  void frameReceived();
-  /// A valid frame was offered to the keyframe policy; `insertion_seconds` >= 0 when it became a
-  /// keyframe (points + matrix time).
-  void frameOffered(double insertion_seconds);
-  /// A frame (or a map) was dropped: counted under `reason`, logged as a warning at most once per
-  /// `kLogPeriod` per reason (with the number not logged since).
-  void drop(const std::string& reason, const std::string& message, const ros::Time& stamp);
+  /// A synchronised frame reached the node; returns the session it belongs to.
+  uint64_t frameReceived();
+  /// A valid frame of `session` was offered to the keyframe policy; `insertion_seconds` >= 0
+  /// when it became a keyframe (points + matrix time).
+  void frameOffered(uint64_t session, const ros::Time& stamp, double insertion_seconds);
+  /// A frame of `session` was dropped: counted under `reason` (unless the session is over),
+  /// logged as a warning at most once per `kLogPeriod` per reason (with the number not logged).
+  void drop(uint64_t session, const std::string& reason, const std::string& message,
+            const ros::Time& stamp);
+  /// Something other than a received frame (a map cloud, a path, an image that never became a
+  /// frame) was dropped: counted and logged the same way.
+  void dropInput(const std::string& reason, const std::string& message, const ros::Time& stamp);
+  /// Starts a new session with zero counts.
   void reset();
+  uint64_t session() const;
+
+  /// The counts as a saved session keeps them: frames_received counts only the frames handled
+  /// (offered or dropped), so that a replay after last_frame_stamp re-sends exactly the others.
+  io::SessionStatistics toSaved() const;
+  /// Continues from saved counts (a new session) of a session with `keyframes` keyframes.
+  void restore(const io::SessionStatistics& saved, uint64_t keyframes);
+  /// ~state_file: the last state written had `keyframes` keyframes and its last frame handled
+  /// at `frame_stamp`.
+  void stateSaved(uint32_t keyframes, const ros::Time& frame_stamp);
 
   Counts counts() const;
   /// Bumps on every change.
   uint64_t version() const;
   /// The ~statistics message, stamped with ROS time (simulated during replays).
-  view_selection::InputStatistics toMsg(uint32_t keyframes) const;
+  view_selection::InputStatistics toMsg() const;
 
   static constexpr double kLogPeriod = 5.0;  ///< [s, wall] between warnings of one reason
 
@@ -64,9 +87,14 @@ class InputStatistics {
     ros::WallTime last;
     uint64_t suppressed = 0;
   };
+  void count(const std::string& reason, const std::string& message, const ros::Time& stamp,
+             bool frame);
   mutable std::mutex mutex_;
   Counts counts_;
+  uint64_t session_ = 0;
   uint64_t version_ = 0;
+  uint32_t saved_keyframes_ = 0;
+  ros::Time saved_frame_stamp_;
   std::map<std::string, Throttle> throttle_;
 };
 

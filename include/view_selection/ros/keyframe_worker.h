@@ -12,6 +12,7 @@
 #include "view_selection/ros/keyframe_verdicts.h"
 #include "view_selection/ros/node_config.h"
 #include "view_selection/ros/pose_provider.h"
+#include "view_selection/ros/state_keeper.h"
 
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
@@ -42,11 +43,14 @@ struct NodeSnapshot {
 
 class KeyframeWorker {
  public:
-  /// Makes the selector (throws core::InvalidArgument for bad parameters) and starts the thread.
-  /// `verdicts`: the external keyframe decisions (~keyframe_policy external), or null.
+  /// Makes the selector (throws core::InvalidArgument for bad parameters), continues the
+  /// session `keeper` read (when it can; otherwise the keeper sets the file aside and the
+  /// session starts empty) and starts the thread. `verdicts`: the external keyframe decisions
+  /// (~keyframe_policy external), or null.
   KeyframeWorker(const NodeConfig& config, PoseProvider& poses, InputStatistics& statistics,
-                 KeyframeVerdicts* verdicts = nullptr);
-  /// Stops the thread (a frame in flight is abandoned) and joins it.
+                 StateKeeper& keeper, KeyframeVerdicts* verdicts = nullptr);
+  /// Stops the thread (a frame in flight is abandoned: it is not part of the saved session),
+  /// joins it, and saves the session when it changed since the last save.
   ~KeyframeWorker();
   KeyframeWorker(const KeyframeWorker&) = delete;
   KeyframeWorker& operator=(const KeyframeWorker&) = delete;
@@ -54,9 +58,13 @@ class KeyframeWorker {
   /// Queues a frame; when ~max_pending_frames wait already, the oldest is dropped
   /// ("worker_behind").
   void push(PendingFrame frame);
-  /// Forgets every keyframe and waiting frame; a frame in flight is discarded, not inserted.
-  /// Returns the number of keyframes forgotten.
+  /// Forgets every keyframe and waiting frame and starts a new statistics session; a frame in
+  /// flight is discarded, not inserted, and not counted in the new session. Saves the empty
+  /// session (so that a crash after a reset does not bring back the old one). Returns the number
+  /// of keyframes forgotten.
   size_t reset();
+  /// The whole session now, for ~save_state (copied under the state lock, written outside it).
+  StateSnapshot captureState();
   /// Replaces the map of the "map" point source and recomputes the rows of the keyframes whose
   /// points changed. Throws core::InvalidInput for bad points (nothing changes then).
   void setMapPoints(Eigen::Matrix3Xd points);
@@ -80,19 +88,26 @@ class KeyframeWorker {
   struct Queued {
     PendingFrame frame;
     uint64_t generation = 0;  ///< reset() count when it was queued
+    uint64_t session = 0;     ///< its statistics session
     ros::WallTime queued;
   };
 
   void loop();
   void process(const Queued& queued);
   /// Checks and converts a frame; false (after counting the drop) when it is unusable.
-  bool convert(const PendingFrame& frame, CameraModel& camera);
+  bool convert(const Queued& queued, CameraModel& camera);
   /// Under state_mutex_: a new snapshot of the selector's state.
   void publishSnapshotLocked();
+  /// Under state_mutex_: the session for the state file.
+  StateSnapshot captureStateLocked();
+  /// At construction: continues the session the keeper read, or starts empty.
+  void restoreLoaded();
+  void drop(const Queued& queued, const std::string& reason, const std::string& message);
 
   const NodeConfig& config_;
   PoseProvider& poses_;
   InputStatistics& statistics_;
+  StateKeeper& keeper_;
   KeyframeVerdicts* verdicts_;
 
   // The method's state, guarded by state_mutex_.
@@ -103,6 +118,9 @@ class KeyframeWorker {
   std::string camera_frame_;                        // the images' frame_id, normalised
   uint64_t generation_ = 0;  // bumps on reset(); frames of older ones are discarded
   uint64_t version_ = 0;
+  uint64_t captures_ = 0;            // state snapshots taken (their sequence)
+  int keyframes_since_save_ = 0;     // towards ~autosave_keyframes
+  bool changed_since_save_ = false;  // anything a saved session would differ in
 
   mutable std::mutex snapshot_mutex_;
   std::shared_ptr<const NodeSnapshot> snapshot_;

@@ -44,6 +44,10 @@ struct NodeConfig {
   double publish_period = 0.5;        ///< [s, wall] minimum interval between ~selection messages
   bool save_keyframe_images = false;  ///< keep keyframe images for ~export
   double marker_scale = 0.1;          ///< frustum depth in RViz [m, scene units]
+  /// The session is saved here (on shutdown, every autosave_keyframes keyframes, ~save_state)
+  /// and continued from it at start; "" = off; relative to ROS_HOME (default ~/.ros).
+  std::string state_file;
+  int autosave_keyframes = 10;  ///< 0: save only on shutdown and ~save_state
 
   double keyframe_verdict_timeout = 1.0;  ///< [s, wall] external policy: longest wait for a verdict
   double keyframe_stamp_tolerance = 0.001;  ///< [s] external policy: stamp match

@@ -1,12 +1,14 @@
-// The node's services: ~get_next_views, ~get_selection, ~export and ~reset. They answer from the
-// worker's last snapshot on a callback queue and thread of their own, so an export never holds up
-// the inputs and an insertion never holds up an answer.
+// The node's services: ~get_next_views, ~get_selection, ~export, ~reset and ~save_state. They
+// answer from the worker's last snapshot on callback queues and threads of their own, so an
+// insertion never holds up an answer; the file writers (~export, ~save_state) have a queue and
+// thread apart from the queries, so a long export never holds up ~get_selection either.
 #pragma once
 
 #include "view_selection/ros/input_statistics.h"
 #include "view_selection/ros/keyframe_worker.h"
 #include "view_selection/ros/node_config.h"
 #include "view_selection/ros/pose_provider.h"
+#include "view_selection/ros/state_keeper.h"
 
 #include <ros/callback_queue.h>
 #include <ros/ros.h>
@@ -23,8 +25,7 @@ class SelectionServices {
  public:
   /// `on_reset` runs after a reset (e.g. to publish the empty selection at once).
   SelectionServices(const NodeConfig& config, ros::NodeHandle private_nh, KeyframeWorker& worker,
-                    InputStatistics& statistics, PoseProvider& poses,
-                    std::function<void()> on_reset);
+                    PoseProvider& poses, StateKeeper& keeper, std::function<void()> on_reset);
   ~SelectionServices();
 
   /// The callback queue the services run on (shared with dynamic_reconfigure's).
@@ -37,15 +38,16 @@ class SelectionServices {
                     view_selection::GetSelection::Response& res);
   bool exportSelection(view_selection::Export::Request& req, view_selection::Export::Response& res);
   bool reset(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
+  bool saveState(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
 
   const NodeConfig& config_;
   KeyframeWorker& worker_;
-  InputStatistics& statistics_;
   PoseProvider& poses_;
+  StateKeeper& keeper_;
   std::function<void()> on_reset_;
-  ros::CallbackQueue queue_;
-  ros::ServiceServer next_views_, selection_, export_, reset_;
-  ros::AsyncSpinner spinner_;
+  ros::CallbackQueue queue_, files_queue_;
+  ros::ServiceServer next_views_, selection_, export_, reset_, save_state_;
+  ros::AsyncSpinner spinner_, files_spinner_;
 };
 
 /// Writes the snapshot's keyframe images under the names pairs.txt uses, into `directory`.

@@ -3,7 +3,8 @@
 //   inputs (image, camera_info, depth; map points) -> worker (pose, core::ViewSelector) ->
 //   snapshot -> outputs (~selection, ~markers, ~statistics, /diagnostics) and services.
 // Members are built in that order and torn down in reverse, so no callback ever reaches a part
-// that is gone, and a constructor that throws leaves no thread running.
+// that is gone, and a constructor that throws leaves no thread running (every part joins its
+// threads in its destructor).
 #pragma once
 
 #include "view_selection/ros/frame_inputs.h"
@@ -16,6 +17,7 @@
 #include "view_selection/ros/pose_provider.h"
 #include "view_selection/ros/selection_outputs.h"
 #include "view_selection/ros/selection_services.h"
+#include "view_selection/ros/state_keeper.h"
 
 #include <ros/ros.h>
 
@@ -34,6 +36,7 @@ class ViewSelectionRos {
  private:
   const NodeConfig config_;
   InputStatistics statistics_;
+  StateKeeper keeper_;  // before the worker, which saves through it until it is gone
   std::unique_ptr<PoseProvider> poses_;
   KeyframeVerdicts verdicts_;
   KeyframeWorker worker_;

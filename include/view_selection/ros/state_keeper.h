@@ -1,0 +1,83 @@
+// ~state_file: reads the saved session at start (a bad file is kept aside with one clear error)
+// and writes snapshots of the session on a thread of its own, so that a save never holds up the
+// frames: the worker copies its state under its lock and hands the copy over.
+#pragma once
+
+#include "view_selection/io/state_file.h"
+#include "view_selection/ros/input_statistics.h"
+#include "view_selection/ros/node_config.h"
+
+#include <condition_variable>
+#include <cstdint>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+
+namespace view_selection::ros_node {
+
+/// One snapshot of the session; `sequence` orders snapshots (a later one is never replaced by an
+/// earlier one on disk).
+struct StateSnapshot {
+  uint64_t sequence = 0;
+  io::SessionState state;
+};
+
+/// What a save did.
+struct SaveResult {
+  bool ok = false;
+  std::string message;  ///< "wrote 37 keyframes (1.8 MB) to ... in 12 ms", or why not
+  size_t bytes = 0;
+  double seconds = 0.0;
+};
+
+class StateKeeper {
+ public:
+  /// With an empty ~state_file, does nothing. Otherwise resolves the path (relative to ROS_HOME,
+  /// default ~/.ros) and reads the file if it exists; `producer` is written into every save.
+  StateKeeper(const NodeConfig& config, InputStatistics& statistics, std::string producer);
+  /// Finishes the write in progress, drops one still waiting (the worker saves its final state
+  /// itself, before this), and joins the thread.
+  ~StateKeeper();
+  StateKeeper(const StateKeeper&) = delete;
+  StateKeeper& operator=(const StateKeeper&) = delete;
+
+  bool enabled() const { return !path_.empty(); }
+  const std::string& path() const { return path_; }
+  /// The session read at start (once; empty afterwards, without a file or when it was bad).
+  std::optional<io::SessionState> takeLoaded();
+  /// The loaded session cannot continue here (another point source, inconsistent content): logs
+  /// `why` once, keeps the file aside (it is never overwritten) and the node starts empty.
+  void refuseLoaded(const std::string& why);
+
+  /// Queues a snapshot for the keeper's thread; one still waiting is replaced. Never blocks on
+  /// a write.
+  void saveLater(StateSnapshot snapshot);
+  /// Writes now, after a write in progress (~save_state, shutdown).
+  SaveResult saveNow(StateSnapshot snapshot);
+
+ private:
+  void loop();
+  SaveResult write(StateSnapshot& snapshot);
+
+  std::string path_;
+  InputStatistics& statistics_;
+  std::string producer_;
+  std::optional<io::SessionState> loaded_;
+
+  std::mutex write_mutex_;  // one write at a time; guards written_
+  uint64_t written_ = 0;    // sequence of the last snapshot on disk
+  ros::WallTime last_error_log_;
+
+  std::mutex mutex_;
+  std::condition_variable wake_;
+  std::optional<StateSnapshot> waiting_;
+  bool stopping_ = false;
+  std::thread thread_;  // last
+};
+
+/// ~state_file resolved: "" stays "", an absolute path is kept, a relative one is taken relative
+/// to $ROS_HOME (else $HOME/.ros).
+std::string resolveStatePath(const std::string& state_file);
+
+}  // namespace view_selection::ros_node

@@ -1,0 +1,300 @@
+#!/usr/bin/env python3
+"""Nothing accepted is lost: a session killed with SIGKILL after an autosave and started again
+continues from ~state_file; once the frames after the saved one are replayed, its selection equals
+an uninterrupted node's, message for message. select_views --state re-selects the same file. A
+truncated, corrupted, foreign or incompatible file gives one error, an empty start, and is kept
+aside, never overwritten.
+
+Frames: the first ~max_frames of ~dataset (default ../shared/data/redkitchen-0-499) through
+tum_to_bag, else the built-in synthetic sequence (generate_sequence)."""
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import unittest
+
+import rospy
+import rostest
+from std_srvs.srv import Trigger
+
+from view_selection.srv import Export, ExportRequest, GetSelection
+
+from vs_robust import (FramePublisher, NodeProcess, Statistics, bag_frames, call,
+                       check_selection, check_statistics, find_tool, note_without_real_data,
+                       serialized, wait_until)
+
+PKG = 'view_selection'
+
+# The session's parameters (as test/ros/replay/replay.yaml: ~20 keyframes in 120 kitchen frames).
+PARAMS = {
+    'pose_source': 'topic', 'world_frame': '/world', 'keyframe_policy': 'motion',
+    'min_translation': 0.05, 'min_rotation_deg': 5.0, 'k': 5, 'point_source': 'depth',
+    'pose_timeout': 2.0, 'queue_size': 30, 'max_pending_frames': 1000, 'publish_period': 0.02,
+}
+
+
+def run(cmd, timeout, what):
+    done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, timeout=timeout,
+                          universal_newlines=True)
+    if done.returncode != 0:
+        raise AssertionError('%s failed (exit %d): %s\n%s' % (what, done.returncode, ' '.join(cmd),
+                                                             done.stdout))
+    return done.stdout
+
+
+class Restart(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.tmp = tempfile.mkdtemp(prefix='view_selection_restart_')
+        max_frames = int(rospy.get_param('~max_frames', 120))
+        dataset = rospy.get_param('~dataset', '')
+        tum_to_bag = find_tool('tum_to_bag')
+        assert tum_to_bag, 'tum_to_bag is not built'
+        if not (dataset and os.path.isdir(dataset)):
+            note_without_real_data('restart: synthetic frames', dataset)
+            generate = find_tool('generate_sequence')
+            assert generate, 'generate_sequence is not built'
+            dataset = os.path.join(cls.tmp, 'synthetic')
+            run([generate, '--out', dataset, '--frames', str(max_frames), '--quiet', '--width', '320',
+                 '--height', '240'], 600, 'generate_sequence')
+        cls.dataset = dataset
+        bag = os.path.join(cls.tmp, 'frames.bag')
+        run([tum_to_bag, '--dataset', dataset, '--out', bag, '--max-frames', str(max_frames),
+             '--quiet'], 600, 'tum_to_bag')
+        cls.frames = bag_frames(bag)
+        assert len(cls.frames) >= 40, 'too few frames in %s' % bag
+        rospy.loginfo('restart test: %d frames from %s', len(cls.frames), dataset)
+
+    @classmethod
+    def tearDownClass(cls):
+        shutil.rmtree(cls.tmp, ignore_errors=True)
+
+    # -------------------------------------------------------------------------------------------
+    def start(self, name, extra=None):
+        pub = FramePublisher('/%s/camera' % name)
+        params = dict(PARAMS)
+        params.update(extra or {})
+        node = NodeProcess(name, params, pub.remaps()).start()
+        node.wait_for_services()
+        pub.wait_connected()
+        return node, pub
+
+    def feed(self, frames, targets):
+        """Publishes each frame to every (publisher, statistics) target and waits until each node
+        has handled it (lockstep: no frame lost to a queue, the same frames in the same order)."""
+        for f in frames:
+            wanted = [s.handled() + 1 for _, s in targets]
+            for pub, _ in targets:
+                pub.publish(f)
+            for (pub, s), n in zip(targets, wanted):
+                wait_until(lambda: s.handled() >= n, 30, '%s handled frame %s' % (s.node, f.stamp))
+
+    def index_after(self, stamp):
+        """Index of the first frame after `stamp` (0 for a zero stamp)."""
+        for i, f in enumerate(self.frames):
+            if f.stamp > stamp:
+                return i
+        return len(self.frames)
+
+    # -------------------------------------------------------------------------------------------
+    def test_1_killed_session_continues_exactly(self):
+        state = os.path.join(self.tmp, 'state', 'session.state')
+        half = len(self.frames) // 2
+        ref, ref_pub = self.start('restart_ref', {'save_keyframe_images': True})
+        node, pub = self.start('restart_node', {'state_file': state, 'autosave_keyframes': 3,
+                                                'save_keyframe_images': True})
+        ref_stats, stats = Statistics(ref.name), Statistics(node.name)
+        try:
+            both = [(ref_pub, ref_stats), (pub, stats)]
+            self.feed(self.frames[:half], both)
+            stats.wait(lambda s: s.state_saved_keyframes >= 3, 30, 'an autosave')
+            self.assertTrue(os.path.isfile(state), 'no state file after an autosave')
+            # On until the node holds a keyframe and a few frames the last autosave does not.
+            kill_at = half
+            while kill_at < len(self.frames) - 10:
+                s = stats.get()
+                unsaved = kill_at - self.index_after(s.state_saved_frame_stamp)
+                if s.keyframes > s.state_saved_keyframes and unsaved >= 4:
+                    break
+                self.feed(self.frames[kill_at:kill_at + 1], both)
+                kill_at += 1
+            # SIGKILL: no shutdown save, so frames after the last autosave are lost to the node.
+            node.kill()
+            rospy.loginfo('restart test: killed after frame %d with %d keyframes, %d saved, %d '
+                          'frames to replay', kill_at, s.keyframes, s.state_saved_keyframes,
+                          kill_at - self.index_after(s.state_saved_frame_stamp))
+
+            stats.forget()
+            node.start()
+            node.wait_for_services()
+            pub.wait_connected()
+            restored = stats.wait(lambda s: True, 20, 'statistics after the restart')
+            self.assertGreater(restored.keyframes, 0, 'the restarted node did not continue')
+            self.assertEqual(restored.keyframes, restored.state_saved_keyframes)
+            resume = self.index_after(restored.last_frame_stamp)
+            self.assertEqual(restored.frames_received, resume,
+                             'a continued session has handled exactly the frames up to the saved one')
+            self.assertLess(resume, kill_at, 'nothing was lost: the kill came too late to test')
+            # The frames between the last autosave and the kill, to this node only; then the rest
+            # to both.
+            self.feed(self.frames[resume:kill_at], [(pub, stats)])
+            self.feed(self.frames[kill_at:], both)
+
+            a = call(ref.name + '/get_selection', GetSelection).selection
+            b = call(node.name + '/get_selection', GetSelection).selection
+            check_selection(self, b, 'restarted node')
+            self.assertGreater(len(a.keyframes), 5)
+            self.assertEqual([k.stamp for k in b.keyframes], [k.stamp for k in a.keyframes])
+            self.assertEqual(serialized(b), serialized(a),
+                             'the restarted session\'s selection differs from the uninterrupted one')
+            sa, sb = ref_stats.get(), stats.get()
+            check_statistics(self, sb, 'restarted node')
+            for field in ('frames_received', 'frames_offered', 'keyframes', 'frames_dropped'):
+                self.assertEqual(getattr(sb, field), getattr(sa, field), field)
+            self.assertEqual(sb.frames_received, len(self.frames))
+
+            # Images are not in the state file: the continued keyframes have none, and every
+            # image written is the same keyframe's as the uninterrupted node's.
+            exports = {}
+            for n in (ref, node):
+                folder = os.path.join(self.tmp, 'export' + n.name.replace('/', '_'))
+                answer = call(n.name + '/export', Export, ExportRequest(directory=folder), 60)
+                self.assertTrue(answer.success, answer.message)
+                exports[n.name] = (folder, answer)
+            folder, answer = exports[node.name]
+            self.assertEqual(answer.images_written, len(b.keyframes) - restored.keyframes,
+                             answer.message)
+            self.assertIn('continued from ~state_file have no image', answer.message)
+            for k in b.keyframes[restored.keyframes:]:
+                with open(os.path.join(folder, k.image_name), 'rb') as x, \
+                        open(os.path.join(exports[ref.name][0], k.image_name), 'rb') as y:
+                    self.assertEqual(x.read(), y.read(), 'image of ' + k.image_name)
+            for k in b.keyframes[:restored.keyframes]:
+                self.assertFalse(os.path.exists(os.path.join(folder, k.image_name)), k.image_name)
+
+            # SIGINT: the node saves on the way out; select_views re-selects that file.
+            self.assertEqual(node.stop(), 0)
+            out = os.path.join(self.tmp, 'offline')
+            summary = run([find_tool('select_views'), '--state', state, '--out', out, '--quiet',
+                           '--print-sets', '0'], 120, 'select_views --state')
+            with open(os.path.join(out, 'selection.json')) as f:
+                offline = json.load(f)
+            self.assertEqual(len(offline['keyframes']), len(a.keyframes), summary)
+            self.assertEqual(offline['pairs'], [[p.first, p.second] for p in a.pairs])
+            self.assertEqual(offline['next_views'], [list(v.next_views) for v in a.next_view_sets])
+            self.assertEqual(offline['start_view'], a.start_view)
+            # Other selection parameters re-select the same keyframes offline.
+            run([find_tool('select_views'), '--state', state, '--out', out + '_k3', '--k', '3',
+                 '--quiet'], 120, 'select_views --state --k 3')
+            with open(os.path.join(out + '_k3', 'selection.json')) as f:
+                self.assertTrue(all(len(s) <= 3 for s in json.load(f)['next_views']))
+        finally:
+            for n in (ref, node):
+                n.stop()
+            for s in (ref_stats, stats):
+                s.close()
+            for p in (ref_pub, pub):
+                p.close()
+
+    def test_2_save_state_service(self):
+        state = os.path.join(self.tmp, 'service', 'session.state')
+        node, pub = self.start('save_service', {'state_file': state, 'autosave_keyframes': 0})
+        stats = Statistics(node.name)
+        try:
+            self.feed(self.frames[:10], [(pub, stats)])
+            self.assertFalse(os.path.exists(state), 'autosave_keyframes 0 saved anyway')
+            answer = call(node.name + '/save_state', Trigger, timeout=30)
+            self.assertTrue(answer.success, answer.message)
+            self.assertIn('keyframes', answer.message)
+            self.assertTrue(os.path.isfile(state))
+            s = stats.wait(lambda s: s.state_saved_keyframes > 0, 10, 'saved keyframes reported')
+            self.assertEqual(s.state_saved_keyframes, s.keyframes)
+            # Without ~state_file the service says saving is off.
+            off, off_pub = self.start('save_off')
+            try:
+                answer = call(off.name + '/save_state', Trigger)
+                self.assertFalse(answer.success)
+                self.assertIn('state_file', answer.message)
+            finally:
+                off.stop()
+                off_pub.close()
+        finally:
+            node.stop()
+            stats.close()
+            pub.close()
+
+    def good_state_file(self):
+        """A real state file of a few keyframes."""
+        path = os.path.join(self.tmp, 'good', 'session.state')
+        if not os.path.exists(path):
+            node, pub = self.start('good_state', {'state_file': path})
+            stats = Statistics(node.name)
+            try:
+                self.feed(self.frames[:12], [(pub, stats)])
+            finally:
+                self.assertEqual(node.stop(), 0)
+                stats.close()
+                pub.close()
+        with open(path, 'rb') as f:
+            return f.read()
+
+    def test_3_bad_state_files_are_kept_aside(self):
+        good = self.good_state_file()
+        self.assertGreater(len(good), 1000)
+        flipped = bytearray(good)
+        flipped[len(good) // 2] ^= 0x40
+        cases = [('truncated', good[:len(good) // 3], 'truncated'),
+                 ('corrupted', bytes(flipped), 'corrupted'),
+                 ('foreign', b'\x89PNG\r\n\x1a\n' + b'\0' * 64, 'not a view_selection state file'),
+                 ('empty', b'', 'empty')]
+        for name, content, reason in cases:
+            folder = os.path.join(self.tmp, 'bad_' + name)
+            os.makedirs(folder)
+            path = os.path.join(folder, 'session.state')
+            with open(path, 'wb') as f:
+                f.write(content)
+            node, pub = self.start('bad_' + name, {'state_file': path})
+            try:
+                selection = call(node.name + '/get_selection', GetSelection).selection
+                self.assertEqual(len(selection.keyframes), 0, name + ': started with keyframes')
+                aside = [f for f in os.listdir(folder) if f.startswith('session.state.bad-')]
+                self.assertEqual(len(aside), 1, '%s: kept aside as %s' % (name, os.listdir(folder)))
+                with open(os.path.join(folder, aside[0]), 'rb') as f:
+                    self.assertEqual(f.read(), content, name + ': the kept file was changed')
+                errors = [l for l in node.output().splitlines() if 'cannot continue the session' in l]
+                self.assertEqual(len(errors), 1, '%s: one error line, got:\n%s' % (name, node.output()))
+                self.assertIn(reason, errors[0])
+                # The node works and saves a new file beside the kept one.
+                answer = call(node.name + '/save_state', Trigger, timeout=30)
+                self.assertTrue(answer.success, answer.message)
+                self.assertTrue(os.path.isfile(path))
+                with open(os.path.join(folder, aside[0]), 'rb') as f:
+                    self.assertEqual(f.read(), content, name + ': the kept file was overwritten')
+            finally:
+                node.stop()
+                pub.close()
+
+    def test_4_another_point_source_cannot_continue(self):
+        good = self.good_state_file()
+        folder = os.path.join(self.tmp, 'other_source')
+        os.makedirs(folder)
+        path = os.path.join(folder, 'session.state')
+        with open(path, 'wb') as f:
+            f.write(good)
+        node, pub = self.start('other_source', {'state_file': path, 'grid': 8})
+        try:
+            selection = call(node.name + '/get_selection', GetSelection).selection
+            self.assertEqual(len(selection.keyframes), 0)
+            self.assertIn("point source 'depth'", node.output())
+            aside = [f for f in os.listdir(folder) if f.startswith('session.state.bad-')]
+            self.assertEqual(len(aside), 1, os.listdir(folder))
+        finally:
+            node.stop()
+            pub.close()
+
+
+if __name__ == '__main__':
+    rospy.init_node('restart_tester')
+    rostest.rosrun(PKG, 'restart', Restart, sys.argv)
