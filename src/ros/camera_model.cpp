@@ -3,6 +3,9 @@
 #include "view_selection/core/exceptions.h"
 #include "view_selection/ros/conversions.h"
 
+#include <cv_bridge/cv_bridge.h>
+#include <sensor_msgs/image_encodings.h>
+
 #include <opencv2/imgproc.hpp>
 
 #include <cmath>
@@ -68,6 +71,16 @@ cv::Mat rectifiedImage(const CameraModel& camera, const cv::Mat& image) {
   cv::Mat out;
   camera.model.rectifyImage(image, out, cv::INTER_LINEAR);
   return out;
+}
+
+sensor_msgs::ImageConstPtr rectifiedImageMessage(const CameraModel& camera,
+                                                 const sensor_msgs::ImageConstPtr& image) {
+  namespace enc = sensor_msgs::image_encodings;
+  const cv_bridge::CvImageConstPtr in = enc::isBayer(image->encoding)
+                                            ? cv_bridge::toCvCopy(image, enc::BGR8)
+                                            : cv_bridge::toCvShare(image);
+  return cv_bridge::CvImage(image->header, in->encoding, rectifiedImage(camera, in->image))
+      .toImageMsg();
 }
 
 cv::Mat rectifiedDepth(const CameraModel& camera, const cv::Mat& depth) {

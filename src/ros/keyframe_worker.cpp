@@ -288,12 +288,11 @@ bool KeyframeWorker::convert(const Queued& queued, CameraModel& camera) {
 void KeyframeWorker::process(const Queued& queued) {
   const PendingFrame& frame = queued.frame;
   const ros::Time stamp = frame.image->header.stamp;
-  CameraModel camera;
-  if (!convert(queued, camera)) return;
+  // The stamp first: a frame repeated or late is dropped for that, whatever else is wrong with
+  // it (a repeated stamp may also have been paired with the earlier frame's depth).
   {
     std::lock_guard<std::mutex> lock(state_mutex_);
     if (queued.generation != generation_) return;  // queued before a reset
-    camera_frame_ = normaliseFrameId(frame.image->header.frame_id);
     if (last_stamp_ && !(stamp.toSec() > *last_stamp_)) {
       const bool duplicate = stamp.toSec() == *last_stamp_;
       std::ostringstream s;
@@ -304,6 +303,13 @@ void KeyframeWorker::process(const Queued& queued) {
       changed_since_save_ = true;
       return;
     }
+  }
+  CameraModel camera;
+  if (!convert(queued, camera)) return;
+  {
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    if (queued.generation != generation_) return;
+    camera_frame_ = normaliseFrameId(frame.image->header.frame_id);
   }
   // The waits for the verdict and the pose hold no lock: services and resets go on meanwhile.
   bool external = false;
@@ -373,7 +379,9 @@ void KeyframeWorker::process(const Queued& queued) {
   changed_since_save_ = true;
   double insertion = -1.0;
   if (result.outcome == core::FrameOutcome::kKeyframe) {
-    if (config_.save_keyframe_images) images_.push_back(frame.image);
+    // A distorted camera's keyframe images are kept rectified, as the exported intrinsics are.
+    if (config_.save_keyframe_images)
+      images_.push_back(camera.rectify ? rectifiedImageMessage(camera, frame.image) : frame.image);
     insertion = result.points_seconds + result.matrix_seconds;
     // Counted before the snapshot is published: a reader never sees more keyframes in the
     // selection than in the statistics.

@@ -3,6 +3,7 @@
 
 #include "view_selection/core/exceptions.h"
 
+#include <cv_bridge/cv_bridge.h>
 #include <gtest/gtest.h>
 
 #include <opencv2/imgproc.hpp>
@@ -80,6 +81,31 @@ TEST(CameraModel, DistortedImagesAreRectifiedToP) {
   EXPECT_FLOAT_EQ(d.at<float>(cvRound(rect.y), cvRound(rect.x)), 2.0f);
   const cv::Mat other = (d != 0.0f) & (d != 2.0f);
   EXPECT_EQ(cv::countNonZero(other), 0) << "rectified depth holds blended values";
+}
+
+TEST(CameraModel, RectifiedMessagesKeepHeaderAndEncoding) {
+  const CameraModel c = cameraModelFromInfo(info({-0.25, 0.08, 0.0, 0.0, 0.0}));
+  cv::Mat image(480, 640, CV_8UC3, cv::Scalar(0, 0, 0));
+  const cv::Point2d rect(560.0, 420.0);
+  const cv::Point2d raw = c.model.unrectifyPoint(rect);
+  cv::circle(image, cv::Point(cvRound(raw.x), cvRound(raw.y)), 2, cv::Scalar(0, 0, 255), cv::FILLED);
+  std_msgs::Header h;
+  h.stamp = ros::Time(12.5);
+  h.frame_id = "cam";
+  const auto msg = cv_bridge::CvImage(h, "rgb8", image).toImageMsg();
+  const sensor_msgs::ImageConstPtr out = rectifiedImageMessage(c, msg);
+  EXPECT_EQ(out->header.stamp, h.stamp);
+  EXPECT_EQ(out->header.frame_id, "cam");
+  EXPECT_EQ(out->encoding, "rgb8");
+  ASSERT_EQ(out->width, 640u);
+  const cv::Mat back = cv_bridge::toCvShare(out)->image;
+  std::vector<cv::Mat> channels;
+  cv::split(back, channels);
+  double peak = 0.0;
+  cv::Point at;
+  cv::minMaxLoc(channels[2], nullptr, &peak, nullptr, &at);
+  EXPECT_GT(peak, 100.0);
+  EXPECT_LT(cv::norm(cv::Point2d(at) - rect), 2.0) << at;
 }
 
 TEST(CameraModel, UnusableCamerasAreRejectedWithTheReason) {

@@ -8,6 +8,7 @@
 
 #include <image_geometry/pinhole_camera_model.h>
 #include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
 
 #include <opencv2/core.hpp>
 
@@ -26,6 +27,11 @@ struct CameraModel {
 CameraModel cameraModelFromInfo(const sensor_msgs::CameraInfo& info);
 /// The rectified image (same type); `image` must have the size camera_info gives.
 cv::Mat rectifiedImage(const CameraModel& camera, const cv::Mat& image);
+/// The image message rectified (a Bayer mosaic debayered to bgr8 first, since interpolating a
+/// mosaic mixes its colours), same header; what an export writes for a distorted camera, so that
+/// the images agree with the intrinsics it writes.
+sensor_msgs::ImageConstPtr rectifiedImageMessage(const CameraModel& camera,
+                                                 const sensor_msgs::ImageConstPtr& image);
 /// The rectified depth (CV_32FC1 metres, 0 = none), nearest neighbour.
 cv::Mat rectifiedDepth(const CameraModel& camera, const cv::Mat& depth);
 
