@@ -101,7 +101,9 @@ Keyframe objectKeyframe(int index, std::mt19937& rng) {
   kf.pose = lookAt(eye, Eigen::Vector3d::Zero());
   kf.points.resize(3, 256);
   for (int q = 0; q < 256; ++q) {
-    Eigen::Vector3d p(uni(rng) - 0.5, uni(rng) - 0.5, uni(rng) - 0.5);
+    // One draw at a time, z first (gcc's order for these as arguments, which is unspecified).
+    const double z = uni(rng), y = uni(rng), x = uni(rng);
+    Eigen::Vector3d p(x - 0.5, y - 0.5, z - 0.5);
     kf.points.col(q) = p;
   }
   return kf;
@@ -140,7 +142,10 @@ PointSet pointSet() {
   std::uniform_real_distribution<double> uni(-0.5, 0.5);
   s.pose_i = lookAt({0, 0, 0}, {0, 0, 3});
   s.pose_j = lookAt({1.2, 0.1, 0.3}, {0, 0, 3});
-  for (int q = 0; q < 1024; ++q) s.world.emplace_back(uni(rng), uni(rng), 3.0 + uni(rng));
+  for (int q = 0; q < 1024; ++q) {
+    const double z = uni(rng), y = uni(rng), x = uni(rng);  // z first, as above
+    s.world.emplace_back(x, y, 3.0 + z);
+  }
   return s;
 }
 

@@ -62,7 +62,12 @@ Eigen::Vector3d randomColour(Rng& rng) {
 /// No regular pattern, so every corner looks different from its neighbours.
 cv::Mat makeTexture(int w, int h, double metres_per_texel, uint64_t seed) {
   Rng rng(seed);
-  const Eigen::Vector3d base(rng.uniform(0.3, 0.8), rng.uniform(0.3, 0.8), rng.uniform(0.3, 0.8));
+  // Several draws for one call are taken one at a time, last argument first: function arguments
+  // have no evaluation order, and gcc's (last first) made the files written so far; clang's
+  // differs, which made the textures depend on the compiler.
+  const double base_z = rng.uniform(0.3, 0.8), base_y = rng.uniform(0.3, 0.8),
+               base_x = rng.uniform(0.3, 0.8);
+  const Eigen::Vector3d base(base_x, base_y, base_z);
   cv::Mat tex(h, w, CV_8UC3, bgr(base));
   const double area = w * h * metres_per_texel * metres_per_texel;  // m^2
   const double texels_per_metre = 1.0 / metres_per_texel;
@@ -78,12 +83,14 @@ cv::Mat makeTexture(int w, int h, double metres_per_texel, uint64_t seed) {
     const double small_texels_per_metre = texels_per_metre * sw / w;
     const int soft = std::max(2, static_cast<int>(std::lround(area * 2.0)));
     for (int q = 0; q < soft; ++q) {
-      const cv::Point centre(rng.below(sw), rng.below(sh));
+      const int cy = rng.below(sh), cx = rng.below(sw);
+      const cv::Point centre(cx, cy);
       const double r = rng.uniform(0.2, 0.8) * small_texels_per_metre;
       const cv::Size axes(std::max(1, static_cast<int>(r)),
                           std::max(1, static_cast<int>(r * rng.uniform(0.4, 1.0))));
-      cv::ellipse(small, centre, axes, rng.uniform(0, 180), 0, 360,
-                  bgr(mixed(rng.uniform(0.1, 0.3))), cv::FILLED, cv::LINE_AA);
+      const cv::Scalar colour = bgr(mixed(rng.uniform(0.1, 0.3)));
+      const double angle = rng.uniform(0, 180);
+      cv::ellipse(small, centre, axes, angle, 0, 360, colour, cv::FILLED, cv::LINE_AA);
     }
     cv::GaussianBlur(small, small, cv::Size(0, 0), std::max(0.5, 0.08 * small_texels_per_metre));
     cv::resize(small, tex, tex.size(), 0, 0, cv::INTER_LINEAR);
@@ -92,7 +99,8 @@ cv::Mat makeTexture(int w, int h, double metres_per_texel, uint64_t seed) {
   const int shapes = std::max(4, static_cast<int>(std::lround(area * 110.0)));
   for (int q = 0; q < shapes; ++q) {
     const double size = rng.logUniform(0.012, 0.2) * texels_per_metre;  // radius [texels]
-    const cv::Point2d c(rng.uniform(-size, w + size), rng.uniform(-size, h + size));
+    const double cy = rng.uniform(-size, h + size), cx = rng.uniform(-size, w + size);
+    const cv::Point2d c(cx, cy);
     const cv::Scalar colour = bgr(mixed(rng.uniform(0.25, 1.0)));
     const double angle = rng.uniform(0.0, 2.0 * kPi);
     switch (rng.below(4)) {
@@ -185,7 +193,8 @@ SyntheticScene::SyntheticScene(uint64_t seed, const SyntheticSceneConfig& config
   };
 
   if (config_.table) {
-    const Eigen::Vector2d at(rng.uniform(-0.1, 0.1), rng.uniform(-0.1, 0.1));
+    const double at_y = rng.uniform(-0.1, 0.1), at_x = rng.uniform(-0.1, 0.1);  // last first
+    const Eigen::Vector2d at(at_x, at_y);
     const double yaw = rng.uniform(-0.3, 0.3);
     const Eigen::Vector3d top_half(0.5, 0.35, 0.02);
     const double top_z = 0.75;
@@ -201,8 +210,9 @@ SyntheticScene::SyntheticScene(uint64_t seed, const SyntheticSceneConfig& config
             Eigen::Vector3d(leg, leg, leg_height / 2.0), yaw);
       }
     }
-    const Eigen::Vector3d box_half(rng.uniform(0.1, 0.18), rng.uniform(0.08, 0.15),
-                                   rng.uniform(0.08, 0.2));
+    const double box_z = rng.uniform(0.08, 0.2), box_y = rng.uniform(0.08, 0.15),
+                 box_x = rng.uniform(0.1, 0.18);
+    const Eigen::Vector3d box_half(box_x, box_y, box_z);
     const double bx = rng.uniform(-0.2, 0.2), by = rng.uniform(-0.1, 0.1);
     add("box on table",
         Eigen::Vector3d(at.x() + c * bx - s * by, at.y() + s * bx + c * by, top_z + box_half.z()),

@@ -31,7 +31,7 @@ struct RandomPair {
 RandomPair randomPair(std::mt19937& rng) {
   std::uniform_real_distribution<double> uni(0.0, 1.0);
   RandomPair c;
-  c.point = Eigen::Vector3d(uni(rng) * 10 - 5, uni(rng) * 10 - 5, uni(rng) * 10 - 5);
+  c.point = 10.0 * test::drawnVector3(rng, uni) - Eigen::Vector3d::Constant(5.0);
   const Eigen::Vector3d v1 = test::randomUnit(rng);
   const Eigen::Vector3d axis = v1.cross(test::randomUnit(rng)).normalized();
   const double parallax = (10.0 + 140.0 * uni(rng)) * M_PI / 180.0;

@@ -18,7 +18,12 @@ namespace {
 Eigen::Matrix3Xd randomPoints(std::mt19937& rng, int n, double spread = 2.0) {
   std::uniform_real_distribution<double> u(-spread, spread);
   Eigen::Matrix3Xd p(3, n);
-  for (int i = 0; i < n; ++i) p.col(i) = Eigen::Vector3d(u(rng), u(rng), u(rng));
+  for (int i = 0; i < n; ++i) {
+    // One draw at a time, z first: the order gcc evaluated Vector3d(u(rng), ...) in before
+    // (argument order is unspecified; clang's differs).
+    const double z = u(rng), y = u(rng), x = u(rng);
+    p.col(i) = Eigen::Vector3d(x, y, z);
+  }
   return p;
 }
 
@@ -69,8 +74,10 @@ TEST(TrajectoryAlignment, NoisyPointsGiveCloseTransformAndErrorOfNoiseSize) {
   Eigen::Matrix3Xd gt = applyTo(truth, est);
   const double sigma = 0.05;  // per axis, ground-truth units
   std::normal_distribution<double> noise(0.0, sigma);
-  for (Eigen::Index i = 0; i < gt.cols(); ++i)
-    gt.col(i) += Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
+  for (Eigen::Index i = 0; i < gt.cols(); ++i) {
+    const double z = noise(rng), y = noise(rng), x = noise(rng);  // z first, as above
+    gt.col(i) += Eigen::Vector3d(x, y, z);
+  }
   const TrajectoryError r = absoluteTrajectoryError(est, gt);
   EXPECT_NEAR(r.alignment.scale, truth.scale, 0.01);
   EXPECT_LT(Eigen::AngleAxisd(r.alignment.rotation.transpose() * truth.rotation).angle(), 0.005);

@@ -150,12 +150,16 @@ TEST(Triangulation, CeresRefinementLowersReprojectionErrorFromTheLinearStart) {
   std::vector<Eigen::Vector3d> truth, linear;
   std::vector<std::vector<PixelObservation>> obs;
   for (int i = 0; i < 300; ++i) {
-    const Eigen::Vector3d x(uniform(rng), 0.6 * uniform(rng), 3.0 + 0.5 * uniform(rng));
+    // One by one, last first (the order gcc gave these as arguments; clang's differs).
+    const double rz = uniform(rng), ry = uniform(rng), rx = uniform(rng);
+    const Eigen::Vector3d x(rx, 0.6 * ry, 3.0 + 0.5 * rz);
     std::vector<PixelObservation> o;
-    for (int c = 0; c < 2 + i % 3; ++c)
+    for (int c = 0; c < 2 + i % 3; ++c) {
+      const double dv = noise(rng), du = noise(rng);
       o.push_back({c, cams[static_cast<size_t>(c)].intrinsics.project(
                           cams[static_cast<size_t>(c)].toCamera(x)) +
-                          Eigen::Vector2d(noise(rng), noise(rng))});
+                          Eigen::Vector2d(du, dv)});
+    }
     truth.push_back(x);
     linear.push_back(triangulateLinear(o, cams));
     obs.push_back(o);
@@ -223,7 +227,8 @@ TEST(FeaturePointSource, SampsonDistanceMeasuresEpipolarError) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   for (int i = 0; i < 50; ++i) {
-    const Eigen::Vector3d x(u(rng), 0.7 * u(rng), 4.0 + u(rng));
+    const double rz = u(rng), ry = u(rng), rx = u(rng);  // last first, as gcc drew them
+    const Eigen::Vector3d x(rx, 0.7 * ry, 4.0 + rz);
     const Eigen::Vector2d pa = a.intrinsics.project(a.toCamera(x)),
                           pb = b.intrinsics.project(b.toCamera(x));
     EXPECT_LT(FeaturePointSource::sampsonDistance(f, pa, pb), 1e-6);

@@ -137,10 +137,12 @@ TEST(SyntheticScene, RayHitsLieOnSurfacesAndDistanceIsALowerBound) {
   std::normal_distribution<double> n(0.0, 1.0);
   int tested = 0;
   while (tested < 2000) {
-    const Eigen::Vector3d p(ux(rng), uy(rng), uz(rng));
+    const double pz = uz(rng), py = uy(rng), px = ux(rng);  // last first, as gcc drew them
+    const Eigen::Vector3d p(px, py, pz);
     if (!scene.isFree(p)) continue;
     ++tested;
-    const Eigen::Vector3d d = Eigen::Vector3d(n(rng), n(rng), n(rng)).normalized();
+    const double dz = n(rng), dy = n(rng), dx = n(rng);
+    const Eigen::Vector3d d = Eigen::Vector3d(dx, dy, dz).normalized();
     const auto hit = scene.castRay(p, d, 100.0);
     ASSERT_TRUE(hit.has_value()) << "a closed room: every ray from inside hits";
     EXPECT_LT(scene.distanceToSurface(hit->point), 1e-9);
@@ -482,8 +484,11 @@ TEST(TumWriters, TrajectoryRoundTripsExactly) {
   for (int i = 0; i < 200; ++i) {
     TumPoseEntry e;
     e.stamp = 1305031102.175304 + 0.0333 * i + 1e-9 * n(rng);
-    e.pose.position = Eigen::Vector3d(n(rng), n(rng), 1e-7 * n(rng));
-    e.pose.orientation = Eigen::Quaterniond(n(rng), n(rng), n(rng), n(rng)).normalized();
+    // One draw at a time, last first (the order gcc evaluated these arguments in).
+    const double z = n(rng), y = n(rng), x = n(rng);
+    e.pose.position = Eigen::Vector3d(x, y, 1e-7 * z);
+    const double qz = n(rng), qy = n(rng), qx = n(rng), qw = n(rng);
+    e.pose.orientation = Eigen::Quaterniond(qw, qx, qy, qz).normalized();
     poses.push_back(e);
   }
   const std::string path = (dir.path() / "groundtruth.txt").string();

@@ -33,12 +33,18 @@ class TexturedRoom {
       std::uniform_int_distribution<int> grey(20, 235), x(0, w - 1), y(0, h - 1), size(3, 18);
       const int shapes = w * h / 60;
       for (int s = 0; s < shapes; ++s) {
-        const cv::Point c(x(rng), y(rng));
-        if (s % 2 == 0)
-          cv::circle(tex, c, size(rng), cv::Scalar(grey(rng)), cv::FILLED, cv::LINE_AA);
-        else
-          cv::rectangle(tex, c, c + cv::Point(size(rng) * 2, size(rng) * 2), cv::Scalar(grey(rng)),
-                        cv::FILLED, cv::LINE_AA);
+        // One draw at a time, in the order gcc evaluated them as arguments (unspecified order).
+        const int cy = y(rng), cx = x(rng);
+        const cv::Point c(cx, cy);
+        const int g = grey(rng);
+        if (s % 2 == 0) {
+          const int r = size(rng);
+          cv::circle(tex, c, r, cv::Scalar(g), cv::FILLED, cv::LINE_AA);
+        } else {
+          const int sy = size(rng), sx = size(rng);
+          cv::rectangle(tex, c, c + cv::Point(sx * 2, sy * 2), cv::Scalar(g), cv::FILLED,
+                        cv::LINE_AA);
+        }
       }
       cv::GaussianBlur(tex, tex, cv::Size(3, 3), 0.7);
       textures_[static_cast<size_t>(face)] = tex;
