@@ -249,23 +249,47 @@ void SelectionCache::clear() {
   extended_.clear();
   flat_.clear();
   flat_size_.clear();
+  changed_.clear();
+  previous_size_ = 0;
+  previous_start_ = -1;
+  resumable_ = false;
+  position_.clear();
+  parent_.clear();
+  plain_length_ = 0;
+}
+
+void SelectionCache::findChangedRows(const ErrorResistanceTable& e) {
+  const size_t n = e.size();
+  seen_.resize(n, 0);
+  first_value_.resize(n, kInfinity);
+  changed_.clear();
+  for (size_t i = 0; i < n; ++i) {
+    const std::uint64_t version = e.rowVersion(static_cast<ViewId>(i));
+    // A row never set (version 0) is empty and stays so until it gets a version.
+    if (i < previous_size_ && seen_[i] == version) continue;
+    seen_[i] = version;
+    changed_.push_back(static_cast<ViewId>(i));
+    const auto& top = e.top(static_cast<ViewId>(i));
+    first_value_[i] = config_.k >= 1 && !top.empty() ? top.front().value : kInfinity;
+  }
+}
+
+void SelectionCache::resetFinalSets() {
+  auto& final_sets = selection_.final_next_views;
+  for (const ViewId a : extended_rows_)
+    if (static_cast<size_t>(a) < final_sets.size()) {
+      final_sets[static_cast<size_t>(a)] = selection_.next_views[static_cast<size_t>(a)];
+      extended_[static_cast<size_t>(a)] = 0;
+    }
+  extended_rows_.clear();
 }
 
 void SelectionCache::refreshSets(const ErrorResistanceTable& e) {
   const size_t n = e.size();
   auto& next = selection_.next_views;
   auto& final_sets = selection_.final_next_views;
-  // Completion appended to some final sets last time: back to the plain C_i first.
-  for (const ViewId a : extended_rows_)
-    if (static_cast<size_t>(a) < n) {
-      final_sets[static_cast<size_t>(a)] = next[static_cast<size_t>(a)];
-      extended_[static_cast<size_t>(a)] = 0;
-    }
-  extended_rows_.clear();
   next.resize(n);
   final_sets.resize(n);
-  seen_.resize(n, 0);
-  first_value_.resize(n, kInfinity);
   extended_.resize(n, 0);
   const size_t keep = static_cast<size_t>(config_.k);
   // A flat copy of the sets (stride k) for the traversal: contiguous, where the sets themselves
@@ -274,28 +298,27 @@ void SelectionCache::refreshSets(const ErrorResistanceTable& e) {
   flat_size_.resize(n, 0);
   flat_.resize(n * flat_stride_);
   std::vector<TableEntry> best;
-  for (size_t i = 0; i < n; ++i) {
-    const std::uint64_t version = e.rowVersion(static_cast<ViewId>(i));
-    if (version != 0 && seen_[i] == version) continue;  // unchanged since last time
-    seen_[i] = version;
+  for (const ViewId row : changed_) {
+    const auto i = static_cast<size_t>(row);
     auto& set = next[i];
     set.clear();
     if (keep <= ErrorResistanceTable::kTopCapacity) {
-      const auto& top = e.top(static_cast<ViewId>(i));
+      const auto& top = e.top(row);
       const size_t take = std::min(keep, top.size());
       for (size_t q = 0; q < take; ++q) set.push_back(top[q].view);
-      first_value_[i] = take ? top.front().value : kInfinity;
     } else {
-      best.assign(e.row(static_cast<ViewId>(i)).begin(), e.row(static_cast<ViewId>(i)).end());
+      best.assign(e.row(row).begin(), e.row(row).end());
       const size_t take = std::min(keep, best.size());
       std::partial_sort(best.begin(), best.begin() + static_cast<std::ptrdiff_t>(take), best.end(),
                         [](const TableEntry& a, const TableEntry& b) {
                           return better(a.value, a.view, b.value, b.view);
                         });
       for (size_t q = 0; q < take; ++q) set.push_back(best[q].view);
-      first_value_[i] = take ? best.front().value : kInfinity;
     }
+    // A changed row holds no completion that is kept: a kept completion's view was added to a
+    // view visited before the first changed row's position.
     final_sets[i] = set;
+    extended_[i] = 0;
     if (flat_stride_) {
       std::copy(set.begin(), set.end(), flat_.begin() + static_cast<std::ptrdiff_t>(i * flat_stride_));
       flat_size_[i] = static_cast<std::uint32_t>(set.size());
@@ -318,6 +341,31 @@ SetView SelectionCache::finalSet(ViewId i) const {
   return plainSet(i);
 }
 
+void SelectionCache::visit(ViewId v, ViewId parent) {
+  visited_[static_cast<size_t>(v)] = 1;
+  position_[static_cast<size_t>(v)] = static_cast<std::int32_t>(selection_.order.size());
+  parent_[static_cast<size_t>(v)] = parent;
+  selection_.order.push_back(v);
+}
+
+template <typename Sets>
+void SelectionCache::traverseFrom(const Sets& sets) {
+  // traverseSets' loop, recording where each view was reached from.
+  while (!stack_.empty()) {
+    auto& [current, cursor] = stack_.back();
+    const SetView candidates = sets(current);
+    while (cursor < candidates.size && visited_[static_cast<size_t>(candidates.data[cursor])]) ++cursor;
+    if (cursor == candidates.size) {
+      stack_.pop_back();
+      continue;
+    }
+    const ViewId next = candidates.data[cursor];
+    const ViewId from = current;  // before emplace_back moves the frames
+    visit(next, from);
+    stack_.emplace_back(next, 0);
+  }
+}
+
 void SelectionCache::completePaper(const ErrorResistanceTable& e) {
   // The definition's own paper completion (it traverses nothing), then the rows it lengthened.
   view_selection::core::completePaper(e, visited_, selection_);
@@ -327,19 +375,19 @@ void SelectionCache::completePaper(const ErrorResistanceTable& e) {
   }
 }
 
+void SelectionCache::offer(ViewId x) {
+  if (visited_[static_cast<size_t>(x)] || queued_[static_cast<size_t>(x)]) return;
+  queued_[static_cast<size_t>(x)] = 1;
+  candidates_.push(x);
+}
+
 void SelectionCache::completeReachable(const ErrorResistanceTable& e) {
-  Selection& out = selection_;
   // The same candidates as the plain definition (unvisited views with a finite entry from a
   // visited one), found from the unvisited side: a column of each view the traversal missed.
   // A min-heap with a flag per view instead of a set: each view enters at most once, since a
   // candidate stays a candidate until completion visits it.
-  std::priority_queue<ViewId, std::vector<ViewId>, std::greater<ViewId>> candidates;
+  candidates_ = {};
   queued_.assign(e.size(), 0);
-  auto offer = [&](ViewId x) {
-    if (visited_[static_cast<size_t>(x)] || queued_[static_cast<size_t>(x)]) return;
-    queued_[static_cast<size_t>(x)] = 1;
-    candidates.push(x);
-  };
   for (size_t x = 0; x < e.size(); ++x) {
     if (visited_[x]) continue;
     for (const TableEntry& entry : e.column(static_cast<ViewId>(x)))
@@ -348,9 +396,14 @@ void SelectionCache::completeReachable(const ErrorResistanceTable& e) {
         break;
       }
   }
-  while (!candidates.empty()) {
-    const ViewId x = candidates.top();
-    candidates.pop();
+  completionLoop(e);
+}
+
+void SelectionCache::completionLoop(const ErrorResistanceTable& e) {
+  Selection& out = selection_;
+  while (!candidates_.empty()) {
+    const ViewId x = candidates_.top();
+    candidates_.pop();
     if (visited_[static_cast<size_t>(x)]) continue;
     const ViewId a = bestPredecessor(e, x, &visited_);
     out.final_next_views[static_cast<size_t>(a)].push_back(x);
@@ -358,12 +411,98 @@ void SelectionCache::completeReachable(const ErrorResistanceTable& e) {
     extended_[static_cast<size_t>(a)] = 1;
     out.completed.push_back({x, a});
     const size_t scanned = out.order.size();
-    traverseSets([this](ViewId i) { return finalSet(i); }, x, visited_, out.order);
+    visit(x, -1);
+    stack_.assign(1, {x, 0});
+    traverseFrom([this](ViewId i) { return finalSet(i); });
     for (size_t q = scanned; q < out.order.size(); ++q)
       for (const TableEntry& entry : e.row(out.order[q])) offer(entry.view);
   }
+  out.isolated.clear();
   for (size_t x = 0; x < e.size(); ++x)
     if (!visited_[x]) out.isolated.push_back(static_cast<ViewId>(x));
+}
+
+std::ptrdiff_t SelectionCache::resumePosition(ViewId start) const {
+  if (!resumable_ || config_.completion != CompletionMode::kReachable || start < 0 ||
+      start != previous_start_)
+    return -1;
+  // Up to the first position whose view's row changed, the traversal and completion read only
+  // unchanged rows (sets, candidates and predecessors all come from the visited views' rows).
+  size_t p = selection_.order.size();
+  for (const ViewId i : changed_)
+    if (static_cast<size_t>(i) < previous_size_ && position_[static_cast<size_t>(i)] >= 0)
+      p = std::min(p, static_cast<size_t>(position_[static_cast<size_t>(i)]));
+  if (p == 0) return -1;  // s's own set changed: everything is redone
+  return static_cast<std::ptrdiff_t>(p);
+}
+
+void SelectionCache::undoCompletionsFrom(size_t p) {
+  Selection& out = selection_;
+  size_t keep = out.completed.size();
+  while (keep > 0 &&
+         static_cast<size_t>(position_[static_cast<size_t>(out.completed[keep - 1].view)]) >= p) {
+    --keep;
+    const auto a = static_cast<size_t>(out.completed[keep].added_to);
+    out.final_next_views[a].pop_back();
+    if (out.final_next_views[a].size() == out.next_views[a].size()) extended_[a] = 0;
+  }
+  out.completed.resize(keep);
+  extended_rows_.clear();
+  for (const CompletedView& c : out.completed) extended_rows_.push_back(c.added_to);
+}
+
+void SelectionCache::resumeReachable(const ErrorResistanceTable& e, size_t p) {
+  Selection& out = selection_;
+  const size_t n = e.size();
+  // The views to look at again: the old order from p on, the isolated, the new.
+  reexamine_.assign(out.order.begin() + static_cast<std::ptrdiff_t>(p), out.order.end());
+  reexamine_.insert(reexamine_.end(), out.isolated.begin(), out.isolated.end());
+  for (size_t v = previous_size_; v < n; ++v) reexamine_.push_back(static_cast<ViewId>(v));
+  // Inside a traversal (from s, or a completion's): its depth-first stack when it reached
+  // order[p], rebuilt from the parents (each ancestor's cursor at the child on the path; any
+  // cursor before it would do, since what it skipped is still visited).
+  stack_.clear();
+  if (p < out.order.size() && parent_[static_cast<size_t>(out.order[p])] >= 0) {
+    std::vector<ViewId> path{out.order[p]};
+    while (parent_[static_cast<size_t>(path.back())] >= 0)
+      path.push_back(parent_[static_cast<size_t>(path.back())]);
+    for (size_t q = path.size() - 1; q >= 1; --q) {
+      const ViewId a = path[q], child = path[q - 1];
+      const SetView set = finalSet(a);
+      const auto at = std::find(set.data, set.data + set.size, child);
+      stack_.emplace_back(a, static_cast<size_t>(at - set.data));
+    }
+  }
+  for (size_t q = p; q < out.order.size(); ++q) {
+    visited_[static_cast<size_t>(out.order[q])] = 0;
+    position_[static_cast<size_t>(out.order[q])] = -1;
+  }
+  out.order.resize(p);
+  visited_.resize(n, 0);
+  position_.resize(n, -1);
+  parent_.resize(n, -1);
+  queued_.resize(n, 0);
+  // (Within the traversal from s every completion is undone, so the final sets are the plain
+  // ones there.)
+  const bool from_s = p < plain_length_;
+  if (!stack_.empty()) {
+    ++resumed_inside_;
+    traverseFrom([this](ViewId i) { return finalSet(i); });
+  }
+  if (from_s) plain_length_ = out.order.size();
+  // Candidates now: the unvisited views with a finite entry from a visited one. Every view not
+  // looked at again is visited.
+  candidates_ = {};
+  for (const ViewId x : reexamine_) queued_[static_cast<size_t>(x)] = 0;
+  for (const ViewId x : reexamine_) {
+    if (visited_[static_cast<size_t>(x)]) continue;
+    for (const TableEntry& entry : e.column(x))
+      if (visited_[static_cast<size_t>(entry.view)]) {
+        offer(x);
+        break;
+      }
+  }
+  completionLoop(e);
 }
 
 void SelectionCache::buildPairs() {
@@ -403,31 +542,54 @@ const Selection& SelectionCache::update(const ErrorResistanceTable& e,
                                         const SelectionConfig& config) {
   config.validate();
   if (!configured_ || config.k != config_.k || config.completion != config_.completion ||
-      e.size() < seen_.size())
+      e.size() < previous_size_)
     clear();
   config_ = config;
   configured_ = true;
-  refreshSets(e);
+  ++updates_;
   Selection& out = selection_;
   const size_t n = e.size();
+  findChangedRows(e);
   // s: the best C_i[0] by (value, row); rows ascend, so a tie keeps the smaller row.
-  out.start_view = -1;
+  ViewId start = -1;
   double best_value = kInfinity;
   for (size_t i = 0; i < n; ++i)
     if (first_value_[i] < best_value) {
       best_value = first_value_[i];
-      out.start_view = static_cast<ViewId>(i);
+      start = static_cast<ViewId>(i);
     }
-  visited_.assign(n, 0);
-  out.order.clear();
-  out.completed.clear();
-  out.isolated.clear();
-  if (out.start_view >= 0)
-    traverseSets([this](ViewId i) { return plainSet(i); }, out.start_view, visited_, out.order);
-  if (config_.completion == CompletionMode::kPaper)
-    completePaper(e);
-  else
-    completeReachable(e);
+  const std::ptrdiff_t resume = resumePosition(start);
+  if (resume >= 0) {
+    undoCompletionsFrom(static_cast<size_t>(resume));  // before the changed rows' sets change
+    refreshSets(e);
+    out.start_view = start;
+    resumeReachable(e, static_cast<size_t>(resume));
+    ++resumed_updates_;
+  } else {
+    resetFinalSets();
+    refreshSets(e);
+    out.start_view = start;
+    visited_.assign(n, 0);
+    position_.assign(n, -1);
+    parent_.assign(n, -1);
+    out.order.clear();
+    out.completed.clear();
+    out.isolated.clear();
+    stack_.clear();
+    if (start >= 0) {
+      visit(start, -1);
+      stack_.assign(1, {start, 0});
+      traverseFrom([this](ViewId i) { return plainSet(i); });
+    }
+    plain_length_ = out.order.size();
+    if (config_.completion == CompletionMode::kPaper)
+      completePaper(e);
+    else
+      completeReachable(e);
+  }
+  previous_size_ = n;
+  previous_start_ = start;
+  resumable_ = config_.completion == CompletionMode::kReachable && start >= 0;
   buildPairs();
   return out;
 }

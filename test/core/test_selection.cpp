@@ -300,6 +300,7 @@ TEST(Selection, CacheEqualsFullSelectionAfterAnySequenceOfChanges) {
   std::mt19937 rng(2024);
   std::uniform_real_distribution<double> uni(0.0, 1.0);
   int completed_seen = 0, isolated_seen = 0;
+  size_t resumed = 0;
   for (const int k : {1, 2, 5, 20}) {
     for (const CompletionMode mode : {CompletionMode::kPaper, CompletionMode::kReachable}) {
       const SelectionConfig config{k, mode};
@@ -338,11 +339,62 @@ TEST(Selection, CacheEqualsFullSelectionAfterAnySequenceOfChanges) {
         completed_seen += static_cast<int>(!want.completed.empty());
         isolated_seen += static_cast<int>(!want.isolated.empty());
       }
+      resumed += cache.resumedUpdates();
     }
   }
+  EXPECT_GT(resumed, 50u) << "the resumed completion must be exercised here too";
   // Both completion paths and isolated views must have been exercised.
   EXPECT_GT(completed_seen, 100);
   EXPECT_GT(isolated_seen, 100);
+}
+
+TEST(Selection, ResumedCompletionEqualsFullSelectionAlongAWalk) {
+  // A SLAM walk: each new keyframe has entries to and from the keyframes near it along the
+  // walk (and, now and then, a revisit far back), so most updates change rows near the end of
+  // the traversal and completion is resumed there, sometimes inside a completion's traversal.
+  // Now and then a loop closure rewrites a row far back (resumed earlier, or redone). After
+  // every update the cache must equal the plain definition.
+  std::mt19937 rng(99);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  size_t resumed = 0, inside = 0, updates = 0;
+  for (const int k : {1, 3, 5}) {
+    const SelectionConfig config{k, CompletionMode::kReachable};
+    ErrorResistanceTable e;
+    SelectionCache cache;
+    for (int step = 0; step < 600; ++step) {
+      const size_t n = e.size();
+      e.resize(n + 1);
+      const auto added = static_cast<ViewId>(n);
+      const size_t width = 2 + static_cast<size_t>(uni(rng) * 6);
+      for (size_t q = n > width ? n - width : 0; q < n; ++q) {
+        if (uni(rng) < 0.6) e.set(added, static_cast<ViewId>(q), 0.5 + uni(rng));
+        if (uni(rng) < 0.6) e.set(static_cast<ViewId>(q), added, 0.5 + uni(rng));
+      }
+      if (n > 20 && uni(rng) < 0.05) {  // a revisit: entries to a view far back
+        const auto back = static_cast<ViewId>(uni(rng) * (n - 10));
+        e.set(added, back, 0.5 + uni(rng));
+        e.set(back, added, 0.5 + uni(rng));
+      }
+      if (n > 20 && uni(rng) < 0.03) {  // a loop closure rewrote an old row
+        const auto old = static_cast<ViewId>(uni(rng) * n);
+        std::vector<TableEntry> entries;
+        for (size_t q = 0; q < n; ++q)
+          if (q != static_cast<size_t>(old) && uni(rng) < 3.0 / static_cast<double>(n))
+            entries.push_back({static_cast<ViewId>(q), 0.5 + uni(rng)});
+        e.replaceRow(old, entries);
+      }
+      expectSameSelection(cache.update(e, config), selectViews(e, config),
+                          "k " + std::to_string(k) + " step " + std::to_string(step));
+      if (::testing::Test::HasFailure()) return;
+    }
+    resumed += cache.resumedUpdates();
+    inside += cache.resumedInsideTraversal();
+    updates += cache.updates();
+  }
+  // The resumed paths must be what ran most of the time, both kinds of them.
+  EXPECT_GT(resumed, updates / 2) << resumed << " of " << updates;
+  EXPECT_GT(inside, 20u);
+  EXPECT_LT(resumed, updates) << "some updates must redo the traversal";
 }
 
 TEST(Selection, CacheFollowsACopiedTable) {
