@@ -17,6 +17,7 @@
 #include "view_selection/ros/conversions.h"
 
 #include <cv_bridge/cv_bridge.h>
+#include <opencv2/imgcodecs.hpp>
 #include "view_selection/points/image_conversion.h"
 #include "view_selection/points/map_point_source.h"
 #include "view_selection/points/point_source_factory.h"
@@ -584,7 +585,12 @@ TEST_F(BadInputTest, BoundedSelectionAndMarkers) {
         markers = msg;
       });
   const size_t count = 12;
-  const std::vector<GoodFrame> good = syntheticFrames(count);
+  std::vector<GoodFrame> good = syntheticFrames(count);
+  for (size_t i = 0; i < count; ++i)  // images that differ, for the read-back below
+    for (int v = 0; v < good[i].image.rows; ++v)
+      for (int u = 0; u < good[i].image.cols; ++u)
+        good[i].image.at<cv::Vec3b>(v, u) = cv::Vec3b(static_cast<uint8_t>(u + 7 * i),
+                                                      static_cast<uint8_t>(v * 2 + i), 200);
   ASSERT_TRUE(waitForSubscribers()) << "the node under test did not subscribe within 20 s";
   // The latched (empty, whole) selection first, so the updates start from a full message.
   ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(10.0);
@@ -669,6 +675,25 @@ TEST_F(BadInputTest, BoundedSelectionAndMarkers) {
   EXPECT_GE(frustum_points, per_frustum * ((count + stride - 1) / stride));
   EXPECT_LE(frustum_points, per_frustum * ((count + stride - 1) / stride + 2));
   EXPECT_LT(frustum_points, per_frustum * count) << "~markers draws every keyframe";
+
+  // ~image_cache_mb 0.1 holds one of these images (160 x 120 x 3 bytes): ~export reads the
+  // others back from ~image_dir, every one equal to what was sent.
+  view_selection::Export exp;
+  exp.request.directory =
+      (fs::temp_directory_path() / ("view_selection_bounded_" + std::to_string(::getpid())))
+          .string();
+  ASSERT_TRUE(ros::service::call(node_ + "/export", exp));
+  ASSERT_TRUE(exp.response.success) << exp.response.message;
+  EXPECT_EQ(exp.response.images_written, static_cast<int>(count)) << exp.response.message;
+  for (size_t i = 0; i < count; ++i) {
+    const cv::Mat back = cv::imread(
+        (fs::path(exp.request.directory) / all.keyframes[i].image_name).string(),
+        cv::IMREAD_COLOR);
+    ASSERT_FALSE(back.empty()) << all.keyframes[i].image_name << " was not exported";
+    EXPECT_EQ(cv::norm(back, good[i].image, cv::NORM_INF), 0.0)
+        << "exported image " << i << " differs from the one sent";
+  }
+  fs::remove_all(exp.request.directory);
 }
 
 }  // namespace
