@@ -45,7 +45,7 @@ The same seed and options give byte-identical files.
   --points-only    no rendering: a walk down a long corridor (a building-sized SLAM session),
                    one keyframe every 0.2 m with 256 points ray-cast onto its walls, written as
                    points.bin (poses and points), groundtruth.txt, camera.yaml; select_views
-                   reads it. For runs at 100k keyframes (--frames 100000: 0.3 GB, ~1 min).
+                   reads it. For runs at 100k keyframes (--frames 100000: 0.3 GB, ~5 s).
                    --fps, --speed, --noise and --threads do not apply
   --force          write into a non-empty folder, replacing files of the same names
   --quiet          no progress lines

@@ -592,6 +592,16 @@ TEST_F(BadInputTest, BoundedSelectionAndMarkers) {
         good[i].image.at<cv::Vec3b>(v, u) = cv::Vec3b(static_cast<uint8_t>(u + 7 * i),
                                                       static_cast<uint8_t>(v * 2 + i), 200);
   ASSERT_TRUE(waitForSubscribers()) << "the node under test did not subscribe within 20 s";
+  std::string bad_dir_node;
+  ros::NodeHandle("~").getParam("bad_dir_node", bad_dir_node);
+  if (!bad_dir_node.empty()) {  // both nodes take the same frames
+    const ros::WallTime until = ros::WallTime::now() + ros::WallDuration(20.0);
+    while ((image_pub_.getNumSubscribers() < 2 || depth_pub_.getNumSubscribers() < 2 ||
+            info_pub_.getNumSubscribers() < 2 || tf_pub_.getNumSubscribers() < 2) &&
+           ros::WallTime::now() < until)
+      ros::WallDuration(0.05).sleep();
+    ASSERT_GE(image_pub_.getNumSubscribers(), 2u) << bad_dir_node << " did not subscribe";
+  }
   // The latched (empty, whole) selection first, so the updates start from a full message.
   ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(10.0);
   auto received = [&] {
@@ -694,6 +704,28 @@ TEST_F(BadInputTest, BoundedSelectionAndMarkers) {
         << "exported image " << i << " differs from the one sent";
   }
   fs::remove_all(exp.request.directory);
+
+  if (bad_dir_node.empty()) return;
+  // ~image_dir below a regular file: the images beyond the one that fits in RAM are lost, the
+  // node answers, and ~export says so and why.
+  view_selection::GetSelection bad_sel;
+  ASSERT_TRUE(ros::service::waitForService(bad_dir_node + "/get_selection", ros::Duration(10.0)));
+  deadline = ros::WallTime::now() + ros::WallDuration(10.0);
+  while (ros::WallTime::now() < deadline) {
+    ASSERT_TRUE(ros::service::call(bad_dir_node + "/get_selection", bad_sel));
+    if (bad_sel.response.selection.keyframes.size() == count) break;
+    ros::WallDuration(0.02).sleep();
+  }
+  ASSERT_EQ(bad_sel.response.selection.keyframes.size(), count);
+  view_selection::Export bad_exp;
+  bad_exp.request.directory = exp.request.directory + "_bad_dir";
+  ASSERT_TRUE(ros::service::call(bad_dir_node + "/export", bad_exp));
+  EXPECT_TRUE(bad_exp.response.success) << bad_exp.response.message;
+  EXPECT_EQ(bad_exp.response.images_written, 1) << bad_exp.response.message;
+  EXPECT_NE(bad_exp.response.message.find("lost"), std::string::npos) << bad_exp.response.message;
+  EXPECT_NE(bad_exp.response.message.find("/proc/version"), std::string::npos)
+      << bad_exp.response.message;
+  fs::remove_all(bad_exp.request.directory);
 }
 
 }  // namespace
