@@ -9,6 +9,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include <algorithm>
 #include <filesystem>
 
 namespace view_selection::ros_node {
@@ -131,20 +132,21 @@ bool SelectionServices::exportSelection(view_selection::Export::Request& req,
       lost = cache.lost;
       lost_reason = cache.last_error;
     }
+    const size_t missing = s.size() - std::min(s.size(), static_cast<size_t>(res.images_written));
     res.success = true;
     res.message =
         "wrote " + std::to_string(s.size()) + " keyframes, " +
         std::to_string(s.selection.pairs.size()) + " pairs" +
         (config_.save_keyframe_images ? ", " + std::to_string(res.images_written) + " images"
                                       : " (no images: ~save_keyframe_images is false)") +
-        (config_.save_keyframe_images && static_cast<size_t>(res.images_written) < s.size()
-             ? " (" + std::to_string(s.size() - static_cast<size_t>(res.images_written)) +
-                   " keyframes have no image: continued from ~state_file" +
-                   (lost > 0 ? ", or " + std::to_string(lost) +
-                                   " lost beyond ~image_cache_mb: " + lost_reason
-                             : std::string()) +
-                   ")"
+        (config_.save_keyframe_images && missing > lost
+             ? " (" + std::to_string(missing - lost) +
+                   " keyframes continued from ~state_file have no image)"
              : std::string()) +
+        (lost > 0 ? " (" + std::to_string(lost) +
+                        " images lost: beyond ~image_cache_mb and not written to ~image_dir: " +
+                        lost_reason + ")"
+                  : std::string()) +
         " to " + req.directory;
   } catch (const std::exception& e) {
     res.success = false;
