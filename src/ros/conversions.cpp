@@ -239,44 +239,69 @@ std::string keyframeImageName(double stamp) {
   return buffer;
 }
 
-view_selection::ViewSelection selectionToMsg(const core::SelectionSnapshot& snapshot,
-                                             const std::string& world_frame) {
+namespace {
+
+view_selection::ViewSelection selectionHeader(const core::SelectionSnapshot& snapshot,
+                                              const std::string& world_frame) {
   const core::Selection& selection = snapshot.selection;
-  const core::ErrorResistanceTable& e = snapshot.table;
   view_selection::ViewSelection m;
   m.header.frame_id = world_frame;
+  if (snapshot.size() > 0) m.header.stamp = ros::Time(snapshot.keyframes.back().stamp);
   m.completion = core::toString(snapshot.config.completion);
   m.k = snapshot.config.k;
-  const size_t n = snapshot.size();
-  m.keyframes.resize(n);
-  for (size_t i = 0; i < n; ++i) {
-    const core::KeyframeSummary& kf = snapshot.keyframes[i];
-    auto& info = m.keyframes[i];
-    info.id = static_cast<int32_t>(i);
-    info.stamp = ros::Time(kf.stamp);
-    info.image_name = kf.image_name;
-    info.pose = poseToMsg(kf.pose);
-    info.num_points = static_cast<int32_t>(kf.num_points);
-    if (i + 1 == n) m.header.stamp = info.stamp;
-  }
-  m.next_view_sets.resize(selection.next_views.size());
-  for (size_t i = 0; i < selection.next_views.size(); ++i) {
-    auto& set = m.next_view_sets[i];
-    const auto view = static_cast<core::ViewId>(i);
-    set.view = view;
-    for (const core::ViewId j : selection.next_views[i]) {
-      set.next_views.push_back(j);
-      set.error_resistance.push_back(e.at(view, j));
-    }
-    const auto& fin = selection.final_next_views[i];
-    for (size_t q = selection.next_views[i].size(); q < fin.size(); ++q) {
-      set.completed_views.push_back(fin[q]);
-      set.completed_error_resistance.push_back(e.at(view, fin[q]));
-    }
-  }
   m.start_view = selection.start_view;
   const auto [s, s_first] = selection.initialPair();
   if (s >= 0 && s_first >= 0) m.initial_pair = {s, s_first};
+  m.finite_entries = static_cast<uint32_t>(snapshot.table.finiteCount());
+  m.total_keyframes = static_cast<uint32_t>(snapshot.size());
+  return m;
+}
+
+}  // namespace
+
+view_selection::KeyframeInfo keyframeToMsg(const core::SelectionSnapshot& snapshot,
+                                           core::ViewId view) {
+  const core::KeyframeSummary& kf = snapshot.keyframes[static_cast<size_t>(view)];
+  view_selection::KeyframeInfo info;
+  info.id = view;
+  info.stamp = ros::Time(kf.stamp);
+  info.image_name = kf.image_name;
+  info.pose = poseToMsg(kf.pose);
+  info.num_points = static_cast<int32_t>(kf.num_points);
+  return info;
+}
+
+view_selection::NextViewSet nextViewSetToMsg(const core::SelectionSnapshot& snapshot,
+                                             core::ViewId view) {
+  const core::Selection& selection = snapshot.selection;
+  const core::ErrorResistanceTable& e = snapshot.table;
+  const auto i = static_cast<size_t>(view);
+  view_selection::NextViewSet set;
+  set.view = view;
+  if (i >= selection.next_views.size()) return set;
+  for (const core::ViewId j : selection.next_views[i]) {
+    set.next_views.push_back(j);
+    set.error_resistance.push_back(e.at(view, j));
+  }
+  if (i >= selection.final_next_views.size()) return set;
+  const auto& fin = selection.final_next_views[i];
+  for (size_t q = selection.next_views[i].size(); q < fin.size(); ++q) {
+    set.completed_views.push_back(fin[q]);
+    set.completed_error_resistance.push_back(e.at(view, fin[q]));
+  }
+  return set;
+}
+
+view_selection::ViewSelection selectionToMsg(const core::SelectionSnapshot& snapshot,
+                                             const std::string& world_frame) {
+  const core::Selection& selection = snapshot.selection;
+  view_selection::ViewSelection m = selectionHeader(snapshot, world_frame);
+  const size_t n = snapshot.size();
+  m.keyframes.resize(n);
+  for (size_t i = 0; i < n; ++i) m.keyframes[i] = keyframeToMsg(snapshot, static_cast<core::ViewId>(i));
+  m.next_view_sets.resize(selection.next_views.size());
+  for (size_t i = 0; i < selection.next_views.size(); ++i)
+    m.next_view_sets[i] = nextViewSetToMsg(snapshot, static_cast<core::ViewId>(i));
   m.order.assign(selection.order.begin(), selection.order.end());
   for (const auto& c : selection.completed) {
     view_selection::CompletedView cv;
@@ -291,7 +316,20 @@ view_selection::ViewSelection selectionToMsg(const core::SelectionSnapshot& snap
     p.second = b;
     m.pairs.push_back(p);
   }
-  m.finite_entries = static_cast<uint32_t>(e.finiteCount());
+  return m;
+}
+
+view_selection::ViewSelection selectionUpdateToMsg(const core::SelectionSnapshot& snapshot,
+                                                   const std::string& world_frame,
+                                                   const std::vector<core::ViewId>& views) {
+  view_selection::ViewSelection m = selectionHeader(snapshot, world_frame);
+  m.partial = true;
+  m.keyframes.reserve(views.size());
+  m.next_view_sets.reserve(views.size());
+  for (const core::ViewId v : views) {
+    m.keyframes.push_back(keyframeToMsg(snapshot, v));
+    m.next_view_sets.push_back(nextViewSetToMsg(snapshot, v));
+  }
   return m;
 }
 

@@ -23,6 +23,14 @@ KeyframeWorker::KeyframeWorker(const NodeConfig& config, PoseProvider& poses,
   selector_ = std::make_unique<core::ViewSelector>(
       config_.selector, points::makePointSource(config_.point_source, config_.point_params,
                                                 config_.selector.matrix.occlusion));
+  if (config_.save_keyframe_images) {
+    image_folder_ = std::make_shared<ImageFolder>(config_.image_dir);
+    if (!image_folder_->error().empty())
+      ROS_ERROR_STREAM("view_selection: ~image_dir: " << image_folder_->error()
+                                                      << "; keyframe images beyond ~image_cache_mb "
+                                                         "will be lost (not exported)");
+    images_ = newImageCache();
+  }
   {
     std::lock_guard<std::mutex> lock(state_mutex_);
     restoreLoaded();
@@ -54,6 +62,11 @@ KeyframeWorker::~KeyframeWorker() {
     ROS_ERROR_STREAM("view_selection: " << saved.message);
 }
 
+std::shared_ptr<KeyframeImageCache> KeyframeWorker::newImageCache() const {
+  return std::make_shared<KeyframeImageCache>(
+      static_cast<size_t>(config_.image_cache_mb * 1024.0 * 1024.0), image_folder_);
+}
+
 void KeyframeWorker::restoreLoaded() {
   std::optional<io::SessionState> loaded = keeper_.takeLoaded();
   if (!loaded) return;
@@ -77,7 +90,8 @@ void KeyframeWorker::restoreLoaded() {
   last_stamp_ = loaded->selector.last_stamp;
   const size_t keyframes = selector_->matrix().size();
   // The state file keeps no images: the continued keyframes have none (null), later ones do.
-  if (config_.save_keyframe_images) images_.assign(keyframes, nullptr);
+  if (images_)
+    for (size_t i = 0; i < keyframes; ++i) images_->push(nullptr);
   statistics_.restore(loaded->statistics, keyframes);
   const auto& last = loaded->statistics.last_frame_stamp;
   statistics_.stateSaved(static_cast<uint32_t>(keyframes),
@@ -134,7 +148,7 @@ size_t KeyframeWorker::reset() {
     queue_.clear();
     forgotten = selector_->matrix().size();
     selector_->reset();
-    images_.clear();
+    if (images_) images_ = newImageCache();  // snapshots taken before keep the old one
     last_stamp_.reset();
     ++generation_;
     statistics_.reset();
@@ -212,6 +226,7 @@ void KeyframeWorker::publishSnapshotLocked() {
   next->version = ++version_;
   next->selection = selector_->snapshot();
   next->images = images_;
+  next->image_count = images_ ? images_->size() : 0;
   std::lock_guard<std::mutex> lock(snapshot_mutex_);
   snapshot_ = std::move(next);
 }
@@ -380,8 +395,7 @@ void KeyframeWorker::process(const Queued& queued) {
   double insertion = -1.0;
   if (result.outcome == core::FrameOutcome::kKeyframe) {
     // A distorted camera's keyframe images are kept rectified, as the exported intrinsics are.
-    if (config_.save_keyframe_images)
-      images_.push_back(camera.rectify ? rectifiedImageMessage(camera, frame.image) : frame.image);
+    if (images_) images_->push(camera.rectify ? rectifiedImageMessage(camera, frame.image) : frame.image);
     insertion = result.points_seconds + result.matrix_seconds;
     // Counted before the snapshot is published: a reader never sees more keyframes in the
     // selection than in the statistics.

@@ -52,7 +52,8 @@ void addFrustum(visualization_msgs::Marker& m, const core::KeyframeSummary& kf, 
 }  // namespace
 
 visualization_msgs::MarkerArray selectionMarkers(const core::SelectionSnapshot& snapshot,
-                                                 const std::string& world_frame, double scale) {
+                                                 const std::string& world_frame, double scale,
+                                                 size_t max_views) {
   const core::Selection& selection = snapshot.selection;
   visualization_msgs::MarkerArray array;
   visualization_msgs::Marker clear;
@@ -66,10 +67,16 @@ visualization_msgs::MarkerArray selectionMarkers(const core::SelectionSnapshot& 
   auto edges = lineList("next_views", world_frame, width, 0.1f, 0.5f, 1.0f, 0.8f);
   auto completion = lineList("completion", world_frame, 1.5 * width, 1.0f, 0.6f, 0.0f, 0.9f);
   const size_t n = snapshot.size();
+  const size_t stride = max_views == 0 || n <= max_views ? 1 : (n + max_views - 1) / max_views;
+  auto drawn = [&](size_t i) {
+    return i % stride == 0 || static_cast<core::ViewId>(i) == selection.start_view || i + 1 == n;
+  };
   for (size_t i = 0; i < n; ++i)
-    addFrustum(static_cast<core::ViewId>(i) == selection.start_view ? start : frusta,
-               snapshot.keyframes[i], scale);
+    if (drawn(i))
+      addFrustum(static_cast<core::ViewId>(i) == selection.start_view ? start : frusta,
+                 snapshot.keyframes[i], scale);
   for (size_t i = 0; i < selection.final_next_views.size() && i < n; ++i) {
+    if (!drawn(i)) continue;
     const Eigen::Vector3d from = snapshot.keyframes[i].pose.position;
     const auto& fin = selection.final_next_views[i];
     const size_t selected = i < selection.next_views.size() ? selection.next_views[i].size() : 0;

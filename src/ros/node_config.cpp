@@ -81,6 +81,15 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
                   "keep keyframe images so that ~export writes them for COLMAP");
   core::visitReal(v, "marker_scale", marker_scale, 1e-6, 1e6,
                   "frustum depth in RViz [m, scene units]");
+  core::visitInteger(v, "publish_max_views", publish_max_views, 0, 100000000,
+                     "above this many keyframes ~selection carries only the views that changed "
+                     "(at most this many a message) and ~markers every m-th view; 0 = always all");
+  core::visitReal(v, "image_cache_mb", image_cache_mb, 0.0, 1e7,
+                  "with save_keyframe_images: keyframe images kept in RAM [MB]; older ones are "
+                  "written to image_dir and read back by ~export");
+  core::visitText(v, "image_dir", image_dir, {},
+                  "folder for keyframe images beyond image_cache_mb (a subfolder of the node's "
+                  "own, removed on shutdown); \"\" = a temporary folder");
   v.section("State across restarts");
   core::visitText(v, "state_file", state_file, {},
                   "the session is saved here and continued from it at start (relative to "

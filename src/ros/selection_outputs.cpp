@@ -17,7 +17,9 @@ SelectionOutputs::SelectionOutputs(const NodeConfig& config, ros::NodeHandle nh,
                                    ros::NodeHandle private_nh, const KeyframeWorker& worker,
                                    const InputStatistics& statistics)
     : config_(config), worker_(worker), statistics_(statistics), diagnostics_(nh, private_nh) {
-  selection_pub_ = private_nh.advertise<view_selection::ViewSelection>("selection", 1, true);
+  // Bounded updates are deltas: a queue, so that a subscriber that keeps up misses none.
+  selection_pub_ =
+      private_nh.advertise<view_selection::ViewSelection>("selection", kSelectionQueue, true);
   markers_pub_ = private_nh.advertise<visualization_msgs::MarkerArray>("markers", 1, true);
   statistics_pub_ = private_nh.advertise<view_selection::InputStatistics>("statistics", 1, true);
   diagnostics_.setHardwareID(config_.camera_frame.empty() ? "camera" : config_.camera_frame);
@@ -43,10 +45,26 @@ void SelectionOutputs::setPublishPeriod(double seconds) {
 void SelectionOutputs::update() {
   std::lock_guard<std::mutex> lock(mutex_);
   const std::shared_ptr<const NodeSnapshot> snapshot = worker_.snapshot();
-  if (snapshot->version != published_version_) {
-    selection_pub_.publish(selectionToMsg(snapshot->selection, config_.world_frame));
-    markers_pub_.publish(
-        selectionMarkers(snapshot->selection, config_.world_frame, config_.marker_scale));
+  const core::SelectionSnapshot& s = snapshot->selection;
+  const bool changed = snapshot->version != published_version_;
+  if (changed || pending_views_ > 0) {
+    const size_t max_views = static_cast<size_t>(std::max(0, config_.publish_max_views));
+    view_selection::ViewSelection msg;
+    if (max_views == 0 || s.size() <= max_views) {
+      msg = selectionToMsg(s, config_.world_frame);
+      tracker_.markAll(s);
+      pending_views_ = 0;
+    } else {
+      msg = selectionUpdateToMsg(s, config_.world_frame,
+                                 tracker_.take(s, max_views, &pending_views_));
+      msg.pending_views = static_cast<uint32_t>(pending_views_);
+    }
+    msg.update = ++updates_;
+    selection_pub_.publish(msg);
+  }
+  if (changed) {
+    markers_pub_.publish(selectionMarkers(s, config_.world_frame, config_.marker_scale,
+                                          static_cast<size_t>(std::max(0, config_.publish_max_views))));
     published_version_ = snapshot->version;
   }
   const uint64_t stats_version = statistics_.version();
@@ -54,6 +72,68 @@ void SelectionOutputs::update() {
     statistics_pub_.publish(statistics_.toMsg());
     published_stats_version_ = stats_version;
   }
+}
+
+ViewChangeTracker::Sent ViewChangeTracker::record(const core::SelectionSnapshot& snapshot,
+                                                  size_t i) {
+  const core::KeyframeSummary& kf = snapshot.keyframes[i];
+  const core::Selection& selection = snapshot.selection;
+  Sent sent;
+  sent.valid = true;
+  sent.stamp = kf.stamp;
+  sent.num_points = kf.num_points;
+  sent.pose = kf.pose;
+  sent.selected = i < selection.next_views.size() ? selection.next_views[i].size() : 0;
+  if (i < selection.final_next_views.size()) sent.final = selection.final_next_views[i];
+  sent.row_version = snapshot.table.rowVersion(static_cast<core::ViewId>(i));
+  return sent;
+}
+
+bool ViewChangeTracker::same(const Sent& sent, const core::SelectionSnapshot& snapshot, size_t i) {
+  const core::KeyframeSummary& kf = snapshot.keyframes[i];
+  const core::Selection& selection = snapshot.selection;
+  static const core::NextViewSet kEmpty;
+  const size_t selected = i < selection.next_views.size() ? selection.next_views[i].size() : 0;
+  const core::NextViewSet& final =
+      i < selection.final_next_views.size() ? selection.final_next_views[i] : kEmpty;
+  return sent.valid && sent.stamp == kf.stamp && sent.num_points == kf.num_points &&
+         sent.pose.position == kf.pose.position &&
+         sent.pose.orientation.coeffs() == kf.pose.orientation.coeffs() &&
+         sent.selected == selected && sent.final == final &&
+         sent.row_version == snapshot.table.rowVersion(static_cast<core::ViewId>(i));
+}
+
+std::vector<core::ViewId> ViewChangeTracker::take(const core::SelectionSnapshot& snapshot,
+                                                  size_t limit, size_t* pending) {
+  const size_t n = snapshot.size();
+  if (sent_.size() > n) sent_.resize(n);  // after a reset
+  std::vector<core::ViewId> views;
+  size_t left_out = 0;
+  if (cursor_ >= n) cursor_ = 0;
+  size_t next_cursor = cursor_;
+  for (size_t step = 0; step < n; ++step) {
+    const size_t i = (cursor_ + step) % n;
+    if (i < sent_.size() && same(sent_[i], snapshot, i)) continue;
+    if (views.size() >= limit) {
+      ++left_out;
+      continue;
+    }
+    if (i >= sent_.size()) sent_.resize(i + 1);
+    sent_[i] = record(snapshot, i);
+    views.push_back(static_cast<core::ViewId>(i));
+    next_cursor = (i + 1) % n;
+  }
+  cursor_ = next_cursor;
+  std::sort(views.begin(), views.end());
+  if (pending) *pending = left_out;
+  return views;
+}
+
+void ViewChangeTracker::markAll(const core::SelectionSnapshot& snapshot) {
+  const size_t n = snapshot.size();
+  sent_.resize(n);
+  for (size_t i = 0; i < n; ++i) sent_[i] = record(snapshot, i);
+  cursor_ = 0;
 }
 
 void SelectionOutputs::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {

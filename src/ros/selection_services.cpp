@@ -9,6 +9,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include <algorithm>
 #include <filesystem>
 
 namespace view_selection::ros_node {
@@ -81,8 +82,10 @@ bool SelectionServices::getSelection(view_selection::GetSelection::Request&,
 int writeKeyframeImages(const std::string& directory, const NodeSnapshot& snapshot) {
   const std::vector<std::string> names = snapshot.selection.imageNames();
   int written = 0;
-  for (size_t i = 0; i < snapshot.images.size() && i < names.size(); ++i) {
-    if (!snapshot.images[i]) continue;  // a keyframe continued from ~state_file: no image kept
+  for (size_t i = 0; snapshot.images && i < snapshot.image_count && i < names.size(); ++i) {
+    // Null: a keyframe continued from ~state_file (no image kept), or one the cache lost.
+    const sensor_msgs::ImageConstPtr image = snapshot.images->get(i);  // may read it back
+    if (!image) continue;
     const fs::path path = fs::path(directory) / names[i];
     std::error_code ec;
     fs::create_directories(path.parent_path(), ec);
@@ -91,7 +94,7 @@ int writeKeyframeImages(const std::string& directory, const NodeSnapshot& snapsh
                           "': " + ec.message());
     cv::Mat bgr;
     try {
-      bgr = imageForCore(snapshot.images[i]);
+      bgr = imageForCore(image);
     } catch (const core::InvalidInput& e) {
       throw core::IoError("keyframe " + std::to_string(i) + " image: " + e.what());
     }
@@ -122,16 +125,28 @@ bool SelectionServices::exportSelection(view_selection::Export::Request& req,
     res.selection_json = written.selection_json;
     res.pairs_txt = written.pairs_txt;
     res.images_written = writeKeyframeImages(req.directory, *snapshot);
+    size_t lost = 0;
+    std::string lost_reason;
+    if (snapshot->images) {
+      const KeyframeImageCache::Stats cache = snapshot->images->stats();
+      lost = cache.lost;
+      lost_reason = cache.last_error;
+    }
+    const size_t missing = s.size() - std::min(s.size(), static_cast<size_t>(res.images_written));
     res.success = true;
     res.message =
         "wrote " + std::to_string(s.size()) + " keyframes, " +
         std::to_string(s.selection.pairs.size()) + " pairs" +
         (config_.save_keyframe_images ? ", " + std::to_string(res.images_written) + " images"
                                       : " (no images: ~save_keyframe_images is false)") +
-        (config_.save_keyframe_images && static_cast<size_t>(res.images_written) < s.size()
-             ? " (" + std::to_string(s.size() - static_cast<size_t>(res.images_written)) +
+        (config_.save_keyframe_images && missing > lost
+             ? " (" + std::to_string(missing - lost) +
                    " keyframes continued from ~state_file have no image)"
              : std::string()) +
+        (lost > 0 ? " (" + std::to_string(lost) +
+                        " images lost: beyond ~image_cache_mb and not written to ~image_dir: " +
+                        lost_reason + ")"
+                  : std::string()) +
         " to " + req.directory;
   } catch (const std::exception& e) {
     res.success = false;

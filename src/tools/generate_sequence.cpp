@@ -3,6 +3,7 @@
 #include "command_line.h"
 
 #include "view_selection/core/exceptions.h"
+#include "view_selection/sim/corridor_walk.h"
 #include "view_selection/sim/synthetic_sequence.h"
 
 #include <opencv2/core/utility.hpp>
@@ -41,6 +42,11 @@ The same seed and options give byte-identical files.
   --speed V        walking speed [m/s] (default 0.7: about one loop in 300 frames)
   --noise SIGMA    colour noise [grey levels] (default 2; 0 for none)
   --threads N      frames rendered at once (default 0: one per core; the files are the same)
+  --points-only    no rendering: a walk down a long corridor (a building-sized SLAM session),
+                   one keyframe every 0.2 m with 256 points ray-cast onto its walls, written as
+                   points.bin (poses and points), groundtruth.txt, camera.yaml; select_views
+                   reads it. For runs at 100k keyframes (--frames 100000: 0.3 GB, ~5 s).
+                   --fps, --speed, --noise and --threads do not apply
   --force          write into a non-empty folder, replacing files of the same names
   --quiet          no progress lines
   --help           this text
@@ -52,13 +58,14 @@ struct Options {
   int threads = 0;  ///< 0: OpenCV's default, one per core
   bool force = false;
   bool quiet = false;
+  bool points_only = false;
 };
 
 Options parse(int argc, char** argv) {
   const CommandLine cli(argc, argv,
                         {"out", "frames", "seed", "width", "height", "fx", "fy", "cx", "cy", "fps",
                          "speed", "noise", "threads"},
-                        {"force", "quiet", "help"});
+                        {"force", "quiet", "points-only", "help"});
   if (cli.flag("help")) {
     std::cout << kUsage;
     std::exit(0);
@@ -81,9 +88,35 @@ Options parse(int argc, char** argv) {
   c.speed = cli.real("speed", c.speed, 0.0, 10.0);
   c.noise_sigma = cli.real("noise", c.noise_sigma, 0.0, 50.0);
   o.threads = static_cast<int>(cli.integer("threads", 0, 0, 1024));
+  o.points_only = cli.flag("points-only");
+  if (o.points_only)
+    for (const char* name : {"fps", "speed", "noise", "threads"})
+      if (cli.has(name))
+        throw UsageError(std::string("--") + name + " does not apply with --points-only");
   o.force = cli.flag("force");
   o.quiet = cli.flag("quiet");
   return o;
+}
+
+int runPointsOnly(const Options& o, std::chrono::steady_clock::time_point start) {
+  CorridorWalkConfig c;
+  c.seed = o.config.seed;
+  c.frames = o.config.frames;
+  c.intrinsics = o.config.intrinsics;
+  const bool tty = isatty(fileno(stderr));
+  writeCorridorWalk(o.out.string(), c, [&](size_t done, size_t total) {
+    if (o.quiet || (done % 10000 != 0 && done != total)) return;
+    std::fprintf(stderr, "%s  keyframe %zu/%zu%s", tty ? "\r" : "", done, total, tty ? "" : "\n");
+    if (tty && done == total) std::fprintf(stderr, "\n");
+  });
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::printf("wrote %d keyframes (points only: %d points each, %.1f m of corridor, seed %llu) to "
+              "%s in %.1f s\n",
+              c.frames, c.points, c.spacing * (c.frames - 1),
+              static_cast<unsigned long long>(c.seed), o.out.c_str(), seconds);
+  std::printf("      points.bin groundtruth.txt camera.yaml SOURCE.md\n");
+  return 0;
 }
 
 int run(const Options& o) {
@@ -96,8 +129,9 @@ int run(const Options& o) {
                     "' exists and is not empty; choose another --out or add --force to write "
                     "into it");
   }
-  if (o.threads > 0) cv::setNumThreads(o.threads);
   const auto start = std::chrono::steady_clock::now();
+  if (o.points_only) return runPointsOnly(o, start);
+  if (o.threads > 0) cv::setNumThreads(o.threads);
   const SyntheticSequence sequence(o.config);
   const bool tty = isatty(fileno(stderr));
   auto last = std::chrono::steady_clock::now();

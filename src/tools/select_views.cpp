@@ -7,11 +7,13 @@
 #include "view_selection/eval/nearest_pairs.h"
 #include "view_selection/io/export.h"
 #include "view_selection/io/params_json.h"
+#include "view_selection/io/points_file.h"
 #include "view_selection/io/selection_io.h"
 #include "view_selection/io/state_file.h"
 #include "view_selection/io/tum_frames.h"
 #include "view_selection/points/point_source_factory.h"
 
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -40,6 +42,9 @@ const char* kUsage = R"(usage: select_views --dataset DIR [options] [parameters]
 
 Error-resistant view selection on a TUM RGB-D layout folder (rgb.txt, depth.txt if any,
 groundtruth.txt, camera.yaml). Writes selection.json, pairs.txt and selection.png.
+A folder with points.bin (generate_sequence --points-only) is read as poses and points alone:
+every record is a frame with those points (no images, no depth, so no occlusion test).
+The summary gives the time per stage and the peak resident memory (getrusage).
 With --state, re-selects the keyframes of a session saved by view_selection_node (~state_file):
 the saved parameters, changed by the selection and matrix parameters given (the matrix is
 recomputed when a gate changes; keyframe and point-source parameters cannot change).
@@ -73,6 +78,13 @@ const std::map<std::string, std::string> kAliases = {
     {"--min-rotation", "--min-rotation-deg"},
     {"--max-parallax", "--max-parallax-deg"},
 };
+
+/// Peak resident set size of this process so far [MB] (getrusage: ru_maxrss, KiB on Linux).
+double peakRssMb() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return static_cast<double>(usage.ru_maxrss) / 1024.0;
+}
 
 double seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
@@ -367,6 +379,7 @@ void printSummary(const Options& o, const TumDataset& dataset, const ViewSelecto
       "time        read %.2f s | points %.2f s | matrix %.3f s | selection %.4f s | write %.2f s | "
       "total %.2f s\n",
       t.read, t.points, t.matrix, t.selection, t.write, total_seconds);
+  std::printf("memory      peak RSS %.0f MB (getrusage ru_maxrss)\n", peakRssMb());
   std::printf("wrote       %s, %s, %s\n", written.selection_json.c_str(), written.pairs_txt.c_str(),
               written.plot_png.c_str());
   printSets(selection, static_cast<size_t>(o.print_sets));
@@ -416,8 +429,124 @@ int runFromState(const Options& o) {
   return 0;
 }
 
+/// The points of points.bin, handed to the selector for the frame in hand.
+class GivenPointSource : public PointSource {
+ public:
+  std::string name() const override { return "points.bin"; }
+  PointSourceResult process(ViewId, const Frame&) override {
+    PointSourceResult r;
+    r.points = std::move(next_);
+    return r;
+  }
+  void reset() override {}
+  void setNext(Eigen::Matrix3Xd points) { next_ = std::move(points); }
+
+ private:
+  Eigen::Matrix3Xd next_;
+};
+
+/// A points-only folder (points.bin): every record offered as a frame with its points.
+int runPointsOnly(const Options& o, const fs::path& points_file) {
+  if (o.strategy == "nearest")
+    throw UsageError("--strategy nearest reads rgb.txt; a points.bin folder has none");
+  if (o.points != "auto")
+    throw UsageError("--points does not apply to a points.bin folder (its points are given)");
+  const auto t_start = std::chrono::steady_clock::now();
+  PointsFileReader reader(points_file.string());
+  auto source = std::make_unique<GivenPointSource>();
+  GivenPointSource* given = source.get();
+  ViewSelector selector(o.config, std::move(source));
+  Timings t;
+  const size_t total = o.max_frames > 0 ? std::min<size_t>(reader.size(), size_t(o.max_frames))
+                                        : static_cast<size_t>(reader.size());
+  const bool tty = isatty(fileno(stderr));
+  auto last_report = std::chrono::steady_clock::now();
+  PointsRecord record;
+  size_t points = 0;
+  for (size_t q = 0; q < total; ++q) {
+    const auto t0 = std::chrono::steady_clock::now();
+    if (!reader.next(record)) break;
+    Frame frame;
+    frame.stamp = record.stamp;
+    char name[64];
+    std::snprintf(name, sizeof name, "rgb/%.6f.png", record.stamp);
+    frame.image_name = name;
+    frame.intrinsics = reader.intrinsics();
+    frame.pose = record.pose;
+    points += static_cast<size_t>(record.points.cols());
+    given->setNext(std::move(record.points));
+    t.read += seconds(t0);
+    FrameResult r;
+    try {
+      r = selector.addFrame(frame);
+    } catch (const InvalidInput& e) {
+      throw InvalidInput("record " + std::to_string(q) + " of " + points_file.string() + ": " +
+                         e.what());
+    }
+    t.points += r.points_seconds;
+    t.matrix += r.matrix_seconds;
+    if (!o.quiet && (seconds(last_report) > 5.0 || q + 1 == total)) {
+      last_report = std::chrono::steady_clock::now();
+      std::fprintf(stderr, "%s  record %zu/%zu, %zu keyframes, %.1f s, peak RSS %.0f MB%s",
+                   tty ? "\r" : "", q + 1, total, selector.matrix().size(), seconds(t_start),
+                   peakRssMb(), tty ? "" : "\n");
+      if (tty && q + 1 == total) std::fprintf(stderr, "\n");
+    }
+  }
+  const double rss_matrix = peakRssMb();
+  const auto t_sel = std::chrono::steady_clock::now();
+  const SelectionSnapshot snapshot = selector.snapshot();
+  t.selection = seconds(t_sel);
+  const double rss_selection = peakRssMb();
+  const auto t_write = std::chrono::steady_clock::now();
+  nlohmann::json params = toJson(snapshot.params);
+  params["dataset"] = o.dataset;
+  params["image_path"] = "";
+  if (o.max_frames > 0) params["max_frames"] = o.max_frames;
+  ExportOptions options;
+  options.title = fs::path(o.dataset).filename().string() +
+                  " (points only), k = " + std::to_string(o.config.selection.k) +
+                  ", completion: " + toString(o.config.selection.completion);
+  options.points = o.dump_points ? &selector.matrix() : nullptr;
+  const ExportResult written = exportSelection(o.out.string(), snapshot, params, options);
+  t.write = seconds(t_write);
+  const size_t n = selector.matrix().size();
+  const Selection& selection = snapshot.selection;
+  const double offdiag = n > 1 ? static_cast<double>(n) * (n - 1) : 0.0;
+  std::printf("dataset     %s: points.bin, %zu records used of %llu (points only)\n",
+              o.dataset.c_str(), total, static_cast<unsigned long long>(reader.size()));
+  std::printf("keyframes   %zu (%s), %.0f sample points each (mean)\n", n,
+              keyframeRule(o.config.keyframes).c_str(),
+              total > 0 ? static_cast<double>(points) / static_cast<double>(total) : 0.0);
+  std::printf("matrix      %zu finite entries (%.1f a row, %s of the off-diagonal)\n",
+              selector.matrix().table().finiteCount(),
+              n > 0 ? static_cast<double>(selector.matrix().table().finiteCount()) / n : 0.0,
+              percent(static_cast<double>(selector.matrix().table().finiteCount()), offdiag).c_str());
+  std::printf(
+      "selection   k %d, completion %s: start view %d, traversal reached %zu, completed %zu, "
+      "isolated %zu\n",
+      o.config.selection.k, toString(o.config.selection.completion).c_str(), selection.start_view,
+      selection.order.size(), selection.completed.size(), selection.isolated.size());
+  std::printf("pairs       %zu to match\n", selection.pairs.size());
+  std::printf(
+      "time        read %.2f s | points %.2f s | matrix %.2f s (%.3f ms a keyframe) | selection "
+      "%.3f s | write %.2f s | total %.2f s\n",
+      t.read, t.points, t.matrix, n > 0 ? 1e3 * t.matrix / static_cast<double>(n) : 0.0,
+      t.selection, t.write, seconds(t_start));
+  std::printf(
+      "memory      peak RSS %.0f MB after the matrix, %.0f MB after the selection, %.0f MB at the "
+      "end (getrusage ru_maxrss)\n",
+      rss_matrix, rss_selection, peakRssMb());
+  std::printf("wrote       %s, %s, %s\n", written.selection_json.c_str(), written.pairs_txt.c_str(),
+              written.plot_png.c_str());
+  printSets(selection, static_cast<size_t>(o.print_sets));
+  return 0;
+}
+
 int run(const Options& o) {
   if (!o.state.empty()) return runFromState(o);
+  if (const fs::path points = fs::path(o.dataset) / "points.bin"; fs::exists(points))
+    return runPointsOnly(o, points);
   const auto t_start = std::chrono::steady_clock::now();
   TumDatasetOptions dataset_options;
   dataset_options.max_time_difference = o.max_time_difference;

@@ -17,6 +17,7 @@
 #include "view_selection/ros/conversions.h"
 
 #include <cv_bridge/cv_bridge.h>
+#include <opencv2/imgcodecs.hpp>
 #include "view_selection/points/image_conversion.h"
 #include "view_selection/points/map_point_source.h"
 #include "view_selection/points/point_source_factory.h"
@@ -35,6 +36,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -558,6 +560,172 @@ TEST_F(BadInputTest, MapPointsReplaceAndUpdateRows) {
           sel.next_view_sets[i].error_resistance[q],
           selector.matrix().at(static_cast<core::ViewId>(i), sel.next_view_sets[i].next_views[q]));
   }
+}
+
+
+// bounded_outputs.test: ~publish_max_views 3. Every message on ~selection stays within 3 views
+// once the map is larger, the updates applied in order rebuild exactly what ~get_selection
+// returns (all views), and ~markers draws a bounded summary.
+TEST_F(BadInputTest, BoundedSelectionAndMarkers) {
+  int max_views = 0;
+  if (!ros::NodeHandle("~").getParam("publish_max_views", max_views))
+    GTEST_SKIP() << "only in bounded_outputs.test";
+  ASSERT_GT(max_views, 0);
+  std::mutex m;
+  std::vector<view_selection::ViewSelection::ConstPtr> updates;
+  visualization_msgs::MarkerArray::ConstPtr markers;
+  ros::Subscriber sel_sub = nh_.subscribe<view_selection::ViewSelection>(
+      node_ + "/selection", 1000, [&](const view_selection::ViewSelection::ConstPtr& msg) {
+        std::lock_guard<std::mutex> lock(m);
+        updates.push_back(msg);
+      });
+  ros::Subscriber marker_sub = nh_.subscribe<visualization_msgs::MarkerArray>(
+      node_ + "/markers", 10, [&](const visualization_msgs::MarkerArray::ConstPtr& msg) {
+        std::lock_guard<std::mutex> lock(m);
+        markers = msg;
+      });
+  const size_t count = 12;
+  std::vector<GoodFrame> good = syntheticFrames(count);
+  for (size_t i = 0; i < count; ++i)  // images that differ, for the read-back below
+    for (int v = 0; v < good[i].image.rows; ++v)
+      for (int u = 0; u < good[i].image.cols; ++u)
+        good[i].image.at<cv::Vec3b>(v, u) = cv::Vec3b(static_cast<uint8_t>(u + 7 * i),
+                                                      static_cast<uint8_t>(v * 2 + i), 200);
+  ASSERT_TRUE(waitForSubscribers()) << "the node under test did not subscribe within 20 s";
+  std::string bad_dir_node;
+  ros::NodeHandle("~").getParam("bad_dir_node", bad_dir_node);
+  if (!bad_dir_node.empty()) {  // both nodes take the same frames
+    const ros::WallTime until = ros::WallTime::now() + ros::WallDuration(20.0);
+    while ((image_pub_.getNumSubscribers() < 2 || depth_pub_.getNumSubscribers() < 2 ||
+            info_pub_.getNumSubscribers() < 2 || tf_pub_.getNumSubscribers() < 2) &&
+           ros::WallTime::now() < until)
+      ros::WallDuration(0.05).sleep();
+    ASSERT_GE(image_pub_.getNumSubscribers(), 2u) << bad_dir_node << " did not subscribe";
+  }
+  // The latched (empty, whole) selection first, so the updates start from a full message.
+  ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(10.0);
+  auto received = [&] {
+    std::lock_guard<std::mutex> lock(m);
+    return updates.size();
+  };
+  while (received() == 0 && ros::WallTime::now() < deadline) ros::WallDuration(0.01).sleep();
+  ASSERT_GT(received(), 0u) << "no latched message on ~selection";
+  for (size_t i = 0; i < count; ++i)
+    ASSERT_TRUE(publish(makeSend(good[i], ros::Time(3000.0 + 0.1 * double(i)), "cam"), i + 1));
+
+  view_selection::GetSelection srv;
+  ASSERT_TRUE(ros::service::call(node_ + "/get_selection", srv));
+  const view_selection::ViewSelection& all = srv.response.selection;
+  ASSERT_EQ(all.keyframes.size(), count) << "~get_selection must give every keyframe";
+  ASSERT_EQ(all.next_view_sets.size(), count);
+  EXPECT_FALSE(all.partial);
+  EXPECT_EQ(all.total_keyframes, count);
+  EXPECT_FALSE(all.pairs.empty());
+  EXPECT_FALSE(all.order.empty());
+
+  // Wait (bounded) for the update that has caught up with all keyframes and left nothing out.
+  deadline = ros::WallTime::now() + ros::WallDuration(10.0);
+  auto caughtUp = [&] {
+    std::lock_guard<std::mutex> lock(m);
+    return !updates.empty() && updates.back()->total_keyframes == count &&
+           updates.back()->pending_views == 0 && markers &&
+           std::any_of(markers->markers.begin(), markers->markers.end(),
+                       [](const auto& mk) { return mk.ns == "next_views"; });
+  };
+  while (!caughtUp() && ros::WallTime::now() < deadline) ros::WallDuration(0.01).sleep();
+  ASSERT_TRUE(caughtUp()) << "~selection did not catch up with " << count << " keyframes";
+  ros::WallDuration(0.3).sleep();  // nothing changes any more: no later update may differ
+
+  std::lock_guard<std::mutex> lock(m);
+  std::map<int32_t, view_selection::KeyframeInfo> keyframes;
+  std::map<int32_t, view_selection::NextViewSet> sets;
+  bool saw_partial = false;
+  for (size_t u = 0; u < updates.size(); ++u) {
+    const auto& msg = *updates[u];
+    if (u > 0) {
+      EXPECT_EQ(msg.update, updates[u - 1]->update + 1) << "an update was missed";
+    }
+    EXPECT_EQ(msg.keyframes.size(), msg.next_view_sets.size());
+    if (msg.total_keyframes > static_cast<uint32_t>(max_views)) {
+      EXPECT_TRUE(msg.partial) << "update " << msg.update << " of " << msg.total_keyframes
+                               << " keyframes is not bounded";
+      EXPECT_LE(msg.keyframes.size(), static_cast<size_t>(max_views)) << "update " << msg.update;
+      EXPECT_LE(msg.next_view_sets.size(), static_cast<size_t>(max_views));
+      EXPECT_TRUE(msg.pairs.empty() && msg.order.empty() && msg.completed.empty());
+    } else {
+      EXPECT_FALSE(msg.partial);
+      EXPECT_EQ(msg.keyframes.size(), msg.total_keyframes);
+    }
+    saw_partial = saw_partial || msg.partial;
+    if (!msg.partial) {
+      keyframes.clear();
+      sets.clear();
+    }
+    for (const auto& kf : msg.keyframes) keyframes[kf.id] = kf;
+    for (const auto& set : msg.next_view_sets) sets[set.view] = set;
+  }
+  EXPECT_TRUE(saw_partial);
+  const auto& last = *updates.back();
+  EXPECT_EQ(last.start_view, all.start_view);
+  EXPECT_EQ(last.finite_entries, all.finite_entries);
+  ASSERT_EQ(keyframes.size(), count) << "the updates left views out";
+  ASSERT_EQ(sets.size(), count);
+  for (size_t i = 0; i < count; ++i) {
+    const auto id = static_cast<int32_t>(i);
+    EXPECT_EQ(keyframes[id], all.keyframes[i]) << "keyframe " << i;
+    EXPECT_EQ(sets[id], all.next_view_sets[i]) << "next view set " << i << " is stale";
+  }
+
+  // Markers: frusta of every m-th view, the start view and the newest, m = ceil(n / max_views).
+  size_t frustum_points = 0;
+  for (const auto& mk : markers->markers)
+    if (mk.ns == "frusta" || mk.ns == "start_view") frustum_points += mk.points.size();
+  const size_t stride = (count + static_cast<size_t>(max_views) - 1) / static_cast<size_t>(max_views);
+  const size_t per_frustum = 16;
+  EXPECT_GE(frustum_points, per_frustum * ((count + stride - 1) / stride));
+  EXPECT_LE(frustum_points, per_frustum * ((count + stride - 1) / stride + 2));
+  EXPECT_LT(frustum_points, per_frustum * count) << "~markers draws every keyframe";
+
+  // ~image_cache_mb 0.1 holds one of these images (160 x 120 x 3 bytes): ~export reads the
+  // others back from ~image_dir, every one equal to what was sent.
+  view_selection::Export exp;
+  exp.request.directory =
+      (fs::temp_directory_path() / ("view_selection_bounded_" + std::to_string(::getpid())))
+          .string();
+  ASSERT_TRUE(ros::service::call(node_ + "/export", exp));
+  ASSERT_TRUE(exp.response.success) << exp.response.message;
+  EXPECT_EQ(exp.response.images_written, static_cast<int>(count)) << exp.response.message;
+  for (size_t i = 0; i < count; ++i) {
+    const cv::Mat back = cv::imread(
+        (fs::path(exp.request.directory) / all.keyframes[i].image_name).string(),
+        cv::IMREAD_COLOR);
+    ASSERT_FALSE(back.empty()) << all.keyframes[i].image_name << " was not exported";
+    EXPECT_EQ(cv::norm(back, good[i].image, cv::NORM_INF), 0.0)
+        << "exported image " << i << " differs from the one sent";
+  }
+  fs::remove_all(exp.request.directory);
+
+  if (bad_dir_node.empty()) return;
+  // ~image_dir below a regular file: the images beyond the one that fits in RAM are lost, the
+  // node answers, and ~export says so and why.
+  view_selection::GetSelection bad_sel;
+  ASSERT_TRUE(ros::service::waitForService(bad_dir_node + "/get_selection", ros::Duration(10.0)));
+  deadline = ros::WallTime::now() + ros::WallDuration(10.0);
+  while (ros::WallTime::now() < deadline) {
+    ASSERT_TRUE(ros::service::call(bad_dir_node + "/get_selection", bad_sel));
+    if (bad_sel.response.selection.keyframes.size() == count) break;
+    ros::WallDuration(0.02).sleep();
+  }
+  ASSERT_EQ(bad_sel.response.selection.keyframes.size(), count);
+  view_selection::Export bad_exp;
+  bad_exp.request.directory = exp.request.directory + "_bad_dir";
+  ASSERT_TRUE(ros::service::call(bad_dir_node + "/export", bad_exp));
+  EXPECT_TRUE(bad_exp.response.success) << bad_exp.response.message;
+  EXPECT_EQ(bad_exp.response.images_written, 1) << bad_exp.response.message;
+  EXPECT_NE(bad_exp.response.message.find("lost"), std::string::npos) << bad_exp.response.message;
+  EXPECT_NE(bad_exp.response.message.find("/proc/version"), std::string::npos)
+      << bad_exp.response.message;
+  fs::remove_all(bad_exp.request.directory);
 }
 
 }  // namespace

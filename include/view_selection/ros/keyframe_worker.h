@@ -8,6 +8,7 @@
 #include "view_selection/core/selection_snapshot.h"
 #include "view_selection/core/view_selector.h"
 #include "view_selection/ros/camera_model.h"
+#include "view_selection/ros/image_cache.h"
 #include "view_selection/ros/input_statistics.h"
 #include "view_selection/ros/keyframe_verdicts.h"
 #include "view_selection/ros/node_config.h"
@@ -38,7 +39,9 @@ struct PendingFrame {
 struct NodeSnapshot {
   uint64_t version = 0;  ///< bumps with every change
   core::SelectionSnapshot selection;
-  std::vector<sensor_msgs::ImageConstPtr> images;  ///< by keyframe id
+  /// By keyframe id, ids below image_count (null without ~save_keyframe_images); RAM-bounded.
+  std::shared_ptr<const KeyframeImageCache> images;
+  size_t image_count = 0;
 };
 
 class KeyframeWorker {
@@ -103,6 +106,7 @@ class KeyframeWorker {
   /// At construction: continues the session the keeper read, or starts empty.
   void restoreLoaded();
   void drop(const Queued& queued, const std::string& reason, const std::string& message);
+  std::shared_ptr<KeyframeImageCache> newImageCache() const;
 
   const NodeConfig& config_;
   PoseProvider& poses_;
@@ -113,7 +117,8 @@ class KeyframeWorker {
   // The method's state, guarded by state_mutex_.
   mutable std::mutex state_mutex_;
   std::unique_ptr<core::ViewSelector> selector_;
-  std::vector<sensor_msgs::ImageConstPtr> images_;  // by keyframe id, with ~save_keyframe_images
+  std::shared_ptr<ImageFolder> image_folder_;    // with ~save_keyframe_images: ~image_dir
+  std::shared_ptr<KeyframeImageCache> images_;  // by keyframe id; a new one after each reset
   std::optional<double> last_stamp_;                // of the last frame offered to the core
   std::string camera_frame_;                        // the images' frame_id, normalised
   uint64_t generation_ = 0;  // bumps on reset(); frames of older ones are discarded

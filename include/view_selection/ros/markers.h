@@ -12,8 +12,11 @@ namespace view_selection::ros_node {
 
 /// Namespaces: "frusta", "start_view", "next_views", "completion". Each is one marker that is
 /// replaced on every call (a DELETEALL first clears markers of a larger earlier selection).
-/// `scale` is the frustum depth [m, scene units].
+/// `scale` is the frustum depth [m, scene units]. Above `max_views` keyframes (0: never) only a
+/// summary is drawn: the frusta and final next-view edges of every m-th view, m = ceil(n /
+/// max_views), and of the start view and the newest keyframe, so at most max_views + 2 views.
 visualization_msgs::MarkerArray selectionMarkers(const core::SelectionSnapshot& snapshot,
-                                                 const std::string& world_frame, double scale);
+                                                 const std::string& world_frame, double scale,
+                                                 size_t max_views = 0);
 
 }  // namespace view_selection::ros_node

@@ -43,6 +43,13 @@ struct NodeConfig {
   double depth_16u_metres_per_unit = 0.001;  ///< 16UC1 depth scale (millimetres)
   double publish_period = 0.5;        ///< [s, wall] minimum interval between ~selection messages
   bool save_keyframe_images = false;  ///< keep keyframe images for ~export
+  /// Above this many keyframes ~selection carries only what changed (at most this many views a
+  /// message) and ~markers a summary of at most about this many views; 0 = always everything.
+  int publish_max_views = 1000;
+  /// With save_keyframe_images: keyframe images held in RAM [MB]; older ones go to image_dir.
+  double image_cache_mb = 512.0;
+  /// Folder for the images beyond image_cache_mb; "" = a temporary folder of the node's own.
+  std::string image_dir;
   double marker_scale = 0.1;          ///< frustum depth in RViz [m, scene units]
   /// The session is saved here (on shutdown, every autosave_keyframes keyframes, ~save_state)
   /// and continued from it at start; "" = off; relative to ROS_HOME (default ~/.ros).

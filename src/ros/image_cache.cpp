@@ -1,0 +1,231 @@
+#include "view_selection/ros/image_cache.h"
+
+#include "view_selection/core/exceptions.h"
+
+#include <ros/console.h>
+#include <ros/serialization.h>
+
+#include <boost/make_shared.hpp>
+
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+
+namespace view_selection::ros_node {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr double kReportPeriod = 10.0;  // [s, wall] at most one logged spill failure
+
+/// mkdtemp under `parent`; "" with `error` set when it fails.
+std::string makeUniqueFolder(const fs::path& parent, const std::string& prefix,
+                             std::string& error) {
+  std::string pattern = (parent / (prefix + "XXXXXX")).string();
+  std::vector<char> buffer(pattern.begin(), pattern.end());
+  buffer.push_back('\0');
+  if (!::mkdtemp(buffer.data())) {
+    error = "cannot create a folder in '" + parent.string() + "': " + std::strerror(errno);
+    return {};
+  }
+  return std::string(buffer.data());
+}
+
+}  // namespace
+
+ImageFolder::ImageFolder(const std::string& dir) {
+  if (dir.empty()) {
+    std::error_code ec;
+    const fs::path tmp = fs::temp_directory_path(ec);
+    if (ec) {
+      error_ = "no temporary folder: " + ec.message();
+      return;
+    }
+    path_ = makeUniqueFolder(tmp, "view_selection_images_", error_);
+    created_ = !path_.empty();
+    return;
+  }
+  path_ = dir;
+  std::error_code ec;
+  if (fs::exists(path_, ec)) {
+    if (!fs::is_directory(path_, ec))
+      error_ = "'" + path_ + "' is not a folder";
+    else if (::access(path_.c_str(), W_OK | X_OK) != 0)
+      error_ = "cannot write into '" + path_ + "': " + std::strerror(errno);
+    return;
+  }
+  created_ = fs::create_directories(path_, ec);
+  if (ec) {
+    created_ = false;
+    error_ = "cannot create folder '" + path_ + "': " + ec.message();
+  }
+}
+
+ImageFolder::~ImageFolder() {
+  if (!created_) return;
+  std::error_code ec;
+  fs::remove_all(path_, ec);
+  if (ec)
+    ROS_WARN_STREAM("view_selection: could not remove the image folder '" << path_
+                                                                         << "': " << ec.message());
+}
+
+KeyframeImageCache::KeyframeImageCache(size_t memory_bytes, std::shared_ptr<ImageFolder> folder)
+    : budget_(memory_bytes), base_(std::move(folder)) {}
+
+KeyframeImageCache::~KeyframeImageCache() {
+  if (dir_.empty()) return;
+  std::error_code ec;
+  fs::remove_all(dir_, ec);
+  if (ec)
+    ROS_WARN_STREAM("view_selection: could not remove the image folder '" << dir_
+                                                                         << "': " << ec.message());
+}
+
+std::string KeyframeImageCache::fileLocked(size_t id) const {
+  return (fs::path(dir_) / (std::to_string(id) + ".image")).string();
+}
+
+void KeyframeImageCache::reportLocked(const std::string& error) {
+  last_error_ = error;
+  const auto now = std::chrono::steady_clock::now();
+  if (last_report_ != std::chrono::steady_clock::time_point{} &&
+      std::chrono::duration<double>(now - last_report_).count() < kReportPeriod) {
+    ++unreported_;
+    return;
+  }
+  ROS_ERROR_STREAM("view_selection: keyframe image lost (~image_cache_mb is full and it cannot "
+                   "go to ~image_dir): "
+                   << error << "; ~export will lack it"
+                   << (unreported_ > 0
+                           ? " (" + std::to_string(unreported_) + " more since the last message)"
+                           : std::string()));
+  unreported_ = 0;
+  last_report_ = now;
+}
+
+bool KeyframeImageCache::spillLocked(size_t id) {
+  if (!base_ || !base_->error().empty()) {
+    reportLocked(base_ ? base_->error() : std::string("no image folder"));
+    return false;
+  }
+  if (dir_.empty()) {
+    std::string error;
+    dir_ = makeUniqueFolder(base_->path(), "session_", error);
+    if (dir_.empty()) {
+      reportLocked(error);
+      return false;
+    }
+  }
+  const sensor_msgs::Image& image = *entries_[id].image;
+  const uint32_t length = ros::serialization::serializationLength(image);
+  std::vector<uint8_t> bytes(length);
+  ros::serialization::OStream out(bytes.data(), length);
+  ros::serialization::serialize(out, image);
+  const std::string path = fileLocked(id);
+  std::FILE* f = std::fopen(path.c_str(), "wb");
+  if (!f) {
+    reportLocked("cannot write '" + path + "': " + std::strerror(errno));
+    return false;
+  }
+  const size_t written = std::fwrite(bytes.data(), 1, bytes.size(), f);
+  const int write_errno = errno;
+  const bool flushed = std::fflush(f) == 0;
+  const int flush_errno = errno;
+  const bool closed = std::fclose(f) == 0;
+  if (written != bytes.size() || !flushed || !closed) {
+    const int e = written != bytes.size() ? write_errno : flushed ? errno : flush_errno;
+    std::error_code ec;
+    fs::remove(path, ec);
+    reportLocked("cannot write '" + path + "': " + std::strerror(e));
+    return false;
+  }
+  return true;
+}
+
+void KeyframeImageCache::push(sensor_msgs::ImageConstPtr image) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const size_t id = entries_.size();
+  Entry entry;
+  if (image) {
+    entry.where = Where::kMemory;
+    memory_bytes_ += image->data.size();
+    entry.image = std::move(image);
+    memory_order_.push_back(id);
+  }
+  entries_.push_back(std::move(entry));
+  while (memory_bytes_ > budget_ && !memory_order_.empty()) {
+    const size_t oldest = memory_order_.front();
+    memory_order_.pop_front();
+    Entry& e = entries_[oldest];
+    const bool spilled = spillLocked(oldest);
+    memory_bytes_ -= e.image->data.size();
+    e.image.reset();
+    e.where = spilled ? Where::kDisk : Where::kLost;
+    ++(spilled ? on_disk_ : lost_);
+  }
+}
+
+size_t KeyframeImageCache::size() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return entries_.size();
+}
+
+sensor_msgs::ImageConstPtr KeyframeImageCache::get(size_t id) const {
+  std::string path;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (id >= entries_.size()) return nullptr;
+    const Entry& e = entries_[id];
+    if (e.where == Where::kMemory) return e.image;
+    if (e.where != Where::kDisk) return nullptr;
+    path = fileLocked(id);
+  }
+  // Read outside the lock: a spilled file is never written again.
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f)
+    throw core::IoError("cannot read keyframe image " + std::to_string(id) + " back from '" +
+                        path + "': " + std::strerror(errno));
+  std::vector<uint8_t> bytes;
+  uint8_t chunk[1 << 16];
+  size_t got = 0;
+  while ((got = std::fread(chunk, 1, sizeof chunk, f)) > 0) bytes.insert(bytes.end(), chunk, chunk + got);
+  const bool failed = std::ferror(f) != 0;
+  std::fclose(f);
+  if (failed)
+    throw core::IoError("cannot read keyframe image " + std::to_string(id) + " back from '" +
+                        path + "'");
+  auto image = boost::make_shared<sensor_msgs::Image>();
+  try {
+    ros::serialization::IStream in(bytes.data(), static_cast<uint32_t>(bytes.size()));
+    ros::serialization::deserialize(in, *image);
+  } catch (const std::exception& e) {
+    throw core::IoError("keyframe image " + std::to_string(id) + " in '" + path +
+                        "' is damaged: " + e.what());
+  }
+  return image;
+}
+
+KeyframeImageCache::Stats KeyframeImageCache::stats() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  Stats s;
+  s.images = entries_.size();
+  s.in_memory = memory_order_.size();
+  s.on_disk = on_disk_;
+  s.lost = lost_;
+  s.memory_bytes = memory_bytes_;
+  s.last_error = last_error_;
+  return s;
+}
+
+std::string KeyframeImageCache::folder() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return dir_;
+}
+
+}  // namespace view_selection::ros_node

@@ -1,0 +1,196 @@
+// The keyframe image cache (~image_cache_mb, ~image_dir): at most the budget in RAM, the rest on
+// disk and read back equal, folders made and removed as documented, and a folder that cannot be
+// written loses images (counted, with the reason) without throwing. No master needed.
+#include "view_selection/core/exceptions.h"
+#include "view_selection/ros/image_cache.h"
+
+#include <boost/make_shared.hpp>
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace fs = std::filesystem;
+using view_selection::ros_node::ImageFolder;
+using view_selection::ros_node::KeyframeImageCache;
+
+namespace {
+
+sensor_msgs::ImageConstPtr makeImage(int seed, uint32_t width = 40, uint32_t height = 30) {
+  auto m = boost::make_shared<sensor_msgs::Image>();
+  m->header.stamp = ros::Time(100.0 + seed, 12345u);
+  m->header.frame_id = "cam_" + std::to_string(seed);
+  m->width = width;
+  m->height = height;
+  m->encoding = "rgb8";
+  m->step = width * 3 + 2;  // padded rows
+  m->data.resize(static_cast<size_t>(m->step) * height);
+  for (size_t i = 0; i < m->data.size(); ++i)
+    m->data[i] = static_cast<uint8_t>((i * 7 + static_cast<size_t>(seed) * 31) & 0xff);
+  return m;
+}
+
+void expectSameImage(const sensor_msgs::Image& a, const sensor_msgs::Image& b, size_t id) {
+  EXPECT_EQ(a.header.stamp, b.header.stamp) << id;
+  EXPECT_EQ(a.header.frame_id, b.header.frame_id) << id;
+  EXPECT_EQ(a.width, b.width) << id;
+  EXPECT_EQ(a.height, b.height) << id;
+  EXPECT_EQ(a.encoding, b.encoding) << id;
+  EXPECT_EQ(a.is_bigendian, b.is_bigendian) << id;
+  EXPECT_EQ(a.step, b.step) << id;
+  EXPECT_TRUE(a.data == b.data) << "pixels of image " << id << " differ after the read-back";
+}
+
+fs::path scratch(const std::string& name) {
+  return fs::temp_directory_path() /
+         ("view_selection_test_image_cache_" + std::to_string(::getpid()) + "_" + name);
+}
+
+size_t filesIn(const fs::path& dir) {
+  size_t n = 0;
+  for (const auto& e : fs::directory_iterator(dir)) n += e.is_regular_file() ? 1 : 0;
+  return n;
+}
+
+TEST(ImageCache, KeepsTheBudgetInMemoryAndReadsTheRestBackEqual) {
+  const size_t one = makeImage(0)->data.size();
+  auto folder = std::make_shared<ImageFolder>("");
+  ASSERT_TRUE(folder->error().empty()) << folder->error();
+  ASSERT_TRUE(fs::is_directory(folder->path()));
+  KeyframeImageCache cache(2 * one + one / 2, folder);  // two and a half images
+  std::vector<sensor_msgs::ImageConstPtr> pushed;
+  for (int i = 0; i < 6; ++i) {
+    pushed.push_back(i == 3 ? nullptr : makeImage(i));  // keyframe 3 has no image
+    cache.push(pushed.back());
+    EXPECT_LE(cache.stats().memory_bytes, 2 * one + one / 2) << "over budget after " << i;
+  }
+  const KeyframeImageCache::Stats s = cache.stats();
+  EXPECT_EQ(s.images, 6u);
+  EXPECT_EQ(s.in_memory, 2u);  // the newest two: 4 and 5
+  EXPECT_EQ(s.on_disk, 3u);    // 0, 1, 2
+  EXPECT_EQ(s.lost, 0u);
+  EXPECT_TRUE(s.last_error.empty()) << s.last_error;
+  ASSERT_FALSE(cache.folder().empty());
+  EXPECT_EQ(fs::path(cache.folder()).parent_path(), fs::path(folder->path()));
+  EXPECT_EQ(filesIn(cache.folder()), 3u);
+  for (size_t i = 0; i < pushed.size(); ++i) {
+    const sensor_msgs::ImageConstPtr back = cache.get(i);
+    if (!pushed[i]) {
+      EXPECT_FALSE(back) << "keyframe " << i << " has no image";
+      continue;
+    }
+    ASSERT_TRUE(back) << "image " << i << " is gone";
+    expectSameImage(*pushed[i], *back, i);
+    if (i >= 4) {
+      EXPECT_EQ(back.get(), pushed[i].get()) << "image " << i << " should be in RAM";
+    }
+  }
+  EXPECT_FALSE(cache.get(6));  // unknown id
+}
+
+TEST(ImageCache, ZeroBudgetPutsEveryImageOnDisk) {
+  auto folder = std::make_shared<ImageFolder>("");
+  KeyframeImageCache cache(0, folder);
+  for (int i = 0; i < 3; ++i) cache.push(makeImage(i, 17, 5));
+  EXPECT_EQ(cache.stats().in_memory, 0u);
+  EXPECT_EQ(cache.stats().memory_bytes, 0u);
+  EXPECT_EQ(cache.stats().on_disk, 3u);
+  for (int i = 0; i < 3; ++i) expectSameImage(*makeImage(i, 17, 5), *cache.get(size_t(i)), size_t(i));
+}
+
+TEST(ImageCache, FoldersItMadeAreRemovedAndAGivenOneIsKept) {
+  std::string temp, session;
+  {
+    auto folder = std::make_shared<ImageFolder>("");
+    temp = folder->path();
+    EXPECT_TRUE(folder->created());
+    KeyframeImageCache cache(0, folder);
+    cache.push(makeImage(1));
+    session = cache.folder();
+    EXPECT_TRUE(fs::exists(session));
+  }
+  EXPECT_FALSE(fs::exists(session)) << session << " outlived its cache";
+  EXPECT_FALSE(fs::exists(temp)) << "the temporary folder " << temp << " was not removed";
+
+  // A given folder that exists: only the cache's own subfolder goes.
+  const fs::path given = scratch("given");
+  fs::create_directories(given);
+  {
+    auto folder = std::make_shared<ImageFolder>(given.string());
+    EXPECT_FALSE(folder->created());
+    KeyframeImageCache cache(0, folder);
+    cache.push(makeImage(2));
+    session = cache.folder();
+    EXPECT_EQ(fs::path(session).parent_path(), given);
+  }
+  EXPECT_FALSE(fs::exists(session));
+  EXPECT_TRUE(fs::is_directory(given)) << "a folder the user gave must stay";
+  fs::remove_all(given);
+
+  // A given folder that does not exist: made, and removed at the end.
+  const fs::path made = scratch("made") / "deeper";
+  {
+    auto folder = std::make_shared<ImageFolder>(made.string());
+    EXPECT_TRUE(folder->error().empty()) << folder->error();
+    EXPECT_TRUE(folder->created());
+    KeyframeImageCache cache(0, folder);
+    cache.push(makeImage(3));
+    EXPECT_EQ(cache.stats().on_disk, 1u);
+  }
+  EXPECT_FALSE(fs::exists(made));
+  fs::remove_all(made.parent_path());
+}
+
+TEST(ImageCache, AnUnwritableFolderLosesImagesWithTheReasonAndNeverThrows) {
+  // A regular file where the folder should be, and a folder below a regular file: neither can
+  // hold images (permissions would not do: the tests may run as root).
+  const fs::path file = scratch("a_file");
+  { std::ofstream(file) << "not a folder"; }
+  for (const fs::path& dir : {file, file / "below"}) {
+    auto folder = std::make_shared<ImageFolder>(dir.string());
+    EXPECT_FALSE(folder->error().empty()) << dir << " should be unusable";
+    EXPECT_NE(folder->error().find(file.string()), std::string::npos) << folder->error();
+    const size_t one = makeImage(0)->data.size();
+    KeyframeImageCache cache(one, folder);  // one image fits
+    std::vector<sensor_msgs::ImageConstPtr> pushed;
+    for (int i = 0; i < 4; ++i) {
+      pushed.push_back(makeImage(i));
+      EXPECT_NO_THROW(cache.push(pushed.back()));
+    }
+    const KeyframeImageCache::Stats s = cache.stats();
+    EXPECT_EQ(s.lost, 3u);
+    EXPECT_EQ(s.on_disk, 0u);
+    EXPECT_EQ(s.in_memory, 1u);
+    EXPECT_LE(s.memory_bytes, one) << "lost images must not stay in RAM";
+    EXPECT_EQ(s.last_error, folder->error());
+    for (size_t i = 0; i < 3; ++i) EXPECT_FALSE(cache.get(i)) << "image " << i << " was lost";
+    ASSERT_TRUE(cache.get(3));
+    expectSameImage(*pushed[3], *cache.get(3), 3);
+  }
+  EXPECT_TRUE(fs::is_regular_file(file)) << "the cache must not remove what it did not make";
+  fs::remove(file);
+}
+
+TEST(ImageCache, ADamagedFileIsAnIoErrorNamingIt) {
+  auto folder = std::make_shared<ImageFolder>("");
+  KeyframeImageCache cache(0, folder);
+  cache.push(makeImage(5));
+  const fs::path spilled = fs::path(cache.folder()) / "0.image";
+  ASSERT_TRUE(fs::exists(spilled));
+  fs::resize_file(spilled, 10);
+  try {
+    cache.get(0);
+    ADD_FAILURE() << "a truncated file read back without an error";
+  } catch (const view_selection::core::IoError& e) {
+    EXPECT_NE(std::string(e.what()).find(spilled.string()), std::string::npos) << e.what();
+  }
+  fs::remove(spilled);
+  EXPECT_THROW(cache.get(0), view_selection::core::IoError);
+}
+
+}  // namespace
