@@ -15,6 +15,7 @@
 #include <opencv2/core.hpp>
 
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <string>
 
@@ -35,6 +36,14 @@ inline ros::Time toRosTime(double stamp, const std::string& what, long long offs
     nsec -= 1000000000LL;
   }
   return ros::Time(sec, static_cast<uint32_t>(nsec));
+}
+
+/// The "frame i/n" line on stderr every 50 frames and at the last (overwritten in place on a
+/// terminal); nothing when `quiet`.
+inline void reportProgress(size_t written, size_t total, bool tty, bool quiet) {
+  if (quiet || !(written % 50 == 0 || written == total)) return;
+  std::fprintf(stderr, "%s  frame %zu/%zu%s", tty ? "\r" : "", written, total, tty ? "" : "\n");
+  if (tty && written == total) std::fprintf(stderr, "\n");
 }
 
 inline sensor_msgs::CameraInfo cameraInfo(const core::PinholeIntrinsics& k,

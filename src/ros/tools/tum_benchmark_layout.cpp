@@ -199,11 +199,7 @@ WrittenFrames writeBenchmarkLayout(rosbag::Bag& bag, const io::TumDataset& datas
       if (written.frames == 0) written.first = header.stamp.toSec();
       written.last = header.stamp.toSec();
       ++written.frames;
-      if (!o.quiet && (written.frames % 50 == 0 || written.frames == frames.size())) {
-        std::fprintf(stderr, "%s  frame %zu/%zu%s", tty ? "\r" : "", written.frames, frames.size(),
-                     tty ? "" : "\n");
-        if (tty && written.frames == frames.size()) std::fprintf(stderr, "\n");
-      }
+      reportProgress(written.frames, frames.size(), tty, o.quiet);
     }
   }
   return written;

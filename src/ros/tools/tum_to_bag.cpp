@@ -229,11 +229,7 @@ WrittenFrames writeSimpleLayout(rosbag::Bag& bag, const TumDataset& dataset,
     if (written.frames == 0) written.first = tum.stamp;
     written.last = tum.stamp;
     ++written.frames;
-    if (!o.quiet && (written.frames % 50 == 0 || written.frames == frames.size())) {
-      std::fprintf(stderr, "%s  frame %zu/%zu%s", tty ? "\r" : "", written.frames, frames.size(),
-                   tty ? "" : "\n");
-      if (tty && written.frames == frames.size()) std::fprintf(stderr, "\n");
-    }
+    reportProgress(written.frames, frames.size(), tty, o.quiet);
   }
   return written;
 }

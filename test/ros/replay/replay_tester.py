@@ -76,6 +76,23 @@ def msg_stamp_ns(t):
     return t.secs * 1000000000 + t.nsecs
 
 
+
+def wait_for_subscribers(wanted, timeout):
+    """Waits (at most `timeout` s) until each node of `wanted` (node -> topics) subscribes to each
+    of its topics; raises AssertionError naming what is missing."""
+    master = rosgraph.Master(rospy.get_name())
+    deadline = time.time() + timeout
+    missing = []
+    while time.time() < deadline:
+        subscribers = {topic: set(names) for topic, names in master.getSystemState()[1]}
+        missing = ['%s on %s' % (node, topic) for node, topics in wanted.items() for topic in topics
+                   if node not in subscribers.get(topic, ())]
+        if not missing:
+            return
+        time.sleep(0.2)
+    raise AssertionError('not subscribed within %.0f s: %s' % (timeout, ', '.join(missing)))
+
+
 class Replay(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
@@ -234,22 +251,12 @@ class Replay(unittest.TestCase):
     @classmethod
     def wait_for_subscribers(cls):
         """rosbag play must not start before every node listens, or the first frames are lost."""
-        master = rosgraph.Master(rospy.get_name())
-        deadline = time.time() + cls.timeout
         wanted = {}
         for node in cls.nodes:
             topics = ['/camera/rgb/image_color', '/camera/rgb/camera_info', '/camera/depth/image']
             topics.append('/tf' if rospy.get_param(node + '/pose_source', 'tf') == 'tf' else '/camera/pose')
             wanted[node] = topics
-        missing = []
-        while time.time() < deadline:
-            subscribers = {topic: set(names) for topic, names in master.getSystemState()[1]}
-            missing = ['%s on %s' % (node, topic) for node, topics in wanted.items() for topic in topics
-                       if node not in subscribers.get(topic, ())]
-            if not missing:
-                return
-            time.sleep(0.2)
-        raise AssertionError('not subscribed within %.0f s: %s' % (cls.timeout, ', '.join(missing)))
+        wait_for_subscribers(wanted, cls.timeout)
 
     @classmethod
     def wait_until_processed(cls):

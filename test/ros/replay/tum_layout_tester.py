@@ -25,12 +25,11 @@ import tempfile
 import time
 import unittest
 
-import rosgraph
 import rospy
 import rostest
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from replay_tester import find_tool, msg_stamp_ns, run  # noqa: E402
+from replay_tester import find_tool, msg_stamp_ns, run, wait_for_subscribers  # noqa: E402
 
 from view_selection.msg import InputStatistics  # noqa: E402
 from view_selection.srv import GetSelection  # noqa: E402
@@ -129,23 +128,13 @@ class TumLayout(unittest.TestCase):
 
     @classmethod
     def wait_for_subscribers(cls):
-        master = rosgraph.Master(rospy.get_name())
-        deadline = time.time() + cls.timeout
         wanted = {}
         for node in cls.nodes:
             topics = ['/camera/rgb/image_color', '/camera/rgb/camera_info', '/camera/depth/image', '/tf']
             if rospy.get_param(node + '/pose_source', 'tf') != 'tf':
                 topics.append(cls.pose_topic(node))
             wanted[node] = topics
-        missing = []
-        while time.time() < deadline:
-            subscribers = {topic: set(names) for topic, names in master.getSystemState()[1]}
-            missing = ['%s on %s' % (node, topic) for node, topics in wanted.items() for topic in topics
-                       if node not in subscribers.get(topic, ())]
-            if not missing:
-                return
-            time.sleep(0.2)
-        raise AssertionError('not subscribed within %.0f s: %s' % (cls.timeout, ', '.join(missing)))
+        wait_for_subscribers(wanted, cls.timeout)
 
     @staticmethod
     def pose_topic(node):
