@@ -381,6 +381,12 @@ void SelectionCache::offer(ViewId x) {
   candidates_.push(x);
 }
 
+void SelectionCache::offerIfReached(const ErrorResistanceTable& e, ViewId x) {
+  if (visited_[static_cast<size_t>(x)]) return;
+  for (const TableEntry& entry : e.column(x))
+    if (visited_[static_cast<size_t>(entry.view)]) return offer(x);
+}
+
 void SelectionCache::completeReachable(const ErrorResistanceTable& e) {
   // The same candidates as the plain definition (unvisited views with a finite entry from a
   // visited one), found from the unvisited side: a column of each view the traversal missed.
@@ -388,14 +394,7 @@ void SelectionCache::completeReachable(const ErrorResistanceTable& e) {
   // candidate stays a candidate until completion visits it.
   candidates_ = {};
   queued_.assign(e.size(), 0);
-  for (size_t x = 0; x < e.size(); ++x) {
-    if (visited_[x]) continue;
-    for (const TableEntry& entry : e.column(static_cast<ViewId>(x)))
-      if (visited_[static_cast<size_t>(entry.view)]) {
-        offer(static_cast<ViewId>(x));
-        break;
-      }
-  }
+  for (size_t x = 0; x < e.size(); ++x) offerIfReached(e, static_cast<ViewId>(x));
   completionLoop(e);
 }
 
@@ -494,14 +493,7 @@ void SelectionCache::resumeReachable(const ErrorResistanceTable& e, size_t p) {
   // looked at again is visited.
   candidates_ = {};
   for (const ViewId x : reexamine_) queued_[static_cast<size_t>(x)] = 0;
-  for (const ViewId x : reexamine_) {
-    if (visited_[static_cast<size_t>(x)]) continue;
-    for (const TableEntry& entry : e.column(x))
-      if (visited_[static_cast<size_t>(entry.view)]) {
-        offer(x);
-        break;
-      }
-  }
+  for (const ViewId x : reexamine_) offerIfReached(e, x);
   completionLoop(e);
 }
 

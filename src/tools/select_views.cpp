@@ -446,6 +446,22 @@ class GivenPointSource : public PointSource {
 };
 
 /// A points-only folder (points.bin): every record offered as a frame with its points.
+/// selection.json, pairs.txt and the plot of a run on o.dataset: `params` (the snapshot's, with
+/// what the run adds) get the dataset and frame limit; the plot's title names the set, `what`
+/// and the selection parameters.
+ExportResult writeOutputs(const Options& o, const ViewSelector& selector,
+                          const SelectionSnapshot& snapshot, nlohmann::json params,
+                          const std::string& what) {
+  params["dataset"] = o.dataset;
+  if (o.max_frames > 0) params["max_frames"] = o.max_frames;
+  ExportOptions options;
+  options.title = fs::path(o.dataset).filename().string() + what +
+                  ", k = " + std::to_string(o.config.selection.k) +
+                  ", completion: " + toString(o.config.selection.completion);
+  options.points = o.dump_points ? &selector.matrix() : nullptr;
+  return exportSelection(o.out.string(), snapshot, params, options);
+}
+
 int runPointsOnly(const Options& o, const fs::path& points_file) {
   if (o.strategy == "nearest")
     throw UsageError("--strategy nearest reads rgb.txt; a points.bin folder has none");
@@ -500,15 +516,8 @@ int runPointsOnly(const Options& o, const fs::path& points_file) {
   const double rss_selection = peakRssMb();
   const auto t_write = std::chrono::steady_clock::now();
   nlohmann::json params = toJson(snapshot.params);
-  params["dataset"] = o.dataset;
   params["image_path"] = "";
-  if (o.max_frames > 0) params["max_frames"] = o.max_frames;
-  ExportOptions options;
-  options.title = fs::path(o.dataset).filename().string() +
-                  " (points only), k = " + std::to_string(o.config.selection.k) +
-                  ", completion: " + toString(o.config.selection.completion);
-  options.points = o.dump_points ? &selector.matrix() : nullptr;
-  const ExportResult written = exportSelection(o.out.string(), snapshot, params, options);
+  const ExportResult written = writeOutputs(o, selector, snapshot, std::move(params), " (points only)");
   t.write = seconds(t_write);
   const size_t n = selector.matrix().size();
   const Selection& selection = snapshot.selection;
@@ -569,16 +578,9 @@ int run(const Options& o) {
 
   const auto t_write = std::chrono::steady_clock::now();
   nlohmann::json params = toJson(snapshot.params);
-  params["dataset"] = o.dataset;
   params["max_time_difference"] = o.max_time_difference;
   params["image_path"] = dataset.image_dir;
-  if (o.max_frames > 0) params["max_frames"] = o.max_frames;
-  ExportOptions options;
-  options.title = fs::path(o.dataset).filename().string() +
-                  ", k = " + std::to_string(o.config.selection.k) +
-                  ", completion: " + toString(o.config.selection.completion);
-  options.points = o.dump_points ? &selector.matrix() : nullptr;
-  const ExportResult written = exportSelection(o.out.string(), snapshot, params, options);
+  const ExportResult written = writeOutputs(o, selector, snapshot, std::move(params), "");
   t.write = seconds(t_write);
   printSummary(o, dataset, selector, snapshot, written, t, seconds(t_start));
   return 0;

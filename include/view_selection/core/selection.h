@@ -140,6 +140,8 @@ class SelectionCache {
   /// Completion's loop: candidates in the heap, each traversal then offering its views' rows.
   void completionLoop(const ErrorResistanceTable& e);
   void offer(ViewId x);
+  /// Offers x when it is unvisited and has a finite entry from a visited view.
+  void offerIfReached(const ErrorResistanceTable& e, ViewId x);
   void buildPairs();
   SetView plainSet(ViewId i) const;  ///< C_i
   SetView finalSet(ViewId i) const;  ///< C_i after completion so far
