@@ -9,13 +9,14 @@
 #include "view_selection/core/error_resistance.h"
 #include "view_selection/core/error_resistance_matrix.h"
 #include "view_selection/core/selection.h"
-#include "view_selection/core/selection_snapshot.h"
+#include "view_selection/core/selection_output.h"
 #include "view_selection/eval/reference_error_resistance.h"
 
 #include <benchmark/benchmark.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <deque>
 #include <fstream>
 #include <map>
 #include <memory>
@@ -365,10 +366,10 @@ void BM_SelectAfterInsertionAtScale(benchmark::State& state) {
     state.PauseTiming();
     m.addKeyframe(corridorKeyframe(static_cast<int>(m.size()), g.rng));
     state.ResumeTiming();
-    benchmark::DoNotOptimize(cache.update(m.table(), config).pairs.data());
+    benchmark::DoNotOptimize(cache.update(m.table(), config).pairs.size());
   }
   state.counters["pairs"] = static_cast<double>(cache.selection().pairs.size());
-  const Selection& last = cache.selection();
+  const ChunkedSelection& last = cache.selection();
   state.counters["completed"] = static_cast<double>(last.completed.size());
   // How much of the order the plain traversal reached before completion took over.
   const auto first = last.completed.empty()
@@ -383,23 +384,30 @@ BENCHMARK(BM_SelectAfterInsertionAtScale)
     ->Iterations(50)
     ->Unit(benchmark::kMillisecond);
 
-// What the node does after each insertion: a snapshot of keyframes, E and the selection for the
-// outputs (ViewSelector::snapshot). E's lists are shared with the live table (copy on write), so
-// the copy costs a pointer a list; the keyframe summaries and the selection are copied.
+// What the node does after each insertion besides the selection's update: an output of the
+// keyframes, E and the selection for its readers (ViewSelector::output()), and the release of
+// an output readers held before (both timed). Every list is chunked and shared copy-on-write,
+// so this costs a pointer a chunk, not a copy a view.
 void BM_SnapshotAtScale(benchmark::State& state) {
   Grown& g = grownCorridor(static_cast<int>(state.range(0)));
   ErrorResistanceMatrix& m = *g.matrix;
   SelectionCache cache;
   const SelectionConfig config;
   cache.update(m.table(), config);
-  std::vector<SelectionSnapshot> held;  // readers still hold the previous ones
+  std::deque<SelectionOutput> held;  // readers still hold the previous ones
   for (auto _ : state) {
     state.PauseTiming();
     m.addKeyframe(corridorKeyframe(static_cast<int>(m.size()), g.rng));
-    const Selection selection = cache.update(m.table(), config);
-    if (held.size() == 2) held.erase(held.begin());
+    const ChunkedSelection& selection = cache.update(m.table(), config);
     state.ResumeTiming();
-    held.push_back(makeSnapshot(m, selection, config));
+    SelectionOutput out;
+    out.keyframes = m.summaries();
+    out.names = m.imageNames();
+    out.table = m.table();
+    out.selection = selection;
+    out.config = config;
+    held.push_back(std::move(out));
+    if (held.size() > 2) held.pop_front();  // the oldest released: timed too
   }
 }
 BENCHMARK(BM_SnapshotAtScale)->Arg(10000)->Arg(100000)->Iterations(30)->Unit(benchmark::kMillisecond);

@@ -34,7 +34,7 @@ void check(const uint8_t* data, size_t size) {
   }
   try {
     auto selector = io::selectorFor(state);
-    const core::SelectionSnapshot snapshot = selector->snapshot();
+    const core::SelectionOutput snapshot = selector->output();
     if (snapshot.size() != state.selector.keyframes.size()) fuzz::broken("keyframes lost");
     // Continue with one frame (no depth: the depth source refuses it, the others may take it).
     core::Frame frame;

@@ -371,6 +371,8 @@ void ErrorResistanceMatrix::index(ViewId id) {
 
 ViewId ErrorResistanceMatrix::addKeyframe(Keyframe keyframe) {
   validateKeyframe(keyframe);
+  names_.push(views_.size(), keyframe.stamp, keyframe.image_name);
+  summaries_.push_back(KeyframeSummary::of(keyframe));
   views_.push_back(makeView(std::move(keyframe)));
   const auto n = static_cast<ViewId>(views_.size() - 1);
   table_.resize(views_.size());
@@ -390,6 +392,8 @@ void ErrorResistanceMatrix::setPoints(ViewId id, Eigen::Matrix3Xd points) {
   Keyframe keyframe = std::move(views_[static_cast<size_t>(id)].keyframe);
   keyframe.points = std::move(points);
   views_[static_cast<size_t>(id)] = makeView(std::move(keyframe));
+  summaries_.edit(static_cast<size_t>(id)).num_points =
+      static_cast<size_t>(views_[static_cast<size_t>(id)].keyframe.points.cols());
   max_reach_ = std::max(max_reach_, views_[static_cast<size_t>(id)].reach);
   table_.replaceRow(id, computeRow(id));
 }
@@ -422,10 +426,18 @@ void ErrorResistanceMatrix::restore(std::vector<Keyframe> keyframes,
   }
   std::vector<View> views;
   views.reserve(n);
-  for (Keyframe& k : keyframes) views.push_back(makeView(std::move(k)));
+  ChunkedVector<KeyframeSummary> summaries;
+  ImageNames names;
+  for (Keyframe& k : keyframes) {
+    names.push(views.size(), k.stamp, k.image_name);
+    summaries.push_back(KeyframeSummary::of(k));
+    views.push_back(makeView(std::move(k)));
+  }
   ErrorResistanceTable table(n);
   for (size_t i = 0; i < n; ++i) table.replaceRow(static_cast<ViewId>(i), rows[i]);
   views_ = std::move(views);
+  summaries_ = std::move(summaries);
+  names_ = std::move(names);
   table_ = std::move(table);
   pairs_evaluated_ = 0;
   // What insertion's candidate search needs of the views so far.
@@ -460,6 +472,7 @@ void ErrorResistanceMatrix::setPoses(const std::vector<std::pair<ViewId, CameraP
   for (const auto& [id, pose] : poses) {
     View& view = views_[static_cast<size_t>(id)];
     view = makeView(movedKeyframe(std::move(view.keyframe), pose));
+    summaries_.edit(static_cast<size_t>(id)).pose = view.keyframe.pose;
     // A rigid motion keeps a view's reach and focal length; only its centre moves in the grid.
     grid_.move(id, view.keyframe.pose.position);
   }
@@ -495,6 +508,8 @@ void ErrorResistanceMatrix::setPoses(const std::vector<std::pair<ViewId, CameraP
 
 void ErrorResistanceMatrix::clear() {
   views_.clear();
+  summaries_.clear();
+  names_.clear();
   table_.clear();
   pairs_evaluated_ = 0;
   grid_.clear();

@@ -42,7 +42,7 @@ void ErrorResistanceTable::resize(size_t size) {
 
 void ErrorResistanceTable::touch(size_t i) {
   static std::atomic<std::uint64_t> next_version{1};
-  row_version_[i] = next_version.fetch_add(1, std::memory_order_relaxed);
+  row_version_.edit(i) = next_version.fetch_add(1, std::memory_order_relaxed);
 }
 
 void ErrorResistanceTable::clear() {
@@ -83,23 +83,22 @@ void ErrorResistanceTable::set(ViewId i, ViewId j, double value) {
   if (i < 0 || j < 0 || static_cast<size_t>(i) >= size() || static_cast<size_t>(j) >= size())
     throw InvalidArgument("ErrorResistanceTable::set: index out of range");
   if (i == j) return;
-  SharedEntries& row = rows_[static_cast<size_t>(i)];
-  SharedEntries& col = cols_[static_cast<size_t>(j)];
+  const auto ui = static_cast<size_t>(i), uj = static_cast<size_t>(j);
   if (std::isfinite(value)) {
-    const size_t before = row.get().size();
-    upsert(row.edit(), j, value);
-    upsert(col.edit(), i, value);
-    finite_count_ += row.get().size() - before;
+    const size_t before = rows_[ui].get().size();
+    upsert(editRow(ui), j, value);
+    upsert(editColumn(uj), i, value);
+    finite_count_ += rows_[ui].get().size() - before;
     updateTop(static_cast<size_t>(i), j, value);
     touch(static_cast<size_t>(i));
     return;
   }
   // Removing an entry that is not there changes nothing and copies nothing.
-  const auto& current = row.get();
+  const auto& current = rows_[ui].get();
   const auto it = std::lower_bound(current.begin(), current.end(), j, byView);
   if (it == current.end() || it->view != j) return;
-  erase(row.edit(), j);
-  erase(col.edit(), i);
+  erase(editRow(ui), j);
+  erase(editColumn(uj), i);
   --finite_count_;
   updateTop(static_cast<size_t>(i), j, kInfinity);
   touch(static_cast<size_t>(i));
@@ -117,7 +116,7 @@ void ErrorResistanceTable::updateTop(size_t i, ViewId j, double value) {
     // outside the top may now belong in it, which only a scan of the row can tell.
     if (std::isfinite(value) && (!byValue({j, found->value}, {j, value}) || row_size <= view.size())) {
       // (or the whole row is in the top: just reorder)
-      auto& top = top_[i].edit();
+      auto& top = editTop(i);
       top[static_cast<size_t>(at)].value = value;
       std::sort(top.begin(), top.end(), byValue);
       return;
@@ -129,12 +128,12 @@ void ErrorResistanceTable::updateTop(size_t i, ViewId j, double value) {
   const TableEntry entry{j, value};
   if (view.size() < kTopCapacity) {
     // The top held the whole row before this entry arrived.
-    auto& top = top_[i].edit();
+    auto& top = editTop(i);
     top.insert(std::upper_bound(top.begin(), top.end(), entry, byValue), entry);
     return;
   }
   if (byValue(entry, view.back())) {
-    auto& top = top_[i].edit();
+    auto& top = editTop(i);
     top.pop_back();
     top.insert(std::upper_bound(top.begin(), top.end(), entry, byValue), entry);
   }
@@ -142,7 +141,7 @@ void ErrorResistanceTable::updateTop(size_t i, ViewId j, double value) {
 
 void ErrorResistanceTable::rescanTop(size_t i) {
   const auto& row = rows_[i].get();
-  auto& top = top_[i].edit();
+  auto& top = editTop(i);
   top.assign(row.begin(), row.end());
   const size_t keep = std::min(kTopCapacity, top.size());
   std::partial_sort(top.begin(), top.begin() + static_cast<std::ptrdiff_t>(keep), top.end(),
@@ -151,8 +150,13 @@ void ErrorResistanceTable::rescanTop(size_t i) {
 }
 
 void ErrorResistanceTable::replaceRow(ViewId i, std::vector<TableEntry> entries) {
-  auto& row = rows_.at(static_cast<size_t>(i)).edit();
-  for (const TableEntry& e : row) erase(cols_[static_cast<size_t>(e.view)].edit(), i);
+  if (i < 0 || static_cast<size_t>(i) >= size())
+    throw InvalidArgument("ErrorResistanceTable::replaceRow: row out of range");
+  for (const TableEntry& e : entries)
+    if (e.view < 0 || static_cast<size_t>(e.view) >= size())
+      throw InvalidArgument("ErrorResistanceTable::replaceRow: column out of range");
+  auto& row = editRow(static_cast<size_t>(i));
+  for (const TableEntry& e : row) erase(editColumn(static_cast<size_t>(e.view)), i);
   finite_count_ -= row.size();
   row.clear();
   std::sort(entries.begin(), entries.end(),
@@ -160,7 +164,7 @@ void ErrorResistanceTable::replaceRow(ViewId i, std::vector<TableEntry> entries)
   for (const TableEntry& e : entries) {
     if (e.view == i || !std::isfinite(e.value)) continue;
     row.push_back(e);
-    upsert(cols_.at(static_cast<size_t>(e.view)).edit(), i, e.value);
+    upsert(editColumn(static_cast<size_t>(e.view)), i, e.value);
   }
   finite_count_ += row.size();
   rescanTop(static_cast<size_t>(i));

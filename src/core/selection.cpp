@@ -6,6 +6,8 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <iterator>
+#include <stdexcept>
 #include <queue>
 #include <set>
 
@@ -161,7 +163,94 @@ std::vector<std::pair<ViewId, ViewId>> pairsFromSets(const std::vector<NextViewS
   return pairs;
 }
 
+bool PairBuckets::contains(ViewId a, ViewId b) const {
+  const ViewId lo = std::min(a, b), hi = std::max(a, b);
+  if (lo < 0 || static_cast<size_t>(lo) >= buckets_.size()) return false;
+  const Bucket& bucket = buckets_[static_cast<size_t>(lo)];
+  const auto it = std::lower_bound(bucket.begin(), bucket.end(), hi,
+                                   [](const Entry& e, ViewId v) { return e.hi < v; });
+  return it != bucket.end() && it->hi == hi;
+}
+
+std::vector<std::pair<ViewId, ViewId>> PairBuckets::toVector() const {
+  std::vector<std::pair<ViewId, ViewId>> out;
+  out.reserve(count_);
+  for (const auto& pair : *this) out.push_back(pair);
+  return out;
+}
+
+bool PairBuckets::add(ViewId a, ViewId b) {
+  const ViewId lo = std::min(a, b), hi = std::max(a, b);
+  Bucket& bucket = buckets_.edit(static_cast<size_t>(lo));
+  const auto it = std::lower_bound(bucket.begin(), bucket.end(), hi,
+                                   [](const Entry& e, ViewId v) { return e.hi < v; });
+  if (it != bucket.end() && it->hi == hi) {
+    ++it->sets;
+    return false;
+  }
+  bucket.insert(it, {hi, 1});
+  ++count_;
+  return true;
+}
+
+bool PairBuckets::remove(ViewId a, ViewId b) {
+  const ViewId lo = std::min(a, b), hi = std::max(a, b);
+  Bucket& bucket = buckets_.edit(static_cast<size_t>(lo));
+  const auto it = std::lower_bound(bucket.begin(), bucket.end(), hi,
+                                   [](const Entry& e, ViewId v) { return e.hi < v; });
+  if (it == bucket.end() || it->hi != hi) throw std::logic_error("PairBuckets::remove: no such pair");
+  if (--it->sets > 0) return false;
+  bucket.erase(it);
+  --count_;
+  return true;
+}
+
+PairChanges pairChanges(const std::vector<std::pair<ViewId, ViewId>>& before,
+                        const std::vector<std::pair<ViewId, ViewId>>& after) {
+  PairChanges c;
+  std::set_difference(after.begin(), after.end(), before.begin(), before.end(),
+                      std::back_inserter(c.added));
+  std::set_difference(before.begin(), before.end(), after.begin(), after.end(),
+                      std::back_inserter(c.removed));
+  return c;
+}
+
+std::pair<ViewId, ViewId> ChunkedSelection::initialPair() const {
+  if (start_view < 0 || static_cast<size_t>(start_view) >= next_views.size() ||
+      next_views[static_cast<size_t>(start_view)].empty())
+    return {-1, -1};
+  return {start_view, next_views[static_cast<size_t>(start_view)].front()};
+}
+
+ChunkedSelection ChunkedSelection::of(const Selection& plain) {
+  ChunkedSelection s;
+  s.next_views = {plain.next_views.begin(), plain.next_views.end()};
+  s.final_next_views = {plain.final_next_views.begin(), plain.final_next_views.end()};
+  s.start_view = plain.start_view;
+  s.order = {plain.order.begin(), plain.order.end()};
+  s.completed = {plain.completed.begin(), plain.completed.end()};
+  s.isolated = {plain.isolated.begin(), plain.isolated.end()};
+  s.pairs.resize(plain.final_next_views.size());
+  for (const auto& [a, b] : plain.pairs) s.pairs.add(a, b);
+  return s;
+}
+
+Selection ChunkedSelection::toSelection() const {
+  Selection s;
+  s.next_views = next_views.toVector();
+  s.final_next_views = final_next_views.toVector();
+  s.start_view = start_view;
+  s.order = order.toVector();
+  s.completed = completed.toVector();
+  s.isolated = isolated.toVector();
+  s.pairs = pairs.toVector();
+  return s;
+}
+
 namespace {
+
+NextViewSet& setToChange(std::vector<NextViewSet>& sets, size_t i) { return sets[i]; }
+NextViewSet& setToChange(ChunkedVector<NextViewSet>& sets, size_t i) { return sets.edit(i); }
 
 /// Best a (by (E[a][x], a)) over column x, optionally among visited views only; -1 if none.
 ViewId bestPredecessor(const ErrorResistanceTable& e, ViewId x, const std::vector<char>* visited) {
@@ -177,8 +266,9 @@ ViewId bestPredecessor(const ErrorResistanceTable& e, ViewId x, const std::vecto
   return best;
 }
 
-void completePaper(const ErrorResistanceTable& e, const std::vector<char>& visited,
-                   Selection& out) {
+/// Paper completion into a Selection or a ChunkedSelection.
+template <typename Out>
+void completePaper(const ErrorResistanceTable& e, const std::vector<char>& visited, Out& out) {
   for (size_t x = 0; x < e.size(); ++x) {
     if (visited[x]) continue;
     const ViewId a = bestPredecessor(e, static_cast<ViewId>(x), nullptr);
@@ -188,9 +278,9 @@ void completePaper(const ErrorResistanceTable& e, const std::vector<char>& visit
     }
     // x may already be in C_a (a itself unvisited): the set stays free of duplicates, and the
     // completion is still reported.
-    auto& set = out.final_next_views[static_cast<size_t>(a)];
+    const auto& set = out.final_next_views[static_cast<size_t>(a)];
     if (std::find(set.begin(), set.end(), static_cast<ViewId>(x)) == set.end())
-      set.push_back(static_cast<ViewId>(x));
+      setToChange(out.final_next_views, static_cast<size_t>(a)).push_back(static_cast<ViewId>(x));
     out.completed.push_back({static_cast<ViewId>(x), a});
   }
 }
@@ -241,8 +331,14 @@ Selection selectViews(const ErrorResistanceTable& e, const SelectionConfig& conf
 // --- SelectionCache -----------------------------------------------------------------------------
 
 void SelectionCache::clear() {
+  // The pairs that go with the old selection, for whoever follows the changes.
+  if (track_pair_changes_)
+    for (const auto& [a, b] : selection_.pairs) logPair(a, b, false);
   configured_ = false;
-  selection_ = Selection{};
+  selection_ = ChunkedSelection{};
+  counted_.clear();
+  final_changed_.clear();
+  final_changed_flag_.clear();
   seen_.clear();
   first_value_.clear();
   extended_rows_.clear();
@@ -278,8 +374,9 @@ void SelectionCache::resetFinalSets() {
   auto& final_sets = selection_.final_next_views;
   for (const ViewId a : extended_rows_)
     if (static_cast<size_t>(a) < final_sets.size()) {
-      final_sets[static_cast<size_t>(a)] = selection_.next_views[static_cast<size_t>(a)];
+      final_sets.set(static_cast<size_t>(a), selection_.next_views[static_cast<size_t>(a)]);
       extended_[static_cast<size_t>(a)] = 0;
+      finalSetChanged(a);
     }
   extended_rows_.clear();
 }
@@ -298,9 +395,10 @@ void SelectionCache::refreshSets(const ErrorResistanceTable& e) {
   flat_size_.resize(n, 0);
   flat_.resize(n * flat_stride_);
   std::vector<TableEntry> best;
+  final_changed_flag_.resize(n, 0);
   for (const ViewId row : changed_) {
     const auto i = static_cast<size_t>(row);
-    auto& set = next[i];
+    auto& set = next.edit(i);
     set.clear();
     if (keep <= ErrorResistanceTable::kTopCapacity) {
       const auto& top = e.top(row);
@@ -317,8 +415,9 @@ void SelectionCache::refreshSets(const ErrorResistanceTable& e) {
     }
     // A changed row holds no completion that is kept: a kept completion's view was added to a
     // view visited before the first changed row's position.
-    final_sets[i] = set;
+    final_sets.set(i, set);
     extended_[i] = 0;
+    finalSetChanged(row);
     if (flat_stride_) {
       std::copy(set.begin(), set.end(), flat_.begin() + static_cast<std::ptrdiff_t>(i * flat_stride_));
       flat_size_[i] = static_cast<std::uint32_t>(set.size());
@@ -372,6 +471,7 @@ void SelectionCache::completePaper(const ErrorResistanceTable& e) {
   for (const CompletedView& c : selection_.completed) {
     extended_rows_.push_back(c.added_to);
     extended_[static_cast<size_t>(c.added_to)] = 1;
+    finalSetChanged(c.added_to);
   }
 }
 
@@ -399,15 +499,16 @@ void SelectionCache::completeReachable(const ErrorResistanceTable& e) {
 }
 
 void SelectionCache::completionLoop(const ErrorResistanceTable& e) {
-  Selection& out = selection_;
+  ChunkedSelection& out = selection_;
   while (!candidates_.empty()) {
     const ViewId x = candidates_.top();
     candidates_.pop();
     if (visited_[static_cast<size_t>(x)]) continue;
     const ViewId a = bestPredecessor(e, x, &visited_);
-    out.final_next_views[static_cast<size_t>(a)].push_back(x);
+    out.final_next_views.edit(static_cast<size_t>(a)).push_back(x);
     extended_rows_.push_back(a);
     extended_[static_cast<size_t>(a)] = 1;
+    finalSetChanged(a);
     out.completed.push_back({x, a});
     const size_t scanned = out.order.size();
     visit(x, -1);
@@ -436,14 +537,15 @@ std::ptrdiff_t SelectionCache::resumePosition(ViewId start) const {
 }
 
 void SelectionCache::undoCompletionsFrom(size_t p) {
-  Selection& out = selection_;
+  ChunkedSelection& out = selection_;
   size_t keep = out.completed.size();
   while (keep > 0 &&
          static_cast<size_t>(position_[static_cast<size_t>(out.completed[keep - 1].view)]) >= p) {
     --keep;
     const auto a = static_cast<size_t>(out.completed[keep].added_to);
-    out.final_next_views[a].pop_back();
+    out.final_next_views.edit(a).pop_back();
     if (out.final_next_views[a].size() == out.next_views[a].size()) extended_[a] = 0;
+    finalSetChanged(out.completed[keep].added_to);
   }
   out.completed.resize(keep);
   extended_rows_.clear();
@@ -451,7 +553,7 @@ void SelectionCache::undoCompletionsFrom(size_t p) {
 }
 
 void SelectionCache::resumeReachable(const ErrorResistanceTable& e, size_t p) {
-  Selection& out = selection_;
+  ChunkedSelection& out = selection_;
   const size_t n = e.size();
   // The views to look at again: the old order from p on, the isolated, the new.
   reexamine_.assign(out.order.begin() + static_cast<std::ptrdiff_t>(p), out.order.end());
@@ -497,40 +599,69 @@ void SelectionCache::resumeReachable(const ErrorResistanceTable& e, size_t p) {
   completionLoop(e);
 }
 
-void SelectionCache::buildPairs() {
-  const size_t n = selection_.final_next_views.size();
-  bucket_begin_.assign(n + 1, 0);
-  for (size_t i = 0; i < n; ++i) {
-    const SetView set = finalSet(static_cast<ViewId>(i));
-    for (size_t q = 0; q < set.size; ++q)
-      ++bucket_begin_[std::min(i, static_cast<size_t>(set.data[q])) + 1];
-  }
-  for (size_t i = 0; i < n; ++i) bucket_begin_[i + 1] += bucket_begin_[i];
-  bucket_.resize(bucket_begin_[n]);
-  std::vector<std::size_t>& fill = bucket_begin_;  // advanced while filling, then restored
-  for (size_t i = 0; i < n; ++i) {
-    const SetView set = finalSet(static_cast<ViewId>(i));
-    for (size_t q = 0; q < set.size; ++q) {
-      const auto j = static_cast<size_t>(set.data[q]);
-      bucket_[fill[std::min(i, j)]++] = static_cast<ViewId>(std::max(i, j));
-    }
-  }
-  // fill[lo] is now the end of bucket lo, which is the begin of lo + 1.
-  auto& pairs = selection_.pairs;
-  pairs.clear();
-  size_t begin = 0;
-  for (size_t lo = 0; lo < n; ++lo) {
-    const size_t end = fill[lo];
-    std::sort(bucket_.begin() + static_cast<std::ptrdiff_t>(begin),
-              bucket_.begin() + static_cast<std::ptrdiff_t>(end));
-    for (size_t q = begin; q < end; ++q)
-      if (q == begin || bucket_[q] != bucket_[q - 1])
-        pairs.emplace_back(static_cast<ViewId>(lo), bucket_[q]);
-    begin = end;
-  }
+void SelectionCache::finalSetChanged(ViewId a) {
+  const auto i = static_cast<size_t>(a);
+  if (final_changed_flag_.size() <= i) final_changed_flag_.resize(i + 1, 0);
+  if (final_changed_flag_[i]) return;
+  final_changed_flag_[i] = 1;
+  final_changed_.push_back(a);
 }
 
-const Selection& SelectionCache::update(const ErrorResistanceTable& e,
+void SelectionCache::logPair(ViewId a, ViewId b, bool added) {
+  pair_log_.push_back({std::min(a, b), std::max(a, b), added});
+}
+
+void SelectionCache::updatePairs() {
+  const auto& final_sets = selection_.final_next_views;
+  const size_t n = final_sets.size();
+  selection_.pairs.resize(n);
+  static const NextViewSet kEmpty;
+  auto holds = [](const NextViewSet& set, ViewId x) {
+    return std::find(set.begin(), set.end(), x) != set.end();
+  };
+  for (const ViewId a : final_changed_) {
+    const auto i = static_cast<size_t>(a);
+    final_changed_flag_[i] = 0;
+    const NextViewSet& was = i < counted_.size() ? counted_[i] : kEmpty;
+    const NextViewSet& now = final_sets[i];
+    if (was == now) continue;
+    for (const ViewId x : was)
+      if (!holds(now, x) && selection_.pairs.remove(a, x) && track_pair_changes_)
+        logPair(a, x, false);
+    for (const ViewId x : now)
+      if (!holds(was, x) && selection_.pairs.add(a, x) && track_pair_changes_) logPair(a, x, true);
+  }
+  final_changed_.clear();
+  counted_ = final_sets;  // a copy sharing every chunk
+}
+
+void SelectionCache::trackPairChanges(bool on) {
+  track_pair_changes_ = on;
+  if (!on) pair_log_.clear();
+}
+
+PairChanges SelectionCache::takePairChanges() {
+  PairChanges out;
+  // Per pair, in the order they happened: the first event says whether it was there before,
+  // the last whether it is there now.
+  std::stable_sort(pair_log_.begin(), pair_log_.end(), [](const PairEvent& x, const PairEvent& y) {
+    return x.lo < y.lo || (x.lo == y.lo && x.hi < y.hi);
+  });
+  for (size_t q = 0; q < pair_log_.size();) {
+    size_t end = q;
+    while (end < pair_log_.size() && pair_log_[end].lo == pair_log_[q].lo &&
+           pair_log_[end].hi == pair_log_[q].hi)
+      ++end;
+    const bool before = !pair_log_[q].added, after = pair_log_[end - 1].added;
+    if (!before && after) out.added.emplace_back(pair_log_[q].lo, pair_log_[q].hi);
+    if (before && !after) out.removed.emplace_back(pair_log_[q].lo, pair_log_[q].hi);
+    q = end;
+  }
+  pair_log_.clear();
+  return out;
+}
+
+const ChunkedSelection& SelectionCache::update(const ErrorResistanceTable& e,
                                         const SelectionConfig& config) {
   config.validate();
   if (!configured_ || config.k != config_.k || config.completion != config_.completion ||
@@ -539,7 +670,7 @@ const Selection& SelectionCache::update(const ErrorResistanceTable& e,
   config_ = config;
   configured_ = true;
   ++updates_;
-  Selection& out = selection_;
+  ChunkedSelection& out = selection_;
   const size_t n = e.size();
   findChangedRows(e);
   // s: the best C_i[0] by (value, row); rows ascend, so a tie keeps the smaller row.
@@ -582,7 +713,7 @@ const Selection& SelectionCache::update(const ErrorResistanceTable& e,
   previous_size_ = n;
   previous_start_ = start;
   resumable_ = config_.completion == CompletionMode::kReachable && start >= 0;
-  buildPairs();
+  updatePairs();
   return out;
 }
 

@@ -132,10 +132,20 @@ void ViewSelector::correctPoses(const std::vector<std::pair<ViewId, CameraPose>>
     if (id == last) policy_.keyframeAccepted(matrix_.keyframe(id).pose);
 }
 
-Selection ViewSelector::select() const { return selection_.update(matrix_.table(), config_.selection); }
+Selection ViewSelector::select() const {
+  return selection_.update(matrix_.table(), config_.selection).toSelection();
+}
 
-SelectionSnapshot ViewSelector::snapshot() const {
-  return makeSnapshot(matrix_, select(), config_.selection, params());
+SelectionOutput ViewSelector::output() const {
+  SelectionOutput s;
+  s.keyframes = matrix_.summaries();
+  s.names = matrix_.imageNames();
+  s.table = matrix_.table();
+  s.selection = selection_.update(matrix_.table(), config_.selection);
+  s.config = config_.selection;
+  if (!params_) params_ = std::make_shared<const Params>(params());
+  s.params = params_;
+  return s;
 }
 
 void ViewSelector::setConfig(const ViewSelectorConfig& requested) {
@@ -144,6 +154,7 @@ void ViewSelector::setConfig(const ViewSelectorConfig& requested) {
   policy_.setConfig(config.keyframes);
   matrix_.setConfig(config.matrix);
   config_ = config;
+  params_.reset();
 }
 
 void ViewSelector::reset() {
@@ -179,6 +190,7 @@ void ViewSelector::restore(const ViewSelectorState& state) {
   matrix_ = std::move(matrix);
   policy_ = std::move(policy);
   last_stamp_ = state.last_stamp;
+  params_.reset();
 }
 
 Params ViewSelector::params() const {

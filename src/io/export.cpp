@@ -9,7 +9,7 @@
 
 namespace view_selection::io {
 
-ExportResult exportSelection(const std::string& directory, const core::SelectionSnapshot& snapshot,
+ExportResult exportSelection(const std::string& directory, const core::SelectionOutput& snapshot,
                              const nlohmann::json& params, const ExportOptions& options) {
   namespace fs = std::filesystem;
   if (directory.empty())

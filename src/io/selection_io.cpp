@@ -18,13 +18,13 @@ nlohmann::json finiteOrNull(double value) {
 }
 
 nlohmann::json keyframeToJson(core::ViewId id, const core::KeyframeSummary& kf,
-                              const Eigen::Matrix3Xd* points) {
+                              const std::string& image, const Eigen::Matrix3Xd* points) {
   const Eigen::Quaterniond q = kf.pose.orientation.normalized();
   const core::PinholeIntrinsics& k = kf.intrinsics;
   nlohmann::json j = {
       {"id", id},
       {"stamp", kf.stamp},
-      {"image", kf.image_name},
+      {"image", image},
       {"position", {kf.pose.position.x(), kf.pose.position.y(), kf.pose.position.z()}},
       {"orientation_xyzw", {q.x(), q.y(), q.z(), q.w()}},
       {"intrinsics", {k.fx, k.fy, k.cx, k.cy, k.width, k.height}},
@@ -49,10 +49,10 @@ class SelectionWriter {
  public:
   SelectionWriter(std::ostream& out) : out_(out) {}
 
-  void write(const core::SelectionSnapshot& snapshot, const nlohmann::json& params,
+  void write(const core::SelectionOutput& snapshot, const nlohmann::json& params,
              const core::ErrorResistanceMatrix* points, bool sparse) {
     const size_t n = snapshot.size();
-    const core::Selection& sel = snapshot.selection;
+    const core::ChunkedSelection& sel = snapshot.selection;
     out_ << "{\n";
     key("format");
     out_ << nlohmann::json(sparse ? kSparseFormat : kDenseFormat).dump();
@@ -61,7 +61,8 @@ class SelectionWriter {
     key("keyframes");
     list(n, [&](size_t i) {
       const auto id = static_cast<core::ViewId>(i);
-      out_ << keyframeToJson(id, snapshot.keyframes[i], points ? &points->keyframe(id).points : nullptr)
+      out_ << keyframeToJson(id, snapshot.keyframes[i], snapshot.imageName(i),
+                             points ? &points->keyframe(id).points : nullptr)
                   .dump();
     });
     key("error_resistance");
@@ -101,8 +102,11 @@ class SelectionWriter {
     key("final_next_views");
     sets(sel.final_next_views);
     key("pairs");
-    list(sel.pairs.size(), [&](size_t q) {
-      out_ << '[' << sel.pairs[q].first << ',' << sel.pairs[q].second << ']';
+    auto pair = sel.pairs.begin();
+    list(sel.pairs.size(), [&](size_t) {
+      const auto [a, b] = *pair;
+      out_ << '[' << a << ',' << b << ']';
+      ++pair;
     });
     out_ << "\n}\n";
   }
@@ -127,12 +131,13 @@ class SelectionWriter {
     }
     out_ << "  ]";
   }
-  void ids(const std::vector<core::ViewId>& values) {
+  template <typename Ids>
+  void ids(const Ids& values) {
     out_ << '[';
     for (size_t q = 0; q < values.size(); ++q) out_ << (q ? "," : "") << values[q];
     out_ << ']';
   }
-  void sets(const std::vector<core::NextViewSet>& values) {
+  void sets(const core::ChunkedVector<core::NextViewSet>& values) {
     list(values.size(), [&](size_t i) { ids(values[i]); });
   }
   /// The shortest text that reads back as the same double (nlohmann's), null for +inf.
@@ -149,13 +154,13 @@ bool sparseFormatFor(size_t keyframes, JsonFormat format) {
          (format == JsonFormat::kAuto && keyframes > kDenseFormatMaxKeyframes);
 }
 
-void writeSelectionJson(std::ostream& out, const core::SelectionSnapshot& snapshot,
+void writeSelectionJson(std::ostream& out, const core::SelectionOutput& snapshot,
                         const nlohmann::json& params, const core::ErrorResistanceMatrix* points,
                         JsonFormat format) {
   SelectionWriter(out).write(snapshot, params, points, sparseFormatFor(snapshot.size(), format));
 }
 
-nlohmann::json selectionToJson(const core::SelectionSnapshot& snapshot,
+nlohmann::json selectionToJson(const core::SelectionOutput& snapshot,
                                const nlohmann::json& params,
                                const core::ErrorResistanceMatrix* points, JsonFormat format) {
   std::stringstream text;
@@ -166,11 +171,11 @@ nlohmann::json selectionToJson(const core::SelectionSnapshot& snapshot,
 nlohmann::json selectionToJson(const core::ErrorResistanceMatrix& matrix,
                                const core::Selection& selection, const nlohmann::json& params,
                                bool dump_points) {
-  return selectionToJson(core::makeSnapshot(matrix, selection, {}), params,
+  return selectionToJson(core::makeOutput(matrix, selection, {}), params,
                          dump_points ? &matrix : nullptr);
 }
 
-void writeSelectionJson(const std::string& path, const core::SelectionSnapshot& snapshot,
+void writeSelectionJson(const std::string& path, const core::SelectionOutput& snapshot,
                         const nlohmann::json& params, const core::ErrorResistanceMatrix* points,
                         JsonFormat format) {
   // Streamed to the file: the system's reason on failure (a full disk, ...).
@@ -182,12 +187,13 @@ void writeSelectionJson(const std::string& path, const core::SelectionSnapshot& 
 void writeSelectionJson(const std::string& path, const core::ErrorResistanceMatrix& matrix,
                         const core::Selection& selection, const nlohmann::json& params,
                         bool dump_points, JsonFormat format) {
-  writeSelectionJson(path, core::makeSnapshot(matrix, selection, {}), params,
+  writeSelectionJson(path, core::makeOutput(matrix, selection, {}), params,
                      dump_points ? &matrix : nullptr, format);
 }
 
-void writePairsTxt(const std::string& path, const std::vector<std::string>& image_names,
-                   const std::vector<std::pair<core::ViewId, core::ViewId>>& pairs) {
+template <typename Pairs>
+void writePairsTxtOf(const std::string& path, const std::vector<std::string>& image_names,
+                     const Pairs& pairs) {
   for (const auto& [a, b] : pairs) {
     for (const core::ViewId v : {a, b}) {
       if (v < 0 || static_cast<size_t>(v) >= image_names.size())
@@ -205,14 +211,24 @@ void writePairsTxt(const std::string& path, const std::vector<std::string>& imag
   writeFileContents(path, out.str());
 }
 
-void writeMvsPairTxt(const std::string& path, const core::SelectionSnapshot& snapshot) {
+void writePairsTxt(const std::string& path, const std::vector<std::string>& image_names,
+                   const std::vector<std::pair<core::ViewId, core::ViewId>>& pairs) {
+  writePairsTxtOf(path, image_names, pairs);
+}
+
+void writePairsTxt(const std::string& path, const std::vector<std::string>& image_names,
+                   const core::PairBuckets& pairs) {
+  writePairsTxtOf(path, image_names, pairs);
+}
+
+void writeMvsPairTxt(const std::string& path, const core::SelectionOutput& snapshot) {
   writeFileStreaming(path, [&](std::ostream& out) {
     out.precision(9);
     const auto& sets = snapshot.selection.final_next_views;
     out << snapshot.size() << '\n';
+    const std::vector<core::ViewId> none;
     for (size_t i = 0; i < snapshot.size(); ++i) {
       out << i << '\n';
-      const std::vector<core::ViewId> none;
       const auto& set = i < sets.size() ? sets[i] : none;
       out << set.size();
       for (const core::ViewId j : set)

@@ -23,9 +23,9 @@ const cv::Scalar kIsolated(0, 0, 255);
 
 }  // namespace
 
-cv::Mat renderSelectionPlot(const core::SelectionSnapshot& snapshot, int size,
+cv::Mat renderSelectionPlot(const core::SelectionOutput& snapshot, int size,
                             const std::string& title) {
-  const core::Selection& selection = snapshot.selection;
+  const core::ChunkedSelection& selection = snapshot.selection;
   cv::Mat image(size, size, CV_8UC3, kBackground);
   const size_t n = snapshot.size();
   if (n == 0) {
@@ -115,7 +115,7 @@ void writePng(const std::string& path, const cv::Mat& image) {
   writeFileContents(path, png.data(), png.size());
 }
 
-void writeSelectionPlot(const std::string& path, const core::SelectionSnapshot& snapshot,
+void writeSelectionPlot(const std::string& path, const core::SelectionOutput& snapshot,
                         const std::string& title) {
   const cv::Mat image = renderSelectionPlot(snapshot, 1000, title);
   writePng(path, image);

@@ -233,17 +233,13 @@ geometry_msgs::Transform transformToMsg(const core::CameraPose& pose) {
   return m;
 }
 
-std::string keyframeImageName(double stamp) {
-  char buffer[64];
-  std::snprintf(buffer, sizeof buffer, "rgb/%.6f.png", stamp);
-  return buffer;
-}
+std::string keyframeImageName(double stamp) { return core::defaultImageName(stamp); }
 
 namespace {
 
-view_selection::ViewSelection selectionHeader(const core::SelectionSnapshot& snapshot,
+view_selection::ViewSelection selectionHeader(const core::SelectionOutput& snapshot,
                                               const std::string& world_frame) {
-  const core::Selection& selection = snapshot.selection;
+  const core::ChunkedSelection& selection = snapshot.selection;
   view_selection::ViewSelection m;
   m.header.frame_id = world_frame;
   if (snapshot.size() > 0) m.header.stamp = ros::Time(snapshot.keyframes.back().stamp);
@@ -259,21 +255,21 @@ view_selection::ViewSelection selectionHeader(const core::SelectionSnapshot& sna
 
 }  // namespace
 
-view_selection::KeyframeInfo keyframeToMsg(const core::SelectionSnapshot& snapshot,
+view_selection::KeyframeInfo keyframeToMsg(const core::SelectionOutput& snapshot,
                                            core::ViewId view) {
   const core::KeyframeSummary& kf = snapshot.keyframes[static_cast<size_t>(view)];
   view_selection::KeyframeInfo info;
   info.id = view;
   info.stamp = ros::Time(kf.stamp);
-  info.image_name = kf.image_name;
+  info.image_name = snapshot.imageName(static_cast<size_t>(view));
   info.pose = poseToMsg(kf.pose);
   info.num_points = static_cast<int32_t>(kf.num_points);
   return info;
 }
 
-view_selection::NextViewSet nextViewSetToMsg(const core::SelectionSnapshot& snapshot,
+view_selection::NextViewSet nextViewSetToMsg(const core::SelectionOutput& snapshot,
                                              core::ViewId view) {
-  const core::Selection& selection = snapshot.selection;
+  const core::ChunkedSelection& selection = snapshot.selection;
   const core::ErrorResistanceTable& e = snapshot.table;
   const auto i = static_cast<size_t>(view);
   view_selection::NextViewSet set;
@@ -292,9 +288,9 @@ view_selection::NextViewSet nextViewSetToMsg(const core::SelectionSnapshot& snap
   return set;
 }
 
-view_selection::ViewSelection selectionToMsg(const core::SelectionSnapshot& snapshot,
+view_selection::ViewSelection selectionToMsg(const core::SelectionOutput& snapshot,
                                              const std::string& world_frame) {
-  const core::Selection& selection = snapshot.selection;
+  const core::ChunkedSelection& selection = snapshot.selection;
   view_selection::ViewSelection m = selectionHeader(snapshot, world_frame);
   const size_t n = snapshot.size();
   m.keyframes.resize(n);
@@ -319,7 +315,7 @@ view_selection::ViewSelection selectionToMsg(const core::SelectionSnapshot& snap
   return m;
 }
 
-view_selection::ViewSelection selectionUpdateToMsg(const core::SelectionSnapshot& snapshot,
+view_selection::ViewSelection selectionUpdateToMsg(const core::SelectionOutput& snapshot,
                                                    const std::string& world_frame,
                                                    const std::vector<core::ViewId>& views) {
   view_selection::ViewSelection m = selectionHeader(snapshot, world_frame);

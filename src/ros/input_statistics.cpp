@@ -91,24 +91,24 @@ void InputStatistics::frameOffered(uint64_t session, const ros::Time& stamp,
 
 void InputStatistics::drop(uint64_t session, const std::string& reason, const std::string& message,
                            const ros::Time& stamp) {
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (session != session_) return;  // received before a reset: not this session's
-  }
-  count(reason, message, stamp, true);
+  count(reason, message, stamp, &session);
 }
 
 void InputStatistics::dropInput(const std::string& reason, const std::string& message,
                                 const ros::Time& stamp) {
-  count(reason, message, stamp, false);
+  count(reason, message, stamp, nullptr);
 }
 
 void InputStatistics::count(const std::string& reason, const std::string& message,
-                            const ros::Time& stamp, bool frame) {
+                            const ros::Time& stamp, const uint64_t* session) {
   uint64_t suppressed = 0;
   bool log = false;
+  const bool frame = session != nullptr;
   {
     std::lock_guard<std::mutex> lock(mutex_);
+    // Checked under the lock reset() takes: a frame received before a reset is not this
+    // session's, whenever its outcome arrives.
+    if (session && *session != session_) return;
     ++counts_.dropped[reason];
     counts_.last_error = reason + ": " + message;
     counts_.last_error_stamp = stamp;

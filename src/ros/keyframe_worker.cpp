@@ -32,9 +32,9 @@ KeyframeWorker::KeyframeWorker(const NodeConfig& config, PoseProvider& poses,
     images_ = newImageCache();
   }
   {
-    std::lock_guard<std::mutex> lock(state_mutex_);
+    std::lock_guard<std::timed_mutex> lock(state_mutex_);
     restoreLoaded();
-    publishSnapshotLocked();
+    shareSelectionLocked();
   }
   thread_ = std::thread([this] { loop(); });
 }
@@ -51,7 +51,7 @@ KeyframeWorker::~KeyframeWorker() {
   if (!keeper_.enabled()) return;
   std::optional<StateSnapshot> last;
   {
-    std::lock_guard<std::mutex> lock(state_mutex_);
+    std::lock_guard<std::timed_mutex> lock(state_mutex_);
     if (changed_since_save_) last = captureStateLocked();
   }
   if (!last) return;
@@ -89,6 +89,7 @@ void KeyframeWorker::restoreLoaded() {
   }
   last_stamp_ = loaded->selector.last_stamp;
   const size_t keyframes = selector_->matrix().size();
+  keyframe_count_ = keyframes;
   // The state file keeps no images: the continued keyframes have none (null), later ones do.
   if (images_)
     for (size_t i = 0; i < keyframes; ++i) images_->push(nullptr);
@@ -113,10 +114,11 @@ void KeyframeWorker::push(PendingFrame frame) {
       overflow = std::move(queue_.front());
       queue_.pop_front();
     }
-    std::lock_guard<std::mutex> state(state_mutex_);
-    // Counted here, under the locks reset() takes, so a frame belongs to exactly one session.
+    // Counted under the lock reset() starts a new session under: a frame belongs to exactly one
+    // session. No other lock: the inputs never wait for an insertion.
     const uint64_t session = statistics_.frameReceived();
-    queue_.push_back({std::move(frame), generation_, session, ros::WallTime::now()});
+    queue_.push_back({std::move(frame), generation_.load(), session, ros::WallTime::now()});
+    queued_count_ = queue_.size();
   }
   queue_cv_.notify_one();
   if (overflow)
@@ -128,8 +130,7 @@ void KeyframeWorker::push(PendingFrame frame) {
 void KeyframeWorker::drop(const Queued& queued, const std::string& reason,
                           const std::string& message) {
   statistics_.drop(queued.session, reason, message, queued.frame.image->header.stamp);
-  std::lock_guard<std::mutex> lock(state_mutex_);
-  if (queued.generation == generation_) changed_since_save_ = true;
+  if (queued.generation == generation_.load()) changed_since_save_ = true;
 }
 
 size_t KeyframeWorker::pending(double* oldest_age) const {
@@ -140,28 +141,63 @@ size_t KeyframeWorker::pending(double* oldest_age) const {
 }
 
 size_t KeyframeWorker::reset() {
-  StateSnapshot empty;
+  std::shared_ptr<const ServedSelection> old;  // released after the locks
   size_t forgotten = 0;
   {
     std::lock_guard<std::mutex> queue_lock(queue_mutex_);
-    std::lock_guard<std::mutex> lock(state_mutex_);
     queue_.clear();
-    forgotten = selector_->matrix().size();
-    selector_->reset();
-    if (images_) images_ = newImageCache();  // snapshots taken before keep the old one
-    last_stamp_.reset();
-    ++generation_;
+    queued_count_ = 0;
     statistics_.reset();
-    publishSnapshotLocked();
-    keyframes_since_save_ = 0;
-    empty = captureStateLocked();
+    std::lock_guard<std::mutex> lock(served_mutex_);
+    ++generation_;
+    forgotten = keyframe_count_.exchange(0);
+    // Empty at once, with the parameters in force; the worker's thread clears the selector
+    // itself before its next frame (applyResetLocked) and shares its own empty selection then.
+    auto empty = std::make_shared<ServedSelection>();
+    empty->version = ++version_;
+    empty->selection.config = served_->selection.config;
+    empty->selection.params = served_->selection.params;
+    old = std::move(served_);
+    served_ = std::move(empty);
   }
-  keeper_.saveLater(std::move(empty));
+  queue_cv_.notify_one();
   return forgotten;
 }
 
+void KeyframeWorker::applyResetLocked(uint64_t generation) {
+  selector_->reset();
+  if (images_) images_ = newImageCache();  // selections shared before keep the old one
+  last_stamp_.reset();
+  keyframes_since_save_ = 0;
+  applied_generation_ = generation;
+  unshared_ = false;
+  shareSelectionLocked();
+  keeper_.saveLater(captureStateLocked());
+}
+
+void KeyframeWorker::applyRequests() {
+  std::optional<core::ViewSelectorConfig> config;
+  uint64_t generation = 0;
+  {
+    std::lock_guard<std::mutex> lock(queue_mutex_);
+    config = std::move(pending_config_);
+    pending_config_.reset();
+    generation = generation_.load();
+  }
+  if (generation == applied_generation_ && !config) return;
+  std::lock_guard<std::timed_mutex> lock(state_mutex_);
+  if (generation != applied_generation_) applyResetLocked(generation);
+  if (config) {
+    // Readers keep the selection shared last meanwhile (its lists are shared copy-on-write,
+    // so recomputing E in place does not touch what they read).
+    selector_->setConfig(*config);
+    changed_since_save_ = true;
+    shareSelectionLocked();
+  }
+}
+
 StateSnapshot KeyframeWorker::captureState() {
-  std::lock_guard<std::mutex> lock(state_mutex_);
+  std::lock_guard<std::timed_mutex> lock(state_mutex_);
   return captureStateLocked();
 }
 
@@ -176,27 +212,28 @@ StateSnapshot KeyframeWorker::captureStateLocked() {
 }
 
 void KeyframeWorker::setMapPoints(Eigen::Matrix3Xd points) {
-  std::lock_guard<std::mutex> lock(state_mutex_);
+  std::lock_guard<std::timed_mutex> lock(state_mutex_);
   auto* map = dynamic_cast<points::MapPointSource*>(&selector_->pointSource());
   if (!map) return;
   map->setMapPoints(std::move(points));
   const std::vector<core::ViewId> rows = selector_->applyPointUpdates();
   changed_since_save_ = true;
-  if (!rows.empty()) publishSnapshotLocked();
+  if (!rows.empty()) shareSelectionLocked();
   ROS_DEBUG_STREAM("view_selection: map of " << map->mapPoints().cols() << " points, "
                                              << rows.size() << " keyframe rows recomputed");
 }
 
 void KeyframeWorker::reconfigure(const core::ViewSelectorConfig& config) {
-  std::lock_guard<std::mutex> lock(state_mutex_);
-  selector_->setConfig(config);
-  changed_since_save_ = true;
-  publishSnapshotLocked();
+  {
+    std::lock_guard<std::mutex> lock(queue_mutex_);
+    pending_config_ = config;
+  }
+  queue_cv_.notify_one();
 }
 
 size_t KeyframeWorker::correctPoses(const std::vector<core::TimedPose>& trajectory,
                                     const core::PoseCorrectionConfig& config) {
-  std::lock_guard<std::mutex> lock(state_mutex_);
+  std::lock_guard<std::timed_mutex> lock(state_mutex_);
   const core::ErrorResistanceMatrix& m = selector_->matrix();
   std::vector<core::TimedPose> keyframes;
   keyframes.reserve(m.size());
@@ -207,39 +244,85 @@ size_t KeyframeWorker::correctPoses(const std::vector<core::TimedPose>& trajecto
   const auto moves = core::matchCorrections(keyframes, trajectory, config);
   if (moves.empty()) return 0;
   selector_->correctPoses(moves);
-  publishSnapshotLocked();
+  shareSelectionLocked();
   return moves.size();
 }
 
 std::string KeyframeWorker::cameraFrame() const {
-  std::lock_guard<std::mutex> lock(state_mutex_);
+  std::lock_guard<std::timed_mutex> lock(state_mutex_);
   return camera_frame_;
 }
 
-std::shared_ptr<const NodeSnapshot> KeyframeWorker::snapshot() const {
-  std::lock_guard<std::mutex> lock(snapshot_mutex_);
-  return snapshot_;
+std::shared_ptr<const ServedSelection> KeyframeWorker::served() const {
+  std::lock_guard<std::mutex> lock(served_mutex_);
+  return served_;
 }
 
-void KeyframeWorker::publishSnapshotLocked() {
-  auto next = std::make_shared<NodeSnapshot>();
-  next->version = ++version_;
-  next->selection = selector_->snapshot();
+std::shared_ptr<const ServedSelection> KeyframeWorker::servedLatest() {
+  if (unshared_) {
+    std::unique_lock<std::timed_mutex> lock(state_mutex_, std::defer_lock);
+    if (lock.try_lock_for(std::chrono::duration<double>(kLatestWait)) && unshared_)
+      shareSelectionLocked();
+  }
+  return served();
+}
+
+void KeyframeWorker::shareSelectionLocked() {
+  auto next = std::make_shared<ServedSelection>();
+  next->selection = selector_->output();  // O(what changed): the lists' chunks are shared
   next->images = images_;
   next->image_count = images_ ? images_->size() : 0;
-  std::lock_guard<std::mutex> lock(snapshot_mutex_);
-  snapshot_ = std::move(next);
+  unshared_ = false;
+  last_share_ = ros::WallTime::now();
+  installServed(std::move(next), applied_generation_);
+}
+
+void KeyframeWorker::installServed(std::shared_ptr<ServedSelection> next, uint64_t generation) {
+  std::shared_ptr<const ServedSelection> old;  // released after the lock
+  {
+    std::lock_guard<std::mutex> lock(served_mutex_);
+    if (generation != generation_.load()) return;  // a reset since: its empty selection stays
+    next->version = ++version_;
+    old = std::move(served_);
+    served_ = std::move(next);
+  }
+}
+
+void KeyframeWorker::keyframeInsertedLocked() {
+  if (applied_generation_ == generation_.load()) keyframe_count_ = selector_->matrix().size();
+  // While frames wait, shares are coalesced (at most kMaxShareInterval apart); a service that
+  // wants the newest keyframe meanwhile asks for it (servedLatest).
+  if (queued_count_.load() == 0 ||
+      (ros::WallTime::now() - last_share_).toSec() >= kMaxShareInterval)
+    shareSelectionLocked();
+  else
+    unshared_ = true;
 }
 
 void KeyframeWorker::loop() {
   while (true) {
+    applyRequests();
     Queued queued;
     {
       std::unique_lock<std::mutex> lock(queue_mutex_);
-      queue_cv_.wait(lock, [this] { return stopping_ || !queue_.empty(); });
+      if (queue_.empty() && unshared_) {
+        // Idle with keyframes not shared yet: share them before waiting.
+        lock.unlock();
+        {
+          std::lock_guard<std::timed_mutex> state(state_mutex_);
+          if (unshared_) shareSelectionLocked();
+        }
+        lock.lock();
+      }
+      queue_cv_.wait(lock, [this] {
+        return stopping_ || !queue_.empty() || pending_config_ ||
+               generation_.load() != applied_generation_;
+      });
       if (stopping_) return;
+      if (queue_.empty()) continue;  // a request: applied at the top
       queued = std::move(queue_.front());
       queue_.pop_front();
+      queued_count_ = queue_.size();
     }
     try {
       process(queued);
@@ -306,8 +389,9 @@ void KeyframeWorker::process(const Queued& queued) {
   // The stamp first: a frame repeated or late is dropped for that, whatever else is wrong with
   // it (a repeated stamp may also have been paired with the earlier frame's depth).
   {
-    std::lock_guard<std::mutex> lock(state_mutex_);
-    if (queued.generation != generation_) return;  // queued before a reset
+    std::lock_guard<std::timed_mutex> lock(state_mutex_);
+    if (queued.generation != generation_.load()) return;  // queued before a reset
+    if (queued.generation != applied_generation_) applyResetLocked(queued.generation);
     if (last_stamp_ && !(stamp.toSec() > *last_stamp_)) {
       const bool duplicate = stamp.toSec() == *last_stamp_;
       std::ostringstream s;
@@ -322,8 +406,8 @@ void KeyframeWorker::process(const Queued& queued) {
   CameraModel camera;
   if (!convert(queued, camera)) return;
   {
-    std::lock_guard<std::mutex> lock(state_mutex_);
-    if (queued.generation != generation_) return;
+    std::lock_guard<std::timed_mutex> lock(state_mutex_);
+    if (queued.generation != generation_.load()) return;
     camera_frame_ = normaliseFrameId(frame.image->header.frame_id);
   }
   // The waits for the verdict and the pose hold no lock: services and resets go on meanwhile.
@@ -343,9 +427,9 @@ void KeyframeWorker::process(const Queued& queued) {
     return drop(queued, "bad_pose",
                 "the camera pose is not finite or its quaternion is not unit length");
 
-  std::lock_guard<std::mutex> lock(state_mutex_);
+  std::lock_guard<std::timed_mutex> lock(state_mutex_);
   // A reset while the pose was looked up: the frame belongs to the forgotten session.
-  if (queued.generation != generation_) return;
+  if (queued.generation != generation_.load() || queued.generation != applied_generation_) return;
   // Drops from here on are under the state lock: counted directly, the session marked changed.
   auto dropLocked = [&](const std::string& reason, const std::string& message) {
     statistics_.drop(queued.session, reason, message, stamp);
@@ -397,10 +481,10 @@ void KeyframeWorker::process(const Queued& queued) {
     // A distorted camera's keyframe images are kept rectified, as the exported intrinsics are.
     if (images_) images_->push(camera.rectify ? rectifiedImageMessage(camera, frame.image) : frame.image);
     insertion = result.points_seconds + result.matrix_seconds;
-    // Counted before the snapshot is published: a reader never sees more keyframes in the
+    // Counted before the selection is shared: a reader never sees more keyframes in the
     // selection than in the statistics.
     statistics_.frameOffered(queued.session, stamp, insertion);
-    publishSnapshotLocked();
+    keyframeInsertedLocked();
     ROS_DEBUG_STREAM("view_selection: keyframe "
                      << result.id << " at " << stampText(stamp) << ": " << result.points
                      << " points, insertion " << 1e3 * insertion << " ms (points "

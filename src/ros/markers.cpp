@@ -51,10 +51,10 @@ void addFrustum(visualization_msgs::Marker& m, const core::KeyframeSummary& kf, 
 
 }  // namespace
 
-visualization_msgs::MarkerArray selectionMarkers(const core::SelectionSnapshot& snapshot,
+visualization_msgs::MarkerArray selectionMarkers(const core::SelectionOutput& snapshot,
                                                  const std::string& world_frame, double scale,
                                                  size_t max_views) {
-  const core::Selection& selection = snapshot.selection;
+  const core::ChunkedSelection& selection = snapshot.selection;
   visualization_msgs::MarkerArray array;
   visualization_msgs::Marker clear;
   clear.header.frame_id = world_frame;

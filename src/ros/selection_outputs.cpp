@@ -44,8 +44,8 @@ void SelectionOutputs::setPublishPeriod(double seconds) {
 
 void SelectionOutputs::update() {
   std::lock_guard<std::mutex> lock(mutex_);
-  const std::shared_ptr<const NodeSnapshot> snapshot = worker_.snapshot();
-  const core::SelectionSnapshot& s = snapshot->selection;
+  const std::shared_ptr<const ServedSelection> snapshot = worker_.served();
+  const core::SelectionOutput& s = snapshot->selection;
   const bool changed = snapshot->version != published_version_;
   if (changed || pending_views_ > 0) {
     const size_t max_views = static_cast<size_t>(std::max(0, config_.publish_max_views));
@@ -74,10 +74,10 @@ void SelectionOutputs::update() {
   }
 }
 
-ViewChangeTracker::Sent ViewChangeTracker::record(const core::SelectionSnapshot& snapshot,
+ViewChangeTracker::Sent ViewChangeTracker::record(const core::SelectionOutput& snapshot,
                                                   size_t i) {
   const core::KeyframeSummary& kf = snapshot.keyframes[i];
-  const core::Selection& selection = snapshot.selection;
+  const core::ChunkedSelection& selection = snapshot.selection;
   Sent sent;
   sent.valid = true;
   sent.stamp = kf.stamp;
@@ -89,9 +89,9 @@ ViewChangeTracker::Sent ViewChangeTracker::record(const core::SelectionSnapshot&
   return sent;
 }
 
-bool ViewChangeTracker::same(const Sent& sent, const core::SelectionSnapshot& snapshot, size_t i) {
+bool ViewChangeTracker::same(const Sent& sent, const core::SelectionOutput& snapshot, size_t i) {
   const core::KeyframeSummary& kf = snapshot.keyframes[i];
-  const core::Selection& selection = snapshot.selection;
+  const core::ChunkedSelection& selection = snapshot.selection;
   static const core::NextViewSet kEmpty;
   const size_t selected = i < selection.next_views.size() ? selection.next_views[i].size() : 0;
   const core::NextViewSet& final =
@@ -103,7 +103,7 @@ bool ViewChangeTracker::same(const Sent& sent, const core::SelectionSnapshot& sn
          sent.row_version == snapshot.table.rowVersion(static_cast<core::ViewId>(i));
 }
 
-std::vector<core::ViewId> ViewChangeTracker::take(const core::SelectionSnapshot& snapshot,
+std::vector<core::ViewId> ViewChangeTracker::take(const core::SelectionOutput& snapshot,
                                                   size_t limit, size_t* pending) {
   const size_t n = snapshot.size();
   if (sent_.size() > n) sent_.resize(n);  // after a reset
@@ -129,7 +129,7 @@ std::vector<core::ViewId> ViewChangeTracker::take(const core::SelectionSnapshot&
   return views;
 }
 
-void ViewChangeTracker::markAll(const core::SelectionSnapshot& snapshot) {
+void ViewChangeTracker::markAll(const core::SelectionOutput& snapshot) {
   const size_t n = snapshot.size();
   sent_.resize(n);
   for (size_t i = 0; i < n; ++i) sent_[i] = record(snapshot, i);
@@ -151,7 +151,7 @@ void SelectionOutputs::diagnose(diagnostic_updater::DiagnosticStatusWrapper& sta
   }
   double lag = 0.0;
   const size_t pending = worker_.pending(&lag);
-  const size_t keyframes = worker_.snapshot()->selection.size();
+  const size_t keyframes = worker_.served()->selection.size();
 
   if (lag > kLagWarning)
     status.summaryf(diagnostic_msgs::DiagnosticStatus::WARN,

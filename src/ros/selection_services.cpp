@@ -46,8 +46,8 @@ SelectionServices::~SelectionServices() {
 
 bool SelectionServices::getNextViews(view_selection::GetNextViews::Request& req,
                                      view_selection::GetNextViews::Response& res) {
-  const std::shared_ptr<const NodeSnapshot> snapshot = worker_.snapshot();
-  const core::SelectionSnapshot& s = snapshot->selection;
+  const std::shared_ptr<const ServedSelection> served = worker_.servedLatest();
+  const core::SelectionOutput& s = served->selection;
   const size_t n = s.size();
   if (req.view < 0 || static_cast<size_t>(req.view) >= n) {
     res.success = false;
@@ -70,8 +70,8 @@ bool SelectionServices::getNextViews(view_selection::GetNextViews::Request& req,
 
 bool SelectionServices::getSelection(view_selection::GetSelection::Request&,
                                      view_selection::GetSelection::Response& res) {
-  const std::shared_ptr<const NodeSnapshot> snapshot = worker_.snapshot();
-  res.selection = selectionToMsg(snapshot->selection, config_.world_frame);
+  const std::shared_ptr<const ServedSelection> served = worker_.servedLatest();
+  res.selection = selectionToMsg(served->selection, config_.world_frame);
   res.success = true;
   res.message = std::to_string(res.selection.keyframes.size()) + " keyframes, " +
                 std::to_string(res.selection.pairs.size()) + " pairs" +
@@ -79,12 +79,12 @@ bool SelectionServices::getSelection(view_selection::GetSelection::Request&,
   return true;
 }
 
-int writeKeyframeImages(const std::string& directory, const NodeSnapshot& snapshot) {
-  const std::vector<std::string> names = snapshot.selection.imageNames();
+int writeKeyframeImages(const std::string& directory, const ServedSelection& served) {
+  const std::vector<std::string> names = served.selection.imageNames();
   int written = 0;
-  for (size_t i = 0; snapshot.images && i < snapshot.image_count && i < names.size(); ++i) {
+  for (size_t i = 0; served.images && i < served.image_count && i < names.size(); ++i) {
     // Null: a keyframe continued from ~state_file (no image kept), or one the cache lost.
-    const sensor_msgs::ImageConstPtr image = snapshot.images->get(i);  // may read it back
+    const sensor_msgs::ImageConstPtr image = served.images->get(i);  // may read it back
     if (!image) continue;
     const fs::path path = fs::path(directory) / names[i];
     std::error_code ec;
@@ -111,10 +111,10 @@ bool SelectionServices::exportSelection(view_selection::Export::Request& req,
     res.message = "directory is empty: give the folder to write selection.json and pairs.txt into";
     return true;
   }
-  const std::shared_ptr<const NodeSnapshot> snapshot = worker_.snapshot();
-  const core::SelectionSnapshot& s = snapshot->selection;
+  const std::shared_ptr<const ServedSelection> served = worker_.servedLatest();
+  const core::SelectionOutput& s = served->selection;
   try {
-    nlohmann::json params = io::toJson(s.params);
+    nlohmann::json params = io::toJson(*s.params);
     params["source"] = "view_selection_node";
     params["world_frame"] = config_.world_frame;
     params["image_path"] = config_.save_keyframe_images ? "." : "";
@@ -124,11 +124,11 @@ bool SelectionServices::exportSelection(view_selection::Export::Request& req,
     const io::ExportResult written = io::exportSelection(req.directory, s, params, options);
     res.selection_json = written.selection_json;
     res.pairs_txt = written.pairs_txt;
-    res.images_written = writeKeyframeImages(req.directory, *snapshot);
+    res.images_written = writeKeyframeImages(req.directory, *served);
     size_t lost = 0;
     std::string lost_reason;
-    if (snapshot->images) {
-      const KeyframeImageCache::Stats cache = snapshot->images->stats();
+    if (served->images) {
+      const KeyframeImageCache::Stats cache = served->images->stats();
       lost = cache.lost;
       lost_reason = cache.last_error;
     }

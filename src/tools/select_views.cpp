@@ -319,7 +319,7 @@ void printFeatureStats(const FeaturePointSource& fs, size_t rows_updated) {
       t.features / kf, t.candidates / kf, t.matches / kf, t.points / kf, rows_updated);
 }
 
-void printSets(const Selection& selection, size_t limit) {
+void printSets(const ChunkedSelection& selection, size_t limit) {
   const size_t n = selection.next_views.size();
   if (limit == 0 || n == 0) return;
   std::printf("next view sets (view: C_i best first, + completion):\n");
@@ -336,10 +336,10 @@ void printSets(const Selection& selection, size_t limit) {
 }
 
 void printSummary(const Options& o, const TumDataset& dataset, const ViewSelector& selector,
-                  const SelectionSnapshot& snapshot, const ExportResult& written, const Timings& t,
+                  const SelectionOutput& snapshot, const ExportResult& written, const Timings& t,
                   double total_seconds) {
   const ErrorResistanceMatrix& matrix = selector.matrix();
-  const Selection& selection = snapshot.selection;
+  const ChunkedSelection& selection = snapshot.selection;
   const size_t n = matrix.size();
   std::vector<size_t> counts;
   for (const KeyframeSummary& k : snapshot.keyframes) counts.push_back(k.num_points);
@@ -396,8 +396,8 @@ int runFromState(const Options& o) {
   const auto t_matrix = std::chrono::steady_clock::now();
   selector->setConfig(config);  // recomputes E only when a gate changed
   const double matrix_seconds = seconds(t_matrix);
-  const SelectionSnapshot snapshot = selector->snapshot();
-  nlohmann::json params = toJson(snapshot.params);
+  const SelectionOutput snapshot = selector->output();
+  nlohmann::json params = toJson(*snapshot.params);
   params["source"] = "select_views --state";
   params["state_file"] = o.state;
   params["image_path"] = "";
@@ -407,7 +407,7 @@ int runFromState(const Options& o) {
                   ", completion: " + toString(config.selection.completion);
   options.points = o.dump_points ? &selector->matrix() : nullptr;
   const ExportResult written = exportSelection(o.out.string(), snapshot, params, options);
-  const Selection& selection = snapshot.selection;
+  const ChunkedSelection& selection = snapshot.selection;
   const size_t n = selector->matrix().size();
   std::printf("state       %s: written by %s, %zu keyframes, %llu frames offered, points: %s\n",
               o.state.c_str(), state.producer.c_str(), n,
@@ -450,7 +450,7 @@ class GivenPointSource : public PointSource {
 /// what the run adds) get the dataset and frame limit; the plot's title names the set, `what`
 /// and the selection parameters.
 ExportResult writeOutputs(const Options& o, const ViewSelector& selector,
-                          const SelectionSnapshot& snapshot, nlohmann::json params,
+                          const SelectionOutput& snapshot, nlohmann::json params,
                           const std::string& what) {
   params["dataset"] = o.dataset;
   if (o.max_frames > 0) params["max_frames"] = o.max_frames;
@@ -511,16 +511,16 @@ int runPointsOnly(const Options& o, const fs::path& points_file) {
   }
   const double rss_matrix = peakRssMb();
   const auto t_sel = std::chrono::steady_clock::now();
-  const SelectionSnapshot snapshot = selector.snapshot();
+  const SelectionOutput snapshot = selector.output();
   t.selection = seconds(t_sel);
   const double rss_selection = peakRssMb();
   const auto t_write = std::chrono::steady_clock::now();
-  nlohmann::json params = toJson(snapshot.params);
+  nlohmann::json params = toJson(*snapshot.params);
   params["image_path"] = "";
   const ExportResult written = writeOutputs(o, selector, snapshot, std::move(params), " (points only)");
   t.write = seconds(t_write);
   const size_t n = selector.matrix().size();
-  const Selection& selection = snapshot.selection;
+  const ChunkedSelection& selection = snapshot.selection;
   const double offdiag = n > 1 ? static_cast<double>(n) * (n - 1) : 0.0;
   std::printf("dataset     %s: points.bin, %zu records used of %llu (points only)\n",
               o.dataset.c_str(), total, static_cast<unsigned long long>(reader.size()));
@@ -573,11 +573,11 @@ int run(const Options& o) {
   addFrames(o, dataset, selector, t);
 
   const auto t_sel = std::chrono::steady_clock::now();
-  const SelectionSnapshot snapshot = selector.snapshot();
+  const SelectionOutput snapshot = selector.output();
   t.selection = seconds(t_sel);
 
   const auto t_write = std::chrono::steady_clock::now();
-  nlohmann::json params = toJson(snapshot.params);
+  nlohmann::json params = toJson(*snapshot.params);
   params["max_time_difference"] = o.max_time_difference;
   params["image_path"] = dataset.image_dir;
   const ExportResult written = writeOutputs(o, selector, snapshot, std::move(params), "");

@@ -292,6 +292,25 @@ void expectSameSelection(const Selection& got, const Selection& want, const std:
   EXPECT_EQ(got.pairs, want.pairs) << where;
 }
 
+void expectSameSelection(const ChunkedSelection& got, const Selection& want,
+                         const std::string& where) {
+  expectSameSelection(got.toSelection(), want, where);
+  EXPECT_EQ(got.pairs.size(), want.pairs.size()) << where;
+}
+
+/// Follows a cache's pair changes: applied to the pairs before, they must give the pairs now.
+struct PairFollower {
+  std::set<std::pair<ViewId, ViewId>> pairs;
+  void apply(const PairChanges& c, const std::string& where) {
+    for (const auto& p : c.removed) EXPECT_EQ(pairs.erase(p), 1u) << where << ": removed twice";
+    for (const auto& p : c.added) EXPECT_TRUE(pairs.insert(p).second) << where << ": added twice";
+  }
+  void expectEqual(const std::vector<std::pair<ViewId, ViewId>>& want, const std::string& where) {
+    const std::vector<std::pair<ViewId, ViewId>> followed(pairs.begin(), pairs.end());
+    EXPECT_EQ(followed, want) << where;
+  }
+};
+
 TEST(Selection, CacheEqualsFullSelectionAfterAnySequenceOfChanges) {
   // The incremental path against the plain definition, after every step of a random evolution:
   // keyframes added (growing tables, entries toward and from the new view), entries changed and
@@ -306,6 +325,11 @@ TEST(Selection, CacheEqualsFullSelectionAfterAnySequenceOfChanges) {
       const SelectionConfig config{k, mode};
       ErrorResistanceTable e;
       SelectionCache cache;
+      cache.trackPairChanges(true);
+      PairFollower follower;
+      // A copy of an earlier result, as a reader holds it: later updates must not change it.
+      ChunkedSelection held;
+      Selection held_plain;
       for (int step = 0; step < 400; ++step) {
         const double op = uni(rng);
         const size_t n = e.size();
@@ -330,11 +354,17 @@ TEST(Selection, CacheEqualsFullSelectionAfterAnySequenceOfChanges) {
         } else {
           e.clear();
         }
-        const Selection& got = cache.update(e, config);
+        const ChunkedSelection& got = cache.update(e, config);
         const Selection want = selectViews(e, config);
-        expectSameSelection(got, want,
-                            "k " + std::to_string(k) + " mode " + toString(mode) + " step " +
-                                std::to_string(step) + " n " + std::to_string(e.size()));
+        const std::string where = "k " + std::to_string(k) + " mode " + toString(mode) +
+                                  " step " + std::to_string(step) + " n " +
+                                  std::to_string(e.size());
+        expectSameSelection(got, want, where);
+        follower.apply(cache.takePairChanges(), where);
+        follower.expectEqual(want.pairs, where + ": the pairs followed through their changes");
+        expectSameSelection(held, held_plain, where + ": a copy held from the step before");
+        held = got;
+        held_plain = want;
         if (::testing::Test::HasFailure()) return;
         completed_seen += static_cast<int>(!want.completed.empty());
         isolated_seen += static_cast<int>(!want.isolated.empty());
@@ -361,6 +391,8 @@ TEST(Selection, ResumedCompletionEqualsFullSelectionAlongAWalk) {
     const SelectionConfig config{k, CompletionMode::kReachable};
     ErrorResistanceTable e;
     SelectionCache cache;
+    cache.trackPairChanges(true);
+    PairFollower follower;
     for (int step = 0; step < 600; ++step) {
       const size_t n = e.size();
       e.resize(n + 1);
@@ -383,8 +415,11 @@ TEST(Selection, ResumedCompletionEqualsFullSelectionAlongAWalk) {
             entries.push_back({static_cast<ViewId>(q), 0.5 + uni(rng)});
         e.replaceRow(old, entries);
       }
-      expectSameSelection(cache.update(e, config), selectViews(e, config),
-                          "k " + std::to_string(k) + " step " + std::to_string(step));
+      const std::string where = "k " + std::to_string(k) + " step " + std::to_string(step);
+      const Selection want = selectViews(e, config);
+      expectSameSelection(cache.update(e, config), want, where);
+      follower.apply(cache.takePairChanges(), where);
+      follower.expectEqual(want.pairs, where + ": the pairs followed through their changes");
       if (::testing::Test::HasFailure()) return;
     }
     resumed += cache.resumedUpdates();

@@ -118,7 +118,7 @@ TEST(SelectionIo, CompletionAndNullStartAreWritten) {
   // k = 1: views 0 and 1 choose each other, view 2 chooses 0 but no set reaches 2, so
   // completion must bring it back; the file must say which view went into which set.
   const double inf = std::numeric_limits<double>::infinity();
-  SelectionSnapshot snapshot;
+  SelectionOutput snapshot;
   snapshot.table =
       ErrorResistanceTable::fromDense({{inf, 1.0, 3.0}, {1.0, inf, 4.0}, {2.0, 5.0, inf}});
   snapshot.config.k = 1;
@@ -126,11 +126,11 @@ TEST(SelectionIo, CompletionAndNullStartAreWritten) {
   for (int i = 0; i < 3; ++i) {
     KeyframeSummary k;
     k.stamp = i;
-    k.image_name = std::to_string(i) + ".png";
     k.intrinsics = vgaIntrinsics();
+    snapshot.names.push(static_cast<size_t>(i), k.stamp, std::to_string(i) + ".png");
     snapshot.keyframes.push_back(k);
   }
-  snapshot.selection = selectViews(snapshot.table, snapshot.config);
+  snapshot.selection = ChunkedSelection::of(selectViews(snapshot.table, snapshot.config));
   ASSERT_FALSE(snapshot.selection.completed.empty()) << "the example must need completion";
   writeSelectionJson((dir / "c.json").string(), snapshot, {});
   const auto completed = readSelectionJson((dir / "c.json").string())["completed"];
@@ -160,7 +160,7 @@ TEST(SelectionIo, PairsTxtForColmap) {
 
 TEST(SelectionIo, MvsPairTxtListsTheFinalSetsWithInverseErrorResistance) {
   const ErrorResistanceMatrix m = threeViews();
-  const SelectionSnapshot snap = makeSnapshot(m, selectViews(m.table(), {1, CompletionMode::kPaper}),
+  const SelectionOutput snap = makeOutput(m, selectViews(m.table(), {1, CompletionMode::kPaper}),
                                               {1, CompletionMode::kPaper});
   const fs::path dir = freshDir("mvs");
   writeMvsPairTxt((dir / "pair.txt").string(), snap);
@@ -197,14 +197,14 @@ TEST(SelectionIo, SparseFormatAboveTheThresholdReadsBackTheSameSelection) {
   // A selection larger than kDenseFormatMaxKeyframes is written as view_selection/2 (finite
   // entries only); both formats read back into the same table, and every other key is the same.
   const size_t n = kDenseFormatMaxKeyframes + 7;
-  SelectionSnapshot snap;
+  SelectionOutput snap;
   snap.table = ErrorResistanceTable(n);
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> uni(0.0, 1.0);
   for (size_t i = 0; i < n; ++i) {
     KeyframeSummary kf;
     kf.stamp = 1000.0 + static_cast<double>(i);
-    kf.image_name = std::to_string(i) + ".png";
+    snap.names.push(i, kf.stamp, std::to_string(i) + ".png");
     kf.intrinsics = vgaIntrinsics();
     kf.pose = lookAt({0.1 * static_cast<double>(i), 0, 0}, {0, 0, 3});
     snap.keyframes.push_back(kf);
@@ -212,7 +212,7 @@ TEST(SelectionIo, SparseFormatAboveTheThresholdReadsBackTheSameSelection) {
       snap.table.set(static_cast<ViewId>(i), static_cast<ViewId>(uni(rng) * n), 0.001 + uni(rng) / 3.0);
   }
   snap.config = {2, CompletionMode::kReachable};  // sets smaller than the rows: completion runs
-  snap.selection = selectViews(snap.table, snap.config);
+  snap.selection = ChunkedSelection::of(selectViews(snap.table, snap.config));
   const nlohmann::json params = {{"k", 5}};
   const fs::path dir = freshDir("sparse");
   writeSelectionJson((dir / "auto.json").string(), snap, params);

@@ -5,6 +5,7 @@
 
 #include "view_selection/core/camera_grid.h"
 #include "view_selection/core/error_resistance_table.h"
+#include "view_selection/core/keyframe_summary.h"
 #include "view_selection/core/occlusion_map.h"
 #include "view_selection/core/parameters.h"
 #include "view_selection/core/types.h"
@@ -93,6 +94,9 @@ class ErrorResistanceMatrix {
   const Keyframe& keyframe(ViewId id) const { return views_.at(static_cast<size_t>(id)).keyframe; }
   double at(ViewId i, ViewId j) const { return table_.at(i, j); }
   const ErrorResistanceTable& table() const { return table_; }
+  /// What the outputs show of each keyframe, by id (chunked: a copy shares it).
+  const ChunkedVector<KeyframeSummary>& summaries() const { return summaries_; }
+  const ImageNames& imageNames() const { return names_; }
   const ErrorResistanceConfig& config() const { return config_; }
   /// Pairs whose points were projected (not culled by a pair-level test) so far; for benchmarks.
   size_t pairsEvaluated() const { return pairs_evaluated_; }
@@ -140,6 +144,8 @@ class ErrorResistanceMatrix {
 
   ErrorResistanceConfig config_;
   std::vector<View> views_;
+  ChunkedVector<KeyframeSummary> summaries_;  // of views_, kept with them
+  ImageNames names_;
   ErrorResistanceTable table_;
   Scratch scratch_;
   size_t pairs_evaluated_ = 0;

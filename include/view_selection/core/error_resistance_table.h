@@ -3,9 +3,9 @@
 // nothing in common are the norm on long sequences, so selection runs in O(finite entries).
 #pragma once
 
+#include "view_selection/core/chunked_vector.h"
 #include "view_selection/core/types.h"
 
-#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -21,21 +21,21 @@ struct TableEntry {
 };
 
 /// A list of entries shared between copies of a table until one of them changes it (copy on
-/// write): copying a table, as every snapshot for the outputs does, costs a pointer a list, not
-/// the entries. Only the thread that owns a table changes it; copies may be read anywhere.
+/// write): copying a table, as every output does, costs a pointer a chunk of lists
+/// (ChunkedVector), not the entries. A list is changed in place only by the table whose sharing
+/// epoch made it (chunked_vector.h says why epochs and not reference counts).
 class SharedEntries {
  public:
   const std::vector<TableEntry>& get() const { return list_ ? *list_ : empty(); }
-  /// The list to change, copied first when another table still shares it.
-  std::vector<TableEntry>& edit() {
+  /// The list to change, copied first when it was made under another epoch than `epoch` (the
+  /// table's now), i.e. another table may still read it.
+  std::vector<TableEntry>& edit(std::uint64_t epoch) {
     if (!list_) {
       list_ = std::make_shared<std::vector<TableEntry>>();
-    } else if (list_.use_count() > 1) {
+    } else if (epoch_ != epoch) {
       list_ = std::make_shared<std::vector<TableEntry>>(*list_);
-    } else {
-      // Sole owner: a copy released on another thread must be done reading before we write.
-      std::atomic_thread_fence(std::memory_order_acquire);
     }
+    epoch_ = epoch;
     return *list_;
   }
   bool operator==(const SharedEntries& o) const { return get() == o.get(); }
@@ -46,6 +46,7 @@ class SharedEntries {
     return none;
   }
   std::shared_ptr<std::vector<TableEntry>> list_;
+  std::uint64_t epoch_ = 0;
 };
 
 class ErrorResistanceTable {
@@ -94,12 +95,17 @@ class ErrorResistanceTable {
   void updateTop(size_t i, ViewId j, double value);
   void rescanTop(size_t i);
 
-  std::vector<SharedEntries> rows_;
-  std::vector<SharedEntries> cols_;
-  std::vector<SharedEntries> top_;
-  std::vector<std::uint64_t> row_version_;
+  std::vector<TableEntry>& editRow(size_t i) { return rows_.edit(i).edit(epoch_.get()); }
+  std::vector<TableEntry>& editColumn(size_t j) { return cols_.edit(j).edit(epoch_.get()); }
+  std::vector<TableEntry>& editTop(size_t i) { return top_.edit(i).edit(epoch_.get()); }
   void touch(size_t i);
+
+  ChunkedVector<SharedEntries> rows_;
+  ChunkedVector<SharedEntries> cols_;
+  ChunkedVector<SharedEntries> top_;
+  ChunkedVector<std::uint64_t> row_version_;
   size_t finite_count_ = 0;
+  SharingEpoch epoch_;  ///< which lists this table may change in place
 };
 
 }  // namespace view_selection::core

@@ -2,6 +2,7 @@
 // "Completion", "Outputs"). Deterministic: every tie breaks on the lower id.
 #pragma once
 
+#include "view_selection/core/chunked_vector.h"
 #include "view_selection/core/error_resistance_table.h"
 #include "view_selection/core/parameters.h"
 #include "view_selection/core/types.h"
@@ -61,6 +62,107 @@ struct Selection {
   std::pair<ViewId, ViewId> initialPair() const;
 };
 
+/// The pairs of a selection, bucketed by their smaller id: bucket lo holds the larger ids hi of
+/// the pairs {lo, hi}, ascending, each with the number of final sets it comes from (C_lo holding
+/// hi, C_hi holding lo: 1 or 2). Chunked and shared between copies, so that a copy costs a
+/// pointer a chunk and a change copies only the buckets' chunks it touches.
+class PairBuckets {
+ public:
+  struct Entry {
+    ViewId hi;
+    std::uint32_t sets;  ///< final sets the pair comes from
+    bool operator==(const Entry& o) const { return hi == o.hi && sets == o.sets; }
+  };
+  using Bucket = std::vector<Entry>;
+
+  /// Pairs in all.
+  size_t size() const { return count_; }
+  bool empty() const { return count_ == 0; }
+  /// Buckets: one per view.
+  size_t buckets() const { return buckets_.size(); }
+  const Bucket& bucket(ViewId lo) const { return buckets_[static_cast<size_t>(lo)]; }
+  bool contains(ViewId a, ViewId b) const;
+  std::vector<std::pair<ViewId, ViewId>> toVector() const;
+
+  /// The pairs in order (lo ascending, then hi).
+  class const_iterator {
+   public:
+    using iterator_category = std::forward_iterator_tag;
+    using value_type = std::pair<ViewId, ViewId>;
+    using difference_type = std::ptrdiff_t;
+    using pointer = void;
+    using reference = value_type;
+    const_iterator(const PairBuckets* p, size_t lo, size_t q) : p_(p), lo_(lo), q_(q) { skip(); }
+    value_type operator*() const {
+      return {static_cast<ViewId>(lo_), p_->buckets_[lo_][q_].hi};
+    }
+    const_iterator& operator++() {
+      ++q_;
+      skip();
+      return *this;
+    }
+    bool operator==(const const_iterator& o) const { return lo_ == o.lo_ && q_ == o.q_; }
+    bool operator!=(const const_iterator& o) const { return !(*this == o); }
+
+   private:
+    void skip() {
+      while (lo_ < p_->buckets_.size() && q_ >= p_->buckets_[lo_].size()) {
+        ++lo_;
+        q_ = 0;
+      }
+    }
+    const PairBuckets* p_;
+    size_t lo_, q_;
+  };
+  const_iterator begin() const { return {this, 0, 0}; }
+  const_iterator end() const { return {this, buckets_.size(), 0}; }
+
+  // Changes (SelectionCache): one more or one fewer final set holding the pair {a, b}. Return
+  // true when the pair itself appeared or went.
+  bool add(ViewId a, ViewId b);
+  bool remove(ViewId a, ViewId b);
+  void resize(size_t views) { buckets_.resize(views); }
+  void clear() {
+    buckets_.clear();
+    count_ = 0;
+  }
+
+ private:
+  ChunkedVector<Bucket> buckets_;
+  size_t count_ = 0;
+};
+
+/// Pairs that appeared and went, each as i < j, sorted.
+struct PairChanges {
+  std::vector<std::pair<ViewId, ViewId>> added;
+  std::vector<std::pair<ViewId, ViewId>> removed;
+  bool empty() const { return added.empty() && removed.empty(); }
+};
+
+/// The added and removed pairs between two selections (a plain set difference; for tests and
+/// for selections that do not come from one SelectionCache).
+PairChanges pairChanges(const std::vector<std::pair<ViewId, ViewId>>& before,
+                        const std::vector<std::pair<ViewId, ViewId>>& after);
+
+/// A Selection as SelectionCache keeps it and the node's outputs read it: the same fields, with
+/// every per-view list chunked and shared between copies (ChunkedVector, PairBuckets), so that
+/// a copy for readers costs O(n / 256) and not O(n).
+struct ChunkedSelection {
+  ChunkedVector<NextViewSet> next_views;        ///< C_i before completion
+  ChunkedVector<NextViewSet> final_next_views;  ///< C_i after completion
+  ViewId start_view = -1;
+  ChunkedVector<ViewId> order;
+  ChunkedVector<CompletedView> completed;
+  ChunkedVector<ViewId> isolated;
+  PairBuckets pairs;
+
+  std::pair<ViewId, ViewId> initialPair() const;
+  /// The plain Selection with the same content, O(n).
+  Selection toSelection() const;
+  /// The chunked form of a plain Selection (each pair counted once), O(n).
+  static ChunkedSelection of(const Selection& plain);
+};
+
 /// C_i for every row: the first k finite entries of row i sorted by (E[i][j], j).
 std::vector<NextViewSet> computeNextViewSets(const ErrorResistanceTable& e, int k);
 
@@ -100,15 +202,22 @@ struct SetView {
 ///   - otherwise (s or its set changed, paper completion) the traversal runs in full, O(n k),
 ///     and completion looks at the columns of the views the traversal did not reach and at the
 ///     rows of the views completion then reaches;
-///   - pairs are bucketed by their smaller id, O(n k) plus a sort of each bucket.
-/// What remains O(n) per update is the version check of every row, the start view and the
-/// pairs.
+///   - pairs are bucketed by their smaller id and counted again only for the final sets that
+///     changed (PairBuckets), which also gives the pairs that appeared and went;
+///   - the result is a ChunkedSelection: a copy of it for readers shares every chunk.
+/// What remains O(n) per update is the version check of every row, the start view and the scan
+/// for isolated views: a few comparisons a view.
 class SelectionCache {
  public:
-  /// The selection for `e` now. The reference stays valid until the next update or clear.
-  const Selection& update(const ErrorResistanceTable& e, const SelectionConfig& config);
-  const Selection& selection() const { return selection_; }
+  /// The selection for `e` now. The reference stays valid until the next update or clear; a
+  /// copy of it is cheap and stays valid.
+  const ChunkedSelection& update(const ErrorResistanceTable& e, const SelectionConfig& config);
+  const ChunkedSelection& selection() const { return selection_; }
   void clear();
+  /// With tracking on, the pairs that appeared and went are kept from one takePairChanges() to
+  /// the next (netted: a pair that went and came back is neither); off, nothing is kept.
+  void trackPairChanges(bool on);
+  PairChanges takePairChanges();
   /// Updates that resumed reachable completion instead of redoing the traversal (for tests and
   /// benchmarks), and all updates.
   size_t resumedUpdates() const { return resumed_updates_; }
@@ -142,13 +251,17 @@ class SelectionCache {
   void offer(ViewId x);
   /// Offers x when it is unvisited and has a finite entry from a visited view.
   void offerIfReached(const ErrorResistanceTable& e, ViewId x);
-  void buildPairs();
+  /// Marks final set a as changed since the pairs were last counted.
+  void finalSetChanged(ViewId a);
+  /// Counts the changed final sets' pairs again (O(changed sets x their sizes)).
+  void updatePairs();
+  void logPair(ViewId a, ViewId b, bool added);
   SetView plainSet(ViewId i) const;  ///< C_i
   SetView finalSet(ViewId i) const;  ///< C_i after completion so far
 
   SelectionConfig config_;
   bool configured_ = false;
-  Selection selection_;
+  ChunkedSelection selection_;
   std::vector<std::uint64_t> seen_;    ///< rowVersion each cached C_i was computed at
   std::vector<double> first_value_;    ///< E[i][C_i[0]], +inf when C_i is empty
   std::vector<ViewId> extended_rows_;  ///< rows whose final set completion lengthened last time
@@ -169,8 +282,15 @@ class SelectionCache {
   std::priority_queue<ViewId, std::vector<ViewId>, std::greater<ViewId>> candidates_;
   std::vector<ViewId> reexamine_;  ///< views a resumed completion looks at again
   size_t resumed_updates_ = 0, resumed_inside_ = 0, updates_ = 0;
-  std::vector<std::size_t> bucket_begin_;  ///< pairs by smaller id (CSR)
-  std::vector<ViewId> bucket_;
+  ChunkedVector<NextViewSet> counted_;  ///< the final sets as selection_.pairs counts them
+  std::vector<ViewId> final_changed_;   ///< final sets changed since, each once
+  std::vector<char> final_changed_flag_;
+  bool track_pair_changes_ = false;
+  struct PairEvent {
+    ViewId lo, hi;
+    bool added;
+  };
+  std::vector<PairEvent> pair_log_;  ///< with tracking: since the last takePairChanges()
 };
 
 }  // namespace view_selection::core

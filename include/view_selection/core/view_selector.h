@@ -9,7 +9,7 @@
 #include "view_selection/core/parameters.h"
 #include "view_selection/core/point_source.h"
 #include "view_selection/core/selection.h"
-#include "view_selection/core/selection_snapshot.h"
+#include "view_selection/core/selection_output.h"
 
 #include <memory>
 #include <optional>
@@ -66,10 +66,17 @@ class ViewSelector {
   /// Lets callers skip loading depth and images for frames that will not become keyframes
   /// (they still pass those frames to addFrame, without depth, to keep counts and stamps).
   bool wantsFrame(const CameraPose& pose, bool external_keyframe = false) const;
-  /// The selection for the keyframes so far (selectViews, kept current incrementally).
+  /// The selection for the keyframes so far (selectViews, kept current incrementally), as a
+  /// plain Selection (O(n): for tools and tests; outputs take output()).
   Selection select() const;
-  /// The keyframes, E, select() and params() together, for outputs.
-  SelectionSnapshot snapshot() const;
+  /// The keyframes, E, the selection and params() together, for outputs: shares every chunk
+  /// with the selector's own lists, so it costs O(n / 256) plus the selection's update.
+  SelectionOutput output() const;
+  /// With tracking on, the pairs of the selection that appeared and went are kept between
+  /// takePairChanges() calls (SelectionCache::trackPairChanges); off by default.
+  void trackPairChanges(bool on) { selection_.trackPairChanges(on); }
+  /// The pairs that appeared and went since the last call (as of the last select()/output()).
+  PairChanges takePairChanges() { return selection_.takePairChanges(); }
   void reset();
   /// The whole state but the point source's (copies the keyframes; depth maps are shared).
   ViewSelectorState state() const;
@@ -110,6 +117,7 @@ class ViewSelector {
   // What select() last returned, updated from the rows that changed since. Not shared between
   // threads: like every other member, one thread at a time drives a ViewSelector.
   mutable SelectionCache selection_;
+  mutable std::shared_ptr<const Params> params_;  // params(), made once per configuration
 };
 
 }  // namespace view_selection::core

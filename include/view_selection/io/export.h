@@ -3,7 +3,7 @@
 #pragma once
 
 #include "view_selection/core/error_resistance_matrix.h"
-#include "view_selection/core/selection_snapshot.h"
+#include "view_selection/core/selection_output.h"
 
 #include <nlohmann/json.hpp>
 
@@ -27,7 +27,7 @@ struct ExportResult {
 /// Creates `directory` if missing and writes selection.json, pairs.txt, pair.txt (MVS) and
 /// selection.png into it. Each file is complete or
 /// left as it was (io::writeAtomically). Throws core::IoError naming what failed.
-ExportResult exportSelection(const std::string& directory, const core::SelectionSnapshot& snapshot,
+ExportResult exportSelection(const std::string& directory, const core::SelectionOutput& snapshot,
                              const nlohmann::json& params, const ExportOptions& options = {});
 
 }  // namespace view_selection::io

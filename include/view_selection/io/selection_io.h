@@ -3,7 +3,7 @@
 
 #include "view_selection/core/error_resistance_matrix.h"
 #include "view_selection/core/selection.h"
-#include "view_selection/core/selection_snapshot.h"
+#include "view_selection/core/selection_output.h"
 
 #include <nlohmann/json.hpp>
 
@@ -25,7 +25,7 @@ bool sparseFormatFor(size_t keyframes, JsonFormat format);
 /// The selection.json document of a snapshot (parsed back from what writeSelectionJson writes,
 /// so both agree). `params` holds every parameter that shaped the result. With `points` (the
 /// matrix the snapshot was made of), every keyframe's sample points are included.
-nlohmann::json selectionToJson(const core::SelectionSnapshot& snapshot,
+nlohmann::json selectionToJson(const core::SelectionOutput& snapshot,
                                const nlohmann::json& params,
                                const core::ErrorResistanceMatrix* points = nullptr,
                                JsonFormat format = JsonFormat::kAuto);
@@ -38,11 +38,11 @@ nlohmann::json selectionToJson(const core::ErrorResistanceMatrix& matrix,
 /// element, the document is never built in memory); view_selection/2 above
 /// kDenseFormatMaxKeyframes unless `format` says otherwise. Throws IoError when the file cannot
 /// be written.
-void writeSelectionJson(const std::string& path, const core::SelectionSnapshot& snapshot,
+void writeSelectionJson(const std::string& path, const core::SelectionOutput& snapshot,
                         const nlohmann::json& params,
                         const core::ErrorResistanceMatrix* points = nullptr,
                         JsonFormat format = JsonFormat::kAuto);
-void writeSelectionJson(std::ostream& out, const core::SelectionSnapshot& snapshot,
+void writeSelectionJson(std::ostream& out, const core::SelectionOutput& snapshot,
                         const nlohmann::json& params, const core::ErrorResistanceMatrix* points,
                         JsonFormat format);
 void writeSelectionJson(const std::string& path, const core::ErrorResistanceMatrix& matrix,
@@ -53,12 +53,14 @@ void writeSelectionJson(const std::string& path, const core::ErrorResistanceMatr
 /// missing, contains whitespace (COLMAP splits on it) or the file cannot be written.
 void writePairsTxt(const std::string& path, const std::vector<std::string>& image_names,
                    const std::vector<std::pair<core::ViewId, core::ViewId>>& pairs);
+void writePairsTxt(const std::string& path, const std::vector<std::string>& image_names,
+                   const core::PairBuckets& pairs);
 
 /// The view-pair file of the MVSNet family of MVS tools (MVSNet, CasMVSNet, ...): the view count,
 /// then for each view its id and "n id score id score ...", the final next view set best first.
 /// Ids are keyframe ids (the order of selection.json's keyframes); score = 1 / E[i][j] [1/m,
 /// scene units], higher is better as those tools expect. Throws IoError when it cannot write.
-void writeMvsPairTxt(const std::string& path, const core::SelectionSnapshot& snapshot);
+void writeMvsPairTxt(const std::string& path, const core::SelectionOutput& snapshot);
 
 /// Reads a selection.json back, either format (for tests and tools); throws IoError naming the file.
 nlohmann::json readSelectionJson(const std::string& path);

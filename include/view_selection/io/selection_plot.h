@@ -2,7 +2,7 @@
 // edges, completion edges in another colour, the start view and isolated views marked.
 #pragma once
 
-#include "view_selection/core/selection_snapshot.h"
+#include "view_selection/core/selection_output.h"
 
 #include <opencv2/core.hpp>
 
@@ -12,7 +12,7 @@ namespace view_selection::io {
 
 /// Renders onto the plane of the two main directions of the camera centres (PCA), so any
 /// trajectory lies flat. `size` is the image side in pixels.
-cv::Mat renderSelectionPlot(const core::SelectionSnapshot& snapshot, int size = 1000,
+cv::Mat renderSelectionPlot(const core::SelectionOutput& snapshot, int size = 1000,
                             const std::string& title = "");
 
 /// renderSelectionPlot(...) written as a PNG; throws IoError when it cannot be written.
@@ -20,7 +20,7 @@ cv::Mat renderSelectionPlot(const core::SelectionSnapshot& snapshot, int size = 
 /// disk, a read-only folder). For use inside io::writeAtomically.
 void writePng(const std::string& path, const cv::Mat& image);
 
-void writeSelectionPlot(const std::string& path, const core::SelectionSnapshot& snapshot,
+void writeSelectionPlot(const std::string& path, const core::SelectionOutput& snapshot,
                         const std::string& title = "");
 
 }  // namespace view_selection::io

@@ -4,7 +4,7 @@
 #pragma once
 
 #include "view_selection/core/image.h"
-#include "view_selection/core/selection_snapshot.h"
+#include "view_selection/core/selection_output.h"
 #include "view_selection/core/types.h"
 
 #include <view_selection/ViewSelection.h>
@@ -67,18 +67,18 @@ std::string keyframeImageName(double stamp);
 
 /// The whole selection as a message (partial false). `world_frame` goes into the header; its
 /// stamp is the newest keyframe's.
-view_selection::ViewSelection selectionToMsg(const core::SelectionSnapshot& snapshot,
+view_selection::ViewSelection selectionToMsg(const core::SelectionOutput& snapshot,
                                              const std::string& world_frame);
 /// A bounded update: the scalar fields of the whole selection (start view, initial pair, counts),
 /// and the keyframes and next view sets of `views` only (valid ids, in that order); partial true,
 /// order, completed, isolated and pairs empty.
-view_selection::ViewSelection selectionUpdateToMsg(const core::SelectionSnapshot& snapshot,
+view_selection::ViewSelection selectionUpdateToMsg(const core::SelectionOutput& snapshot,
                                                    const std::string& world_frame,
                                                    const std::vector<core::ViewId>& views);
 /// One keyframe's entry and one view's next view set (with its E values) as the messages hold them.
-view_selection::KeyframeInfo keyframeToMsg(const core::SelectionSnapshot& snapshot,
+view_selection::KeyframeInfo keyframeToMsg(const core::SelectionOutput& snapshot,
                                            core::ViewId view);
-view_selection::NextViewSet nextViewSetToMsg(const core::SelectionSnapshot& snapshot,
+view_selection::NextViewSet nextViewSetToMsg(const core::SelectionOutput& snapshot,
                                              core::ViewId view);
 
 }  // namespace view_selection::ros_node

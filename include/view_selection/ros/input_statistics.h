@@ -87,8 +87,10 @@ class InputStatistics {
     ros::WallTime last;
     uint64_t suppressed = 0;
   };
+  /// Counts a drop: of a frame of `session` (ignored when that session is over), or of another
+  /// input (null).
   void count(const std::string& reason, const std::string& message, const ros::Time& stamp,
-             bool frame);
+             const uint64_t* session);
   mutable std::mutex mutex_;
   Counts counts_;
   uint64_t session_ = 0;

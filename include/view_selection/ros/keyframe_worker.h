@@ -1,11 +1,13 @@
 // The worker: frames from the inputs wait in a bounded queue; one thread looks up each frame's
 // pose, converts it and hands it to the core's ViewSelector, which keeps the keyframes and the
-// matrix. After every change it publishes an immutable snapshot, which services and outputs read
-// without waiting for an insertion.
+// matrix. After a change it shares an immutable ServedSelection, which services and outputs read
+// without waiting for an insertion. Nothing waits for the worker: the inputs queue frames under
+// the queue lock alone, ~reset and reconfigures are handed to the worker's thread and return at
+// once, and a ServedSelection costs O(what changed) (core::SelectionOutput shares its chunks).
 #pragma once
 
 #include "view_selection/core/pose_correction.h"
-#include "view_selection/core/selection_snapshot.h"
+#include "view_selection/core/selection_output.h"
 #include "view_selection/core/view_selector.h"
 #include "view_selection/ros/camera_model.h"
 #include "view_selection/ros/image_cache.h"
@@ -18,11 +20,13 @@
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 
+#include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <vector>
 
@@ -35,10 +39,11 @@ struct PendingFrame {
   sensor_msgs::ImageConstPtr depth;  ///< null without depth
 };
 
-/// What readers see: the selection and, with ~save_keyframe_images, the keyframe images.
-struct NodeSnapshot {
+/// What services and publishers read: the selection and, with ~save_keyframe_images, the
+/// keyframe images. Immutable once shared.
+struct ServedSelection {
   uint64_t version = 0;  ///< bumps with every change
-  core::SelectionSnapshot selection;
+  core::SelectionOutput selection;
   /// By keyframe id, ids below image_count (null without ~save_keyframe_images); RAM-bounded.
   std::shared_ptr<const KeyframeImageCache> images;
   size_t image_count = 0;
@@ -58,21 +63,24 @@ class KeyframeWorker {
   KeyframeWorker(const KeyframeWorker&) = delete;
   KeyframeWorker& operator=(const KeyframeWorker&) = delete;
 
-  /// Queues a frame; when ~max_pending_frames wait already, the oldest is dropped
-  /// ("worker_behind").
+  /// Queues a frame (under the queue lock only: never waits for an insertion); when
+  /// ~max_pending_frames wait already, the oldest is dropped ("worker_behind").
   void push(PendingFrame frame);
-  /// Forgets every keyframe and waiting frame and starts a new statistics session; a frame in
-  /// flight is discarded, not inserted, and not counted in the new session. Saves the empty
-  /// session (so that a crash after a reset does not bring back the old one). Returns the number
-  /// of keyframes forgotten.
+  /// Forgets every keyframe and waiting frame and starts a new statistics session, at once: the
+  /// served selection is empty when it returns. A frame in flight is discarded, not inserted,
+  /// and not counted in the new session; the worker's thread clears the selector before its
+  /// next frame and saves the empty session (so that a crash after a reset does not bring back
+  /// the old one). Returns the number of keyframes forgotten.
   size_t reset();
   /// The whole session now, for ~save_state (copied under the state lock, written outside it).
   StateSnapshot captureState();
   /// Replaces the map of the "map" point source and recomputes the rows of the keyframes whose
   /// points changed. Throws core::InvalidInput for bad points (nothing changes then).
   void setMapPoints(Eigen::Matrix3Xd points);
-  /// New method parameters, live: the selection is redone; the matrix is recomputed when its
-  /// gates changed; the keyframe policy keeps its place.
+  /// New method parameters, live, applied by the worker's thread before its next frame (this
+  /// returns at once; readers keep the served selection until the new one is shared): the
+  /// selection is redone; the matrix is recomputed when its gates changed; the keyframe policy
+  /// keeps its place. `config` must be valid (validate() first).
   void reconfigure(const core::ViewSelectorConfig& config);
   /// Loop closure: each keyframe takes the pose of `trajectory` (optical-frame poses, ascending
   /// stamp) at its stamp, when it moved more than the thresholds (core::matchCorrections); their
@@ -82,8 +90,15 @@ class KeyframeWorker {
   /// The (normalised) frame_id of the images so far; "" before the first.
   std::string cameraFrame() const;
 
-  /// The last snapshot; never null.
-  std::shared_ptr<const NodeSnapshot> snapshot() const;
+  /// The selection shared last; never null, never waits.
+  std::shared_ptr<const ServedSelection> served() const;
+  /// The selection with every keyframe accepted so far: shares it first when keyframes were
+  /// inserted since (while frames wait the worker coalesces its shares), waiting at most
+  /// kLatestWait for the state lock (then the last shared one). For services.
+  std::shared_ptr<const ServedSelection> servedLatest();
+  static constexpr double kLatestWait = 0.05;  ///< [s]
+  /// While frames wait, the worker shares at least this often [s].
+  static constexpr double kMaxShareInterval = 0.1;
   /// Frames waiting, and how long the oldest has waited [s, wall].
   size_t pending(double* oldest_age = nullptr) const;
 
@@ -96,11 +111,21 @@ class KeyframeWorker {
   };
 
   void loop();
+  /// Before the next frame: a ~reset or reconfigure handed over since. Takes the state lock.
+  void applyRequests();
   void process(const Queued& queued);
   /// Checks and converts a frame; false (after counting the drop) when it is unusable.
   bool convert(const Queued& queued, CameraModel& camera);
-  /// Under state_mutex_: a new snapshot of the selector's state.
-  void publishSnapshotLocked();
+  /// Under state_mutex_: shares the selector's state with readers (unless a reset happened since
+  /// the state's generation began).
+  void shareSelectionLocked();
+  /// Under state_mutex_, after a keyframe: shares now, or leaves it for later while frames wait.
+  void keyframeInsertedLocked();
+  /// Installs `next` as the served selection, unless `generation` is over; the old one is
+  /// released outside the lock.
+  void installServed(std::shared_ptr<ServedSelection> next, uint64_t generation);
+  /// Under state_mutex_: clears the selector for reset() generation `generation`.
+  void applyResetLocked(uint64_t generation);
   /// Under state_mutex_: the session for the state file.
   StateSnapshot captureStateLocked();
   /// At construction: continues the session the keeper read, or starts empty.
@@ -114,25 +139,34 @@ class KeyframeWorker {
   StateKeeper& keeper_;
   KeyframeVerdicts* verdicts_;
 
-  // The method's state, guarded by state_mutex_.
-  mutable std::mutex state_mutex_;
+  // The method's state, guarded by state_mutex_ (timed: servedLatest() waits only so long).
+  mutable std::timed_mutex state_mutex_;
   std::unique_ptr<core::ViewSelector> selector_;
   std::shared_ptr<ImageFolder> image_folder_;    // with ~save_keyframe_images: ~image_dir
   std::shared_ptr<KeyframeImageCache> images_;  // by keyframe id; a new one after each reset
   std::optional<double> last_stamp_;                // of the last frame offered to the core
   std::string camera_frame_;                        // the images' frame_id, normalised
-  uint64_t generation_ = 0;  // bumps on reset(); frames of older ones are discarded
-  uint64_t version_ = 0;
+  uint64_t applied_generation_ = 0;  // the generation selector_ belongs to
   uint64_t captures_ = 0;            // state snapshots taken (their sequence)
   int keyframes_since_save_ = 0;     // towards ~autosave_keyframes
-  bool changed_since_save_ = false;  // anything a saved session would differ in
+  std::atomic<bool> changed_since_save_{false};  // anything a saved session would differ in
+  std::atomic<bool> unshared_{false};  // keyframes inserted and not yet shared
+  std::atomic<size_t> keyframe_count_{0};  // keyframes accepted in this generation
+  std::atomic<size_t> queued_count_{0};    // queue_.size(), read without the queue lock
+  ros::WallTime last_share_;
 
-  mutable std::mutex snapshot_mutex_;
-  std::shared_ptr<const NodeSnapshot> snapshot_;
+  // Bumps on reset() (under queue_mutex_ and served_mutex_); frames and shares of an older
+  // generation are discarded.
+  std::atomic<uint64_t> generation_{0};
+
+  mutable std::mutex served_mutex_;
+  std::shared_ptr<const ServedSelection> served_;
+  uint64_t version_ = 0;  // of served_; guarded by served_mutex_
 
   mutable std::mutex queue_mutex_;
   std::condition_variable queue_cv_;
   std::deque<Queued> queue_;
+  std::optional<core::ViewSelectorConfig> pending_config_;  // reconfigure() not yet applied
   bool stopping_ = false;
   std::thread thread_;  // last: started when everything above exists
 };

@@ -2,7 +2,7 @@
 // another colour, the start view highlighted.
 #pragma once
 
-#include "view_selection/core/selection_snapshot.h"
+#include "view_selection/core/selection_output.h"
 
 #include <visualization_msgs/MarkerArray.h>
 
@@ -15,7 +15,7 @@ namespace view_selection::ros_node {
 /// `scale` is the frustum depth [m, scene units]. Above `max_views` keyframes (0: never) only a
 /// summary is drawn: the frusta and final next-view edges of every m-th view, m = ceil(n /
 /// max_views), and of the start view and the newest keyframe, so at most max_views + 2 views.
-visualization_msgs::MarkerArray selectionMarkers(const core::SelectionSnapshot& snapshot,
+visualization_msgs::MarkerArray selectionMarkers(const core::SelectionOutput& snapshot,
                                                  const std::string& world_frame, double scale,
                                                  size_t max_views = 0);
 

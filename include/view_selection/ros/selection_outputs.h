@@ -27,10 +27,10 @@ class ViewChangeTracker {
   /// The views (ascending from where the last call stopped, wrapping round, so none starves) that
   /// differ from what was sent, at most `limit`; they count as sent from now on. `pending` gets
   /// how many differing views were left out.
-  std::vector<core::ViewId> take(const core::SelectionSnapshot& snapshot, size_t limit,
+  std::vector<core::ViewId> take(const core::SelectionOutput& snapshot, size_t limit,
                                  size_t* pending);
   /// Every view counts as sent (after a message with the whole selection).
-  void markAll(const core::SelectionSnapshot& snapshot);
+  void markAll(const core::SelectionOutput& snapshot);
 
  private:
   struct Sent {
@@ -42,8 +42,8 @@ class ViewChangeTracker {
     std::vector<core::ViewId> final;   ///< C_i after completion
     std::uint64_t row_version = 0;
   };
-  static bool same(const Sent& sent, const core::SelectionSnapshot& snapshot, size_t i);
-  static Sent record(const core::SelectionSnapshot& snapshot, size_t i);
+  static bool same(const Sent& sent, const core::SelectionOutput& snapshot, size_t i);
+  static Sent record(const core::SelectionOutput& snapshot, size_t i);
 
   std::vector<Sent> sent_;  ///< by view id
   size_t cursor_ = 0;       ///< where the next take() starts

@@ -52,6 +52,6 @@ class SelectionServices {
 
 /// Writes the snapshot's keyframe images under the names pairs.txt uses, into `directory`.
 /// Returns how many; throws core::IoError naming the image that could not be written.
-int writeKeyframeImages(const std::string& directory, const NodeSnapshot& snapshot);
+int writeKeyframeImages(const std::string& directory, const ServedSelection& served);
 
 }  // namespace view_selection::ros_node
