@@ -14,15 +14,17 @@ namespace view_selection::ros_node {
 
 KeyframeWorker::KeyframeWorker(const NodeConfig& config, PoseProvider& poses,
                                InputStatistics& statistics, StateKeeper& keeper,
-                               KeyframeVerdicts* verdicts)
+                               KeyframeVerdicts* verdicts, const PointSourceFactory& make_points)
     : config_(config),
       poses_(poses),
       statistics_(statistics),
       keeper_(keeper),
       verdicts_(verdicts) {
   selector_ = std::make_unique<core::ViewSelector>(
-      config_.selector, points::makePointSource(config_.point_source, config_.point_params,
-                                                config_.selector.matrix.occlusion));
+      config_.selector, make_points ? make_points(config_)
+                                    : points::makePointSource(config_.point_source,
+                                                              config_.point_params,
+                                                              config_.selector.matrix.occlusion));
   if (config_.save_keyframe_images) {
     image_folder_ = std::make_shared<ImageFolder>(config_.image_dir);
     if (!image_folder_->error().empty())

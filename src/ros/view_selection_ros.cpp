@@ -26,12 +26,13 @@ ros::NodeHandle withQueue(ros::NodeHandle nh, ros::CallbackQueue& queue) {
 
 }  // namespace
 
-ViewSelectionRos::ViewSelectionRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
+ViewSelectionRos::ViewSelectionRos(ros::NodeHandle nh, ros::NodeHandle private_nh,
+                                   const PointSourceFactory& make_points)
     : config_(loadAndCheck(private_nh)),
       keeper_(config_, statistics_, "view_selection_node " + private_nh.getNamespace()),
       poses_(makePoseProvider(config_, nh)),
       verdicts_(config_, nh),
-      worker_(config_, *poses_, statistics_, keeper_, &verdicts_),
+      worker_(config_, *poses_, statistics_, keeper_, &verdicts_, make_points),
       outputs_(config_, nh, private_nh, worker_, statistics_),
       services_(config_, private_nh, worker_, *poses_, keeper_, [this] { outputs_.update(); }),
       reconfigure_(config_, withQueue(private_nh, services_.queue()), worker_, outputs_),

@@ -24,6 +24,7 @@
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -49,6 +50,10 @@ struct ServedSelection {
   size_t image_count = 0;
 };
 
+/// Makes the worker's point source from the node's configuration (points::makePointSource by
+/// default; tests pass another, e.g. a deliberately slow one).
+using PointSourceFactory = std::function<std::unique_ptr<core::PointSource>(const NodeConfig&)>;
+
 class KeyframeWorker {
  public:
   /// Makes the selector (throws core::InvalidArgument for bad parameters), continues the
@@ -56,7 +61,8 @@ class KeyframeWorker {
   /// session starts empty) and starts the thread. `verdicts`: the external keyframe decisions
   /// (~keyframe_policy external), or null.
   KeyframeWorker(const NodeConfig& config, PoseProvider& poses, InputStatistics& statistics,
-                 StateKeeper& keeper, KeyframeVerdicts* verdicts = nullptr);
+                 StateKeeper& keeper, KeyframeVerdicts* verdicts = nullptr,
+                 const PointSourceFactory& make_points = {});
   /// Stops the thread (a frame in flight is abandoned: it is not part of the saved session),
   /// joins it, and saves the session when it changed since the last save.
   ~KeyframeWorker();

@@ -1,7 +1,7 @@
 // view_selection_node and the view_selection/ViewSelectionNodelet: the parts of the node, each
 // in a file of its own, composed in the order data flows (docs/architecture.md):
 //   inputs (image, camera_info, depth; map points) -> worker (pose, core::ViewSelector) ->
-//   snapshot -> outputs (~selection, ~markers, ~statistics, /diagnostics) and services.
+//   served selection -> outputs (~selection, ~markers, ~statistics, /diagnostics) and services.
 // Members are built in that order and torn down in reverse, so no callback ever reaches a part
 // that is gone, and a constructor that throws leaves no thread running (every part joins its
 // threads in its destructor).
@@ -29,7 +29,8 @@ class ViewSelectionRos {
  public:
   /// Reads the ~parameters (throws core::InvalidArgument naming a bad one), subscribes to the
   /// relative topics on `nh`, advertises outputs and services on `private_nh`.
-  ViewSelectionRos(ros::NodeHandle nh, ros::NodeHandle private_nh);
+  ViewSelectionRos(ros::NodeHandle nh, ros::NodeHandle private_nh,
+                   const PointSourceFactory& make_points = {});
   ViewSelectionRos(const ViewSelectionRos&) = delete;
   ViewSelectionRos& operator=(const ViewSelectionRos&) = delete;
 
