@@ -7,6 +7,10 @@
 #include "support/test_support.h"
 
 #include <gtest/gtest.h>
+
+#include <algorithm>
+#include <numeric>
+#include <random>
 #include "support/layers.h"
 
 namespace view_selection {
@@ -137,6 +141,72 @@ TEST(MapPointSource, MapChangesUpdateOnlyAffectedRows) {
         EXPECT_EQ(m.at(i, j),
                   computeErrorResistance(m.keyframe(i), m.keyframe(j), selector.config().matrix));
       }
+}
+
+TEST(MapPointSource, IncrementalReassignmentEqualsAFullOne) {
+  // Keyframes along a wall of map points, each looking at it; the map grows at one end, loses
+  // and moves a few points there, and once comes in another order. After every map, each keyframe's assignment
+  // must be what a full reassignment gives, and a map that changes only where few keyframes
+  // look must project only those against it.
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  MapPointSourceConfig config;
+  config.max_points = 150;  // thinning on: the order of the points matters
+  MapPointSource source(config);
+  auto corridor = [&](double from, double to, int n) {
+    Eigen::Matrix3Xd m(3, n);
+    for (int c = 0; c < n; ++c)
+      m.col(c) = Eigen::Vector3d(2.0, uni(rng) * 2 - 1, from + uni(rng) * (to - from));
+    return m;
+  };
+  Eigen::Matrix3Xd map = corridor(-5.0, 25.0, 3000);
+  source.setMapPoints(map);
+  const int kKeyframes = 40;
+  for (int i = 0; i < kKeyframes; ++i)  // 0.5 m apart, 2 m from the wall
+    source.process(i, frameAt(i, lookAt({0, 0, 0.5 * i}, {2.0, 0, 0.5 * i})));
+  source.takeUpdates();
+  auto expectFull = [&](const std::string& where) {
+    const MapPointSource::State state = source.state();
+    for (const MapPointSource::View& v : state.views) {
+      const Eigen::Matrix3Xd want = visibleMapPoints(map, v.intrinsics, v.pose, v.depth.get(), config);
+      ASSERT_EQ(v.assigned.cols(), want.cols()) << where << ", keyframe " << v.id;
+      EXPECT_TRUE(v.assigned == want) << where << ", keyframe " << v.id;
+    }
+  };
+  for (int step = 0; step < 12; ++step) {
+    const std::string where = "step " + std::to_string(step);
+    if (step == 7) {
+      // Another order: every keyframe is projected again.
+      std::vector<Eigen::Index> order(static_cast<size_t>(map.cols()));
+      std::iota(order.begin(), order.end(), 0);
+      std::shuffle(order.begin(), order.end(), rng);
+      Eigen::Matrix3Xd shuffled(3, map.cols());
+      for (Eigen::Index c = 0; c < map.cols(); ++c) shuffled.col(c) = map.col(order[static_cast<size_t>(c)]);
+      map = shuffled;
+      source.setMapPoints(map);
+      EXPECT_EQ(source.lastReassigned(), static_cast<size_t>(kKeyframes)) << where;
+      expectFull(where);
+      continue;
+    }
+    // New points at the far end (seen by the last keyframes only), a few moved there.
+    const Eigen::Matrix3Xd added = corridor(18.5, 19.5 + 0.2 * step, 50);
+    Eigen::Matrix3Xd next(3, map.cols() + added.cols());
+    next << map, added;
+    for (int q = 0; q < 5; ++q) {
+      const Eigen::Index c = next.cols() - 1 - static_cast<Eigen::Index>(uni(rng) * 40);
+      next(1, c) += 0.01;  // moved
+    }
+    map = next;
+    source.setMapPoints(map);
+    EXPECT_LT(source.lastReassigned(), static_cast<size_t>(kKeyframes))
+        << where << ": keyframes that see none of the changes must keep their assignment";
+    EXPECT_GT(source.lastReassigned(), 0u) << where;
+    expectFull(where);
+  }
+  // Points gone: a map with the first 500 points dropped.
+  map = Eigen::Matrix3Xd(map.rightCols(map.cols() - 500));
+  source.setMapPoints(map);
+  expectFull("points dropped");
 }
 
 TEST(MapPointSource, BadInputThrowsAndChangesNothing) {

@@ -6,6 +6,8 @@
 #include "view_selection/core/occlusion_map.h"
 #include "view_selection/core/point_source.h"
 
+#include <memory>
+#include <optional>
 #include <vector>
 
 namespace view_selection::points {
@@ -46,8 +48,14 @@ class MapPointSource : public core::PointSource {
   core::Params params() const override { return core::paramsOf(config_); }
 
   /// Replaces the map (throws InvalidInput for non-finite points; nothing changes then) and
-  /// reassigns every keyframe; keyframes whose set changed become pending updates.
+  /// reassigns the keyframes; keyframes whose set changed become pending updates. Incremental:
+  /// when the points the two maps share keep their order (a SLAM map that grows, moves or
+  /// drops some points), only the keyframes that see a point that came or went are projected
+  /// against the new map (the others' assignments are what a full reassignment gives); else
+  /// every keyframe is.
   void setMapPoints(Eigen::Matrix3Xd points);
+  /// Keyframes projected against the map by the last setMapPoints (for tests and benchmarks).
+  size_t lastReassigned() const { return reassigned_; }
   const Eigen::Matrix3Xd& mapPoints() const { return map_; }
   /// Keyframes whose updates are pending (ascending).
   std::vector<core::ViewId> pendingUpdates() const;
@@ -75,6 +83,13 @@ class MapPointSource : public core::PointSource {
   MapPointSourceConfig config_;
   Eigen::Matrix3Xd map_ = Eigen::Matrix3Xd(3, 0);
   std::vector<View> views_;
+  size_t reassigned_ = 0;
 };
+
+/// The points that came (columns of `after` matched by no point of `before`) and went (of
+/// `before` matched by none of `after`), matched by their exact coordinates; nullopt when the
+/// points the two share are not in the same relative order.
+std::optional<Eigen::Matrix3Xd> changedMapPoints(const Eigen::Matrix3Xd& before,
+                                                 const Eigen::Matrix3Xd& after);
 
 }  // namespace view_selection::points
