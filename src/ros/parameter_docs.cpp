@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <sstream>
+#include <stdexcept>
 #include <vector>
 
 namespace view_selection::ros_node {
@@ -69,6 +70,38 @@ std::string parametersMarkdown() {
         << doc << " |\n";
   }
   return out.str();
+}
+
+std::string parametersNodeTable() {
+  std::ostringstream out;
+  out << kNodeTableBegin << "\n| section | parameters (defaults) |\n|---|---|\n";
+  std::string section;
+  bool first = true;
+  for (const ParameterDoc& d : docs()) {
+    if (d.section != section) {
+      if (!section.empty()) out << " |\n";
+      section = d.section;
+      out << "| " << section << " | ";
+      first = true;
+    }
+    out << (first ? "" : ", ") << "`" << d.name << ": " << d.value << "`";
+    first = false;
+  }
+  if (!section.empty()) out << " |\n";
+  out << kNodeTableEnd << "\n";
+  return out.str();
+}
+
+std::string withNodeTable(const std::string& node_md) {
+  const size_t begin = node_md.find(kNodeTableBegin);
+  const size_t end = node_md.find(kNodeTableEnd);
+  if (begin == std::string::npos || end == std::string::npos || end < begin)
+    throw std::runtime_error(
+        std::string("docs/node.md has no parameter table between the lines '") + kNodeTableBegin +
+        "' and '" + kNodeTableEnd + "'");
+  size_t after = end + std::string(kNodeTableEnd).size();
+  if (after < node_md.size() && node_md[after] == '\n') ++after;
+  return node_md.substr(0, begin) + parametersNodeTable() + node_md.substr(after);
 }
 
 }  // namespace view_selection::ros_node

@@ -63,6 +63,27 @@ TEST(Parameters, TheDocsAreWrittenFromTheStructs) {
          "view_selection_params --markdown > docs/parameters.md";
 }
 
+TEST(Parameters, TheNodeDocsTableIsWrittenFromTheStructs) {
+  const std::string node_md = readFile(kRoot / "docs" / "node.md");
+  ASSERT_NE(node_md.find(ros_node::kNodeTableBegin), std::string::npos)
+      << "docs/node.md lost the line " << ros_node::kNodeTableBegin;
+  EXPECT_TRUE(node_md == ros_node::withNodeTable(node_md))
+      << "docs/node.md's parameter table is not what the structs say; regenerate it: "
+         "view_selection_params --write-docs .";
+  // The table names every parameter with its default (a stale default, such as completion
+  // paper or min_covisible_ratio 0.1 once, fails here).
+  for (const ParameterDoc& d : core::describeParameters(ros_node::NodeConfig{}))
+    EXPECT_NE(ros_node::parametersNodeTable().find("`" + d.name + ": " + d.value + "`"),
+              std::string::npos)
+        << d.name;
+  // Splicing keeps the hand-written text around the table and only that.
+  const std::string spliced =
+      ros_node::withNodeTable(std::string("before\n") + ros_node::kNodeTableBegin + "\nold\n" +
+                              ros_node::kNodeTableEnd + "\nafter\n");
+  EXPECT_EQ(spliced, "before\n" + ros_node::parametersNodeTable() + "after\n");
+  EXPECT_THROW(ros_node::withNodeTable("no markers\n"), std::runtime_error);
+}
+
 /// Each parameter's range, by name.
 std::map<std::string, std::pair<double, double>> ranges() {
   struct Ranges : core::ParameterVisitor {
@@ -101,8 +122,9 @@ TEST(Parameters, ReconfigureDefaultsAndRangesAreTheStructs) {
   // Ranges of the numbers, names of the choices.
   const auto range = ranges();
   const std::map<std::string, std::string> choices = {
-      {"completion", "paper reachable"}, {"keyframe_policy", "every_frame every_nth motion"},
-                                                      {"gate", "paper matchable"}};
+      {"completion", "paper reachable"},
+      {"keyframe_policy", "every_frame every_nth motion"},
+      {"gate", "paper matchable"}};
   for (const auto& description : Config::__getParamDescriptions__()) {
     const std::string& name = description->name;
     if (description->type == "str") {
