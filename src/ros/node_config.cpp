@@ -51,6 +51,16 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
       "frames waiting for the worker; beyond, the oldest is dropped (worker_behind)");
   core::visitFlag(v, "use_depth", use_depth,
                   "synchronise `depth` (16UC1 millimetres or 32FC1 metres) with the image");
+  core::visitText(v, "image_transport", image_transport, {"raw", "compressed"},
+                  "raw: sensor_msgs/Image on `image`; compressed: sensor_msgs/CompressedImage "
+                  "(JPEG or PNG, as compressed_image_transport writes it) on `image`/compressed, "
+                  "decoded by the node itself (no image_transport plugin needed)");
+  core::visitText(v, "depth_image_transport", depth_image_transport,
+                  {"raw", "compressedDepth", "compressed"},
+                  "raw: sensor_msgs/Image on `depth`; compressedDepth: as "
+                  "compressed_depth_image_transport writes it (16UC1 PNG, or 32FC1 as quantised "
+                  "inverse depth) on `depth`/compressedDepth; compressed: a 16-bit PNG on "
+                  "`depth`/compressed");
   core::visitText(v, "point_source", point_source, {"auto", "depth", "features", "map"},
                   "where sample points come from; auto = depth with use_depth, else features");
   core::visitReal(v, "depth_16u_metres_per_unit", depth_16u_metres_per_unit, 1e-9, 1e3,
@@ -184,8 +194,6 @@ NodeConfig loadNodeConfig(const ros::NodeHandle& nh) {
 std::vector<std::string> unknownParameters(const ros::NodeHandle& nh) {
   NameCollector known;
   NodeConfig().visitParameters(known);
-  // image_transport's own ~parameters (TransportHints read them from the private handle).
-  known.names.insert({"image_transport", "depth_image_transport"});
   std::vector<std::string> all, unknown;
   if (!ros::param::getParamNames(all)) return unknown;
   const std::string prefix = nh.getNamespace() + "/";

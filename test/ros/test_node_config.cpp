@@ -146,7 +146,7 @@ TEST(NodeConfig, MisspelledParametersAreNamed) {
   nh.setParam("k", 3);
   nh.setParam("min_covisble_ratio", 0.5);        // misspelled
   nh.setParam("completoin", "reachable");        // misspelled
-  nh.setParam("image_transport/compressed", 1);  // another component's namespace: not judged
+  nh.setParam("image/compressed/mode", 1);  // another component's namespace: not judged
   EXPECT_EQ(unknownParameters(nh), (std::vector<std::string>{"completoin", "min_covisble_ratio"}));
   EXPECT_EQ(loadNodeConfig(nh).selector.selection.k, 3);  // the known ones still arrive
   EXPECT_TRUE(unknownParameters(fresh("clean")).empty());

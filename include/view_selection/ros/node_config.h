@@ -37,6 +37,11 @@ struct NodeConfig {
   double sync_timeout = 1.0;       ///< [s, wall] longest wait of an image for its partners
   int max_pending_frames = 30;     ///< frames waiting for the worker before the oldest is dropped
   bool use_depth = true;           ///< subscribe to `depth` and synchronise it
+  /// raw: sensor_msgs/Image on `image`; compressed: sensor_msgs/CompressedImage on
+  /// `image`/compressed (JPEG or PNG), decoded by the node (no image_transport plugin needed).
+  std::string image_transport = "raw";
+  /// raw, compressedDepth (`depth`/compressedDepth) or compressed (`depth`/compressed, PNG).
+  std::string depth_image_transport = "raw";
   /// depth | features | map | auto; loadNodeConfig resolves auto (depth with use_depth, else
   /// features, as select_views does by the folder).
   std::string point_source = "auto";
