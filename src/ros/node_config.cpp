@@ -77,8 +77,11 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
                   "subscribe to `path` (nav_msgs/Path: the corrected trajectory of ~body_frame in "
                   "world_frame, e.g. VINS pose_graph_path, RTAB-Map mapPath) and move keyframes "
                   "to it");
-  core::visitReal(v, "correction_stamp_tolerance", corrections.stamp_tolerance, 0.0, 10.0,
-                  "a keyframe takes the path pose nearest its stamp, when this close [s]");
+  core::visitReal(v, "correction_max_source_gap", corrections.max_source_gap, 0.0, 10.0,
+                  "a path pose gives a correction (path pose * the pose the node had at its "
+                  "stamp^-1) when the node has poses of its frames on either side of its stamp "
+                  "within this; each keyframe takes the correction interpolated at its stamp, "
+                  "the nearest outside the path [s]");
   core::visitReal(v, "correction_min_translation", corrections.min_translation, 0.0, 1e6,
                   "a keyframe is moved (its row and column recomputed) when its centre moves "
                   "more than this [m] ...");
