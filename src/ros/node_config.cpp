@@ -30,7 +30,8 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
                   "how long a frame waits for its pose before it is dropped [s, wall]");
   core::visitReal(v, "pose_max_time_difference", pose_max_time_difference, 0.0, 10.0,
                   "topic sources: the poses on either side of the image stamp must each be this "
-                  "close to it to be interpolated (a pose at the stamp is taken as it is) [s]");
+                  "close to it to be interpolated (a pose at the stamp is taken as it is); 0.12 "
+                  "admits odometry at 10 Hz or faster on any clock, with 20 ms of jitter [s]");
   v.section("Input");
   core::visitInteger(v, "queue_size", queue_size, 1, 10000,
                      "images waiting for their camera_info and depth; beyond, the oldest is "

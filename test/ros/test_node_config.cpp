@@ -35,7 +35,7 @@ TEST(NodeConfig, DefaultsAreTheCoresAndTheDocumentedOnes) {
   EXPECT_EQ(c.world_frame, "world");
   EXPECT_EQ(c.camera_frame, "");
   EXPECT_EQ(c.pose_source, PoseSource::kTf);
-  EXPECT_DOUBLE_EQ(c.pose_timeout, 0.1);
+  EXPECT_DOUBLE_EQ(c.pose_timeout, 0.5);
   EXPECT_EQ(c.queue_size, 10);
   EXPECT_TRUE(c.use_depth);
   EXPECT_EQ(c.point_source, "depth");
