@@ -1,20 +1,65 @@
 // Seeds for fuzz_state_file: tiny real sessions, one per point source (64 x 48 frames of a
-// textured wall seen from a sideways walk), written as state files into the folder given.
+// textured wall seen from a sideways walk), written as state files into the folder given; and,
+// with a second folder, seeds for fuzz_compressed: that wall and its depth as the compressed
+// transports carry them (JPEG, PNG, compressedDepth 16UC1 and 32FC1), in the target's layout.
 #include "view_selection/core/view_selector.h"
 #include "view_selection/io/state_file.h"
 #include "view_selection/points/image_conversion.h"
 #include "view_selection/points/point_source_factory.h"
+#include "view_selection/ros/compressed_images.h"
 
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include <cstdio>
+#include <cstring>
+#include <fstream>
 #include <random>
 
 using namespace view_selection;
 
+namespace {
+
+/// fuzz_compressed's input: uint32 decoder (0 colour, 1 compressedDepth, 2 compressed depth),
+/// uint32 format length, the format, the payload.
+void writeCompressedSeed(const std::string& path, uint32_t decoder,
+                         const sensor_msgs::CompressedImage& msg) {
+  std::ofstream out(path, std::ios::binary);
+  const auto length = static_cast<uint32_t>(msg.format.size());
+  out.write(reinterpret_cast<const char*>(&decoder), 4);
+  out.write(reinterpret_cast<const char*>(&length), 4);
+  out.write(msg.format.data(), msg.format.size());
+  out.write(reinterpret_cast<const char*>(msg.data.data()),
+            static_cast<std::streamsize>(msg.data.size()));
+  std::printf("%s: %zu bytes\n", path.c_str(), msg.data.size());
+}
+
+void writeCompressedSeeds(const std::string& dir, const cv::Mat& wall) {
+  using ros_node::encodeCompressedDepth;
+  using ros_node::encodeCompressedImage;
+  const cv::Mat image = wall(cv::Rect(0, 0, 64, 48)).clone();
+  cv::Mat grey, depth(48, 64, CV_32FC1), millimetres;
+  cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+  for (int r = 0; r < 48; ++r)
+    for (int c = 0; c < 64; ++c)
+      depth.at<float>(r, c) = (r * 64 + c) % 29 == 0 ? 0.0f : 0.4f + 0.05f * c;
+  depth.convertTo(millimetres, CV_16UC1, 1000.0);
+  writeCompressedSeed(dir + "/jpeg_bgr8", 0, encodeCompressedImage(image, "bgr8", "jpeg", 80));
+  writeCompressedSeed(dir + "/png_bgr8", 0, encodeCompressedImage(image, "bgr8", "png", 0));
+  writeCompressedSeed(dir + "/jpeg_mono8", 0, encodeCompressedImage(grey, "mono8", "jpeg", 80));
+  writeCompressedSeed(dir + "/depth_32fc1", 1, encodeCompressedDepth(depth));
+  writeCompressedSeed(dir + "/depth_16uc1", 1, encodeCompressedDepth(millimetres));
+  sensor_msgs::CompressedImage png16;
+  png16.format = "16UC1; png compressed ";
+  cv::imencode(".png", millimetres, png16.data);
+  writeCompressedSeed(dir + "/png_16uc1", 2, png16);
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
-  if (argc != 2) {
-    std::fprintf(stderr, "usage: fuzz_make_seeds DIR\n");
+  if (argc != 2 && argc != 3) {
+    std::fprintf(stderr, "usage: fuzz_make_seeds STATE_DIR [COMPRESSED_DIR]\n");
     return 2;
   }
   cv::Mat wall(48, 200, CV_8UC3);
@@ -23,6 +68,7 @@ int main(int argc, char** argv) {
     cv::circle(wall, {static_cast<int>(rng() % 200), static_cast<int>(rng() % 48)},
                2 + static_cast<int>(rng() % 6), cv::Scalar(rng() % 255, rng() % 255, rng() % 255),
                cv::FILLED);
+  if (argc == 3) writeCompressedSeeds(argv[2], wall);
   for (const char* source : {"depth", "features", "map", "auto"}) {
     core::ViewSelectorConfig config;
     config.keyframes.mode = core::KeyframeMode::kEveryFrame;

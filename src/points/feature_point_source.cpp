@@ -108,6 +108,9 @@ void FeaturePointSourceConfig::visitParameters(core::ParameterVisitor& v) {
                   "features: robust loss scale of the refinement [px]");
   core::visitInteger(v, "feature_max_refine_iterations", max_refine_iterations, 1, 10000,
                      "features: Levenberg-Marquardt iterations per point");
+  core::visitInteger(v, "feature_keep_descriptor_views", keep_descriptor_views, 1, 10000000,
+                     "features: keyframes that keep their descriptors to be matched (the most "
+                     "recently used); older ones keep only their tracked features and points");
 }
 
 FeaturePointSource::FeaturePointSource(FeaturePointSourceConfig config)
@@ -128,6 +131,10 @@ void FeaturePointSource::reset() {
   index_of_.clear();
   tracks_.clear();
   last_candidates_.clear();
+  grid_.clear();
+  clock_ = 0;
+  last_use_.clear();
+  in_use_.clear();
   last_ = total_ = FeatureStats{};
 }
 
@@ -175,13 +182,27 @@ double FeaturePointSource::sampsonDistance(const Eigen::Matrix3d& f, const Eigen
   return std::sqrt(e * e / denom);
 }
 
-std::vector<int> FeaturePointSource::chooseCandidates(const TriangulationCamera& camera) const {
+std::vector<int> FeaturePointSource::chooseCandidates(const TriangulationCamera& camera,
+                                                       size_t* scored_views) {
+  // The scene's depth from the recent keyframes: their median depths, the median and the largest.
   std::vector<double> medians;
-  for (const View& v : views_)
-    if (v.median_depth > 0.0) medians.push_back(v.median_depth);
+  for (size_t v = views_.size(); v-- > 0 && medians.size() < static_cast<size_t>(kDepthViews);)
+    if (views_[v].median_depth > 0.0) medians.push_back(views_[v].median_depth);
   const double scene_depth = median(medians);
+  const double far_depth = medians.empty() ? 0.0 : *std::max_element(medians.begin(), medians.end());
+  std::vector<core::ViewId> near;
+  if (far_depth > 0.0) {
+    grid_.query(camera.centre, kCandidateDepths * far_depth, near);
+  } else {  // nothing triangulated yet: the most recent keyframes
+    const size_t recent = static_cast<size_t>(kRecentFactor * config_.max_match_views);
+    for (size_t v = views_.size() > recent ? views_.size() - recent : 0; v < views_.size(); ++v)
+      near.push_back(static_cast<core::ViewId>(v));
+  }
   std::vector<std::pair<double, int>> scored;
-  for (size_t v = 0; v < views_.size(); ++v) {
+  size_t estimated = 0;
+  for (const core::ViewId id : near) {
+    const size_t v = static_cast<size_t>(id);
+    if (views_[v].descriptors.empty()) continue;  // released: cannot be matched
     const TriangulationCamera& other = cameras_[v];
     const double baseline = (other.centre - camera.centre).norm();
     if (!(baseline > 0.0)) continue;  // no triangulation from one centre
@@ -193,10 +214,12 @@ std::vector<int> FeaturePointSource::chooseCandidates(const TriangulationCamera&
       depths = {0.6 * d, d, 1.6 * d};
     else
       depths = {2.0 * baseline, 5.0 * baseline, 20.0 * baseline};
+    ++estimated;
     const double overlap = frustumOverlap(other, camera, depths);
     if (overlap >= config_.min_overlap && overlap > 0.0)
       scored.emplace_back(overlap, static_cast<int>(v));
   }
+  if (scored_views) *scored_views = estimated;
   // Best overlap first; among equals the most recent view.
   std::sort(scored.begin(), scored.end(), [](const auto& a, const auto& b) {
     return a.first != b.first ? a.first > b.first : a.second > b.second;
@@ -207,6 +230,71 @@ std::vector<int> FeaturePointSource::chooseCandidates(const TriangulationCamera&
     chosen.push_back(v);
   }
   return chosen;
+}
+
+void FeaturePointSource::use(int view) {
+  const size_t v = static_cast<size_t>(view);
+  if (last_use_.size() <= v) last_use_.resize(v + 1, 0);
+  in_use_.erase({last_use_[v], view});
+  last_use_[v] = ++clock_;
+  if (!views_[v].descriptors.empty()) in_use_.insert({last_use_[v], view});
+}
+
+void FeaturePointSource::releaseOld() {
+  while (in_use_.size() > static_cast<size_t>(config_.keep_descriptor_views)) {
+    const int view = in_use_.begin()->second;
+    in_use_.erase(in_use_.begin());
+    release(view);
+  }
+}
+
+void FeaturePointSource::release(int view) {
+  View& v = views_[static_cast<size_t>(view)];
+  v.descriptors.release();
+  v.index = StripIndex{};
+  // Features that can never be used again are dropped, the others renumbered in the view and
+  // in their tracks: those in no track (nothing can match them now), and those of a track
+  // without a point whose every other view is released too (no match can reach it again, so
+  // it will never be triangulated).
+  std::vector<cv::KeyPoint> kept;
+  std::vector<int> kept_tracks;
+  for (size_t f = 0; f < v.keypoints.size(); ++f) {
+    const int t = v.track_of[f];
+    if (t < 0) continue;
+    Track& track = tracks_[static_cast<size_t>(t)];
+    bool reachable = track.valid;
+    for (const auto& [ov, of] : track.obs)
+      reachable = reachable || (ov != view && !views_[static_cast<size_t>(ov)].descriptors.empty());
+    if (!reachable) {
+      track.obs.erase(std::remove(track.obs.begin(), track.obs.end(),
+                                  std::make_pair(view, static_cast<int>(f))),
+                      track.obs.end());
+      if (track.obs.empty()) std::vector<std::pair<int, int>>().swap(track.obs);
+      continue;
+    }
+    for (auto& [ov, of] : track.obs)
+      if (ov == view && of == static_cast<int>(f)) of = static_cast<int>(kept.size());
+    kept.push_back(v.keypoints[f]);
+    kept_tracks.push_back(t);
+  }
+  v.keypoints = std::move(kept);
+  v.keypoints.shrink_to_fit();
+  v.track_of = std::move(kept_tracks);
+}
+
+FeaturePointSource::MemoryUse FeaturePointSource::memoryUse() const {
+  MemoryUse m;
+  for (const View& v : views_) {
+    m.features += sizeof(View) + v.keypoints.capacity() * sizeof(cv::KeyPoint) +
+                  v.track_of.capacity() * sizeof(int);
+    if (!v.descriptors.empty()) m.descriptors += v.descriptors.total() * v.descriptors.elemSize();
+    for (const auto& strip : v.index.by_x) m.descriptors += strip.capacity() * sizeof(strip[0]);
+    for (const auto& strip : v.index.by_y) m.descriptors += strip.capacity() * sizeof(strip[0]);
+    m.points += static_cast<size_t>(v.emitted.size()) * sizeof(double);
+  }
+  for (const Track& t : tracks_) m.tracks += sizeof(Track) + t.obs.capacity() * sizeof(t.obs[0]);
+  m.features += cameras_.capacity() * sizeof(TriangulationCamera);
+  return m;
 }
 
 void FeaturePointSource::StripIndex::build(const std::vector<cv::KeyPoint>& keypoints, int width,
@@ -407,6 +495,7 @@ FeatureStats& FeatureStats::operator+=(const FeatureStats& o) {
   refine_seconds += o.refine_seconds;
   features += o.features;
   candidates += o.candidates;
+  scored += o.scored;
   matches += o.matches;
   points += o.points;
   keyframes += o.keyframes;
@@ -434,8 +523,9 @@ void FeaturePointSource::restore(State state) {
     if (v.id < 0 || (i > 0 && v.id <= state.views[i - 1].id)) bad("ids do not ascend");
     if (!v.intrinsics.isValid() || !v.pose.isValid()) bad(which + " intrinsics or pose");
     if (v.track_of.size() != v.keypoints.size()) bad(which + " track list size");
-    if (!v.keypoints.empty() && (v.descriptors.rows != static_cast<int>(v.keypoints.size()) ||
-                                 v.descriptors.cols != length || v.descriptors.type() != type))
+    if (!v.keypoints.empty() && !v.descriptors.empty() &&
+        (v.descriptors.rows != static_cast<int>(v.keypoints.size()) ||
+         v.descriptors.cols != length || v.descriptors.type() != type))
       bad(which + " descriptors do not fit the keypoints or the detector '" + config_.detector +
           "'");
     for (const cv::KeyPoint& k : v.keypoints)
@@ -462,7 +552,7 @@ void FeaturePointSource::restore(State state) {
   for (size_t i = 0; i < n; ++i) {
     static_cast<ViewState&>(views[i]) = std::move(state.views[i]);
     View& v = views[i];
-    v.index.build(v.keypoints, v.intrinsics.width, v.intrinsics.height);
+    if (!v.descriptors.empty()) v.index.build(v.keypoints, v.intrinsics.width, v.intrinsics.height);
     cameras.push_back(TriangulationCamera::from(v.intrinsics, v.pose));
     index_of[v.id] = static_cast<int>(i);
   }
@@ -471,6 +561,15 @@ void FeaturePointSource::restore(State state) {
   index_of_ = std::move(index_of);
   tracks_ = std::move(state.tracks);
   last_candidates_.clear();
+  grid_.clear();
+  clock_ = 0;
+  last_use_.clear();
+  in_use_.clear();
+  for (size_t i = 0; i < views_.size(); ++i) {  // in arrival order: the newest used last
+    grid_.insert(static_cast<core::ViewId>(i), cameras_[i].centre);
+    use(static_cast<int>(i));
+  }
+  releaseOld();
   last_ = total_ = FeatureStats{};
 }
 
@@ -508,11 +607,14 @@ core::PointSourceResult FeaturePointSource::process(core::ViewId id, const core:
 
   t0 = cpuNow();
   const TriangulationCamera camera = TriangulationCamera::from(frame.intrinsics, frame.pose);
-  const std::vector<int> candidates = chooseCandidates(camera);
+  const std::vector<int> candidates = chooseCandidates(camera, &stats.scored);
   const int n = static_cast<int>(views_.size());
   views_.push_back(std::move(next));
   cameras_.push_back(camera);
   index_of_[id] = n;
+  grid_.insert(n, camera.centre);
+  use(n);
+  for (const int c : candidates) use(c);
   std::vector<std::vector<cv::DMatch>> matches;
   for (const int c : candidates) {
     matches.push_back(match(views_[static_cast<size_t>(n)], c));
@@ -552,6 +654,8 @@ core::PointSourceResult FeaturePointSource::process(core::ViewId id, const core:
   stats.triangulate_seconds = secondsSince(t0);
   stats.points = static_cast<size_t>(result.points.cols());
   stats.keyframes = 1;
+
+  releaseOld();
 
   last_ = stats;
   total_ += stats;

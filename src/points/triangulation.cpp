@@ -67,6 +67,7 @@ namespace {
 /// of these residuals is minimising the robust cost exactly (rho is continuously differentiable,
 /// so the scaled residual is too, and Gauss-Newton on it is well defined).
 struct TrackReprojectionCost {
+  static constexpr double kBehindCamera = 1e8;  ///< [px] residual of a point behind a camera
   const std::vector<PixelObservation>* observations;
   const std::vector<TriangulationCamera>* cameras;
   double delta;
@@ -84,7 +85,14 @@ struct TrackReprojectionCost {
       for (int k = 0; k < 3; ++k)
         p[k] = T(r(k, 0)) * (x[0] - T(c.centre.x())) + T(r(k, 1)) * (x[1] - T(c.centre.y())) +
                T(r(k, 2)) * (x[2] - T(c.centre.z()));
-      if (!(p[2] > T(0.0))) return false;  // behind the camera: the step is rejected
+      if (!(p[2] > T(0.0))) {
+        // Behind the camera: the step must be rejected. TinySolver ignores the return value of
+        // a trial step's evaluation and compares the residuals' norm, so every residual is set
+        // (to a cost no step in front reaches): otherwise it compared whatever the buffer held
+        // before, and the result depended on the heap's contents.
+        for (size_t i = 0; i < 2 * observations->size(); ++i) residual[i] = T(kBehindCamera);
+        return false;
+      }
       const T du = T(c.intrinsics.fx) * p[0] / p[2] + T(c.intrinsics.cx) - T(o.pixel.x());
       const T dv = T(c.intrinsics.fy) * p[1] / p[2] + T(c.intrinsics.cy) - T(o.pixel.y());
       const T s = du * du + dv * dv;

@@ -3,7 +3,10 @@
 #include "view_selection/core/exceptions.h"
 #include "view_selection/core/parameters.h"
 
+#include "view_selection/ros/compressed_images.h"
 #include "view_selection/ros/conversions.h"
+
+#include <boost/make_shared.hpp>
 
 #include <cmath>
 
@@ -43,11 +46,21 @@ FrameInputs::FrameInputs(const NodeConfig& config, ros::NodeHandle nh, ros::Node
     points_sub_ = nh_.subscribe("points", kMapQueue, &FrameInputs::onMapPoints, this);
   // The roscpp queues hold what arrives while the input thread is busy.
   const uint32_t q = static_cast<uint32_t>(config_.subscriber_queue_size);
-  image_sub_ =
-      it_.subscribe("image", q, &FrameInputs::onImage, this,
-                    image_transport::TransportHints("raw", ros::TransportHints(), private_nh));
+  // Compressed transports as image_transport names their topics (<base>/<transport>, the base
+  // remapped), decoded here: Debian packages only image_transport's raw plugin.
+  if (config_.image_transport == "compressed")
+    compressed_image_sub_ = input_nh_.subscribe(input_nh_.resolveName("image") + "/compressed", q,
+                                                &FrameInputs::onCompressedImage, this);
+  else
+    image_sub_ =
+        it_.subscribe("image", q, &FrameInputs::onImage, this,
+                      image_transport::TransportHints("raw", ros::TransportHints(), private_nh));
   info_sub_ = input_nh_.subscribe("camera_info", q, &FrameInputs::onCameraInfo, this);
-  if (config_.use_depth)
+  if (config_.use_depth && config_.depth_image_transport != "raw")
+    compressed_depth_sub_ =
+        input_nh_.subscribe(input_nh_.resolveName("depth") + "/" + config_.depth_image_transport,
+                            q, &FrameInputs::onCompressedDepth, this);
+  else if (config_.use_depth)
     depth_sub_ =
         it_.subscribe("depth", q, &FrameInputs::onDepth, this,
                       image_transport::TransportHints("raw", ros::TransportHints(), private_nh,
@@ -68,12 +81,60 @@ FrameInputs::~FrameInputs() {
   check_timer_.stop();
   image_sub_.shutdown();
   depth_sub_.shutdown();
+  compressed_image_sub_.shutdown();
+  compressed_depth_sub_.shutdown();
   info_sub_.shutdown();
   points_sub_.shutdown();
 }
 
 void FrameInputs::onImage(const sensor_msgs::ImageConstPtr& image) {
   statistics_.arrived(InputStatistics::Input::kImage);
+  addImage(image);
+}
+
+void FrameInputs::onCompressedImage(const sensor_msgs::CompressedImageConstPtr& msg) {
+  statistics_.arrived(InputStatistics::Input::kImage);
+  sensor_msgs::ImageConstPtr image;
+  try {
+    image = decodeCompressedImage(*msg);  // outside the lock: decoding takes milliseconds
+  } catch (const core::InvalidInput& e) {
+    std::lock_guard<std::mutex> lock(sync_mutex_);
+    image = corruptStandIn(msg->header, "bad_image",
+                           "'" + input_nh_.resolveName("image") + "/compressed' (format '" +
+                               msg->format + "'): " + e.what());
+  }
+  addImage(image);
+}
+
+void FrameInputs::onCompressedDepth(const sensor_msgs::CompressedImageConstPtr& msg) {
+  statistics_.arrived(InputStatistics::Input::kDepth);
+  sensor_msgs::ImageConstPtr depth;
+  try {
+    depth = config_.depth_image_transport == "compressedDepth" ? decodeCompressedDepth(*msg)
+                                                               : decodeCompressedImage(*msg);
+  } catch (const core::InvalidInput& e) {
+    std::lock_guard<std::mutex> lock(sync_mutex_);
+    depth = corruptStandIn(msg->header, "bad_depth",
+                           "'" + input_nh_.resolveName("depth") + "/" +
+                               config_.depth_image_transport + "' (format '" + msg->format +
+                               "'): " + e.what());
+  }
+  addDepth(depth);
+}
+
+sensor_msgs::ImageConstPtr FrameInputs::corruptStandIn(const std_msgs::Header& header,
+                                                       const std::string& reason,
+                                                       const std::string& why) {
+  auto stand_in = boost::make_shared<sensor_msgs::Image>();
+  stand_in->header = header;
+  // Kept while the synchroniser may hold it: as many as it keeps of each input, and waiting.
+  const size_t keep = sync_.config().max_partners + sync_.config().max_waiting + 1;
+  while (corrupt_.size() >= keep) corrupt_.pop_front();
+  corrupt_.push_back({stand_in, reason, why});
+  return stand_in;
+}
+
+void FrameInputs::addImage(const sensor_msgs::ImageConstPtr& image) {
   std::lock_guard<std::mutex> lock(sync_mutex_);
   const uint32_t seq = image->header.seq;
   // Publishers that number their images (rosbag play of a recording, camera drivers): a gap is
@@ -101,6 +162,10 @@ void FrameInputs::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& info) {
 
 void FrameInputs::onDepth(const sensor_msgs::ImageConstPtr& depth) {
   statistics_.arrived(InputStatistics::Input::kDepth);
+  addDepth(depth);
+}
+
+void FrameInputs::addDepth(const sensor_msgs::ImageConstPtr& depth) {
   std::lock_guard<std::mutex> lock(sync_mutex_);
   deliver(sync_.addDepth(depth, wallNow()));
 }
@@ -108,7 +173,20 @@ void FrameInputs::onDepth(const sensor_msgs::ImageConstPtr& depth) {
 void FrameInputs::deliver(SynchronisedFrames decided) {
   for (const auto& drop : decided.drops)
     statistics_.dropInput("unsynchronised", drop.message, drop.stamp);
-  for (PendingFrame& frame : decided.frames) worker_.push(std::move(frame));  // counts it received
+  for (PendingFrame& frame : decided.frames) {
+    const Corrupt* corrupt = nullptr;
+    for (const Corrupt& c : corrupt_)
+      if (c.stand_in == frame.image || (frame.depth && c.stand_in == frame.depth)) corrupt = &c;
+    if (!corrupt) {
+      worker_.push(std::move(frame));  // counts it received
+      continue;
+    }
+    // A frame whose image or depth did not decode: received, and dropped for that.
+    const uint64_t session = statistics_.frameReceived();
+    statistics_.drop(session, corrupt->reason,
+                     "stamp " + stampText(frame.image->header.stamp) + ": " + corrupt->message,
+                     frame.image->header.stamp);
+  }
   statistics_.setImagesInSynchroniser(sync_.waiting());
 }
 

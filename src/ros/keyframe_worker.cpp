@@ -233,17 +233,19 @@ void KeyframeWorker::reconfigure(const core::ViewSelectorConfig& config) {
   queue_cv_.notify_one();
 }
 
-size_t KeyframeWorker::correctPoses(const std::vector<core::TimedPose>& trajectory,
-                                    const core::PoseCorrectionConfig& config) {
+size_t KeyframeWorker::correctPoses(
+    const std::vector<core::TimedPose>& corrections,
+    const std::function<std::optional<core::CameraPose>(double)>& sourcePose,
+    const core::PoseCorrectionConfig& config) {
   std::lock_guard<std::timed_mutex> lock(state_mutex_);
   const core::ErrorResistanceMatrix& m = selector_->matrix();
-  std::vector<core::TimedPose> keyframes;
+  std::vector<core::CorrectableKeyframe> keyframes;
   keyframes.reserve(m.size());
   for (size_t i = 0; i < m.size(); ++i) {
     const core::Keyframe& k = m.keyframe(static_cast<core::ViewId>(i));
-    keyframes.push_back({k.stamp, k.pose});
+    keyframes.push_back({k.stamp, k.pose, sourcePose(k.stamp).value_or(k.pose)});
   }
-  const auto moves = core::matchCorrections(keyframes, trajectory, config);
+  const auto moves = core::matchCorrections(keyframes, corrections, config);
   if (moves.empty()) return 0;
   selector_->correctPoses(moves);
   shareSelectionLocked();

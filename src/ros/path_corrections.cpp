@@ -9,8 +9,9 @@
 namespace view_selection::ros_node {
 
 PathCorrections::PathCorrections(const NodeConfig& config, ros::NodeHandle nh,
-                                 KeyframeWorker& worker, InputStatistics& statistics)
-    : config_(config), nh_(nh), worker_(worker), statistics_(statistics) {
+                                 KeyframeWorker& worker, const PoseProvider& poses,
+                                 InputStatistics& statistics)
+    : config_(config), nh_(nh), worker_(worker), poses_(poses), statistics_(statistics) {
   if (!config_.use_path_corrections) return;
   extrinsic_ = std::make_unique<CameraExtrinsic>(nh);
   ros::SubscribeOptions options = ros::SubscribeOptions::create<nav_msgs::Path>(
@@ -58,11 +59,25 @@ void PathCorrections::onPath(const nav_msgs::PathConstPtr& path) {
   std::stable_sort(
       trajectory.begin(), trajectory.end(),
       [](const core::TimedPose& a, const core::TimedPose& b) { return a.stamp < b.stamp; });
+  // What the node had at each path stamp: the correction there is path pose * that^-1.
+  const double gap = config_.corrections.max_source_gap;
+  std::vector<std::optional<core::CameraPose>> sources;
+  sources.reserve(trajectory.size());
+  for (const core::TimedPose& p : trajectory) sources.push_back(poses_.historyAt(p.stamp, gap));
+  const std::vector<core::TimedPose> corrections = core::pathCorrections(trajectory, sources);
+  if (corrections.empty() && !trajectory.empty())
+    return reject("none of its " + std::to_string(trajectory.size()) +
+                  " poses lies among the node's own poses (within " + std::to_string(gap) +
+                  " s, ~correction_max_source_gap), so no correction is known: a path of another "
+                  "session, or of stamps the node never had frames at");
   try {
-    const size_t moved = worker_.correctPoses(trajectory, config_.corrections);
+    const size_t moved = worker_.correctPoses(
+        corrections, [&](double stamp) { return poses_.historyAt(stamp, 0.0); },
+        config_.corrections);
     statistics_.pathApplied(moved);
-    ROS_DEBUG_STREAM("view_selection: path of " << trajectory.size() << " poses, " << moved
-                                                << " keyframes corrected");
+    ROS_DEBUG_STREAM("view_selection: path of " << trajectory.size() << " poses ("
+                                                << corrections.size() << " with a correction), "
+                                                << moved << " keyframes corrected");
   } catch (const core::Error& e) {
     reject(e.what());
   }

@@ -17,6 +17,22 @@ namespace {
 std::string seconds(double value) { return core::formatNumber(value) + " s"; }
 }  // namespace
 
+void PoseProvider::reset() {
+  std::lock_guard<std::mutex> lock(history_mutex_);
+  history_.clear();
+}
+
+std::optional<core::CameraPose> PoseProvider::historyAt(double stamp, double max_gap) const {
+  std::lock_guard<std::mutex> lock(history_mutex_);
+  return history_.at(stamp, max_gap);
+}
+
+void PoseProvider::record(const ros::Time& stamp, const core::CameraPose& pose) {
+  if (!pose.isValid()) return;
+  std::lock_guard<std::mutex> lock(history_mutex_);
+  history_.add(stamp.toSec(), pose);
+}
+
 // ---------------------------------------------------------------------------------------------
 // tf
 
@@ -55,6 +71,7 @@ PoseLookup TfPoseProvider::lookup(const std::string& image_frame, const ros::Tim
   try {
     out.pose =
         poseFromTransform(buffer_.lookupTransform(config_.world_frame, camera, stamp).transform);
+    record(stamp, *out.pose);
   } catch (const tf2::TransformException& e) {
     out.reason = "no_pose";
     out.message = "no transform " + config_.world_frame + " <- " + camera + " at " +
@@ -140,6 +157,7 @@ void TopicPoseProvider::onPose(ReceivedPose pose) {
 }
 
 void TopicPoseProvider::reset() {
+  PoseProvider::reset();
   std::lock_guard<std::mutex> lock(mutex_);
   poses_.clear();
 }
@@ -226,6 +244,7 @@ PoseLookup TopicPoseProvider::lookup(const std::string& image_frame, const ros::
                                                               : camera;
   if (body_frame == camera) {
     out.pose = body->pose;
+    record(stamp, *out.pose);
     return out;
   }
   std::string error;
@@ -241,6 +260,7 @@ PoseLookup TopicPoseProvider::lookup(const std::string& image_frame, const ros::
     return out;
   }
   out.pose = core::composePoses(body->pose, *extrinsic);
+  record(stamp, *out.pose);
   return out;
 }
 

@@ -36,7 +36,7 @@ ViewSelectionRos::ViewSelectionRos(ros::NodeHandle nh, ros::NodeHandle private_n
       outputs_(config_, nh, private_nh, worker_, statistics_),
       services_(config_, private_nh, worker_, *poses_, keeper_, [this] { outputs_.update(); }),
       reconfigure_(config_, withQueue(private_nh, services_.queue()), worker_, outputs_),
-      corrections_(config_, nh, worker_, statistics_),
+      corrections_(config_, nh, worker_, *poses_, statistics_),
       inputs_(config_, nh, private_nh, worker_, statistics_) {
   const auto& s = config_.selector;
   ROS_INFO_STREAM("view_selection_node: "

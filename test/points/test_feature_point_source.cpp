@@ -328,6 +328,78 @@ TEST(FeaturePointSource, CandidatesAreBoundedRankedAndOverlapping) {
   EXPECT_TRUE(r.updated.empty());
 }
 
+/// A walk along an 80 m corridor, looking at its side wall 1.5 m away, one keyframe every 0.3 m
+/// (320 x 240 px): the scene is many scene depths long.
+Frame corridorFrame(int q) {
+  static const test::TexturedRoom corridor(Eigen::Vector3d(40.0, 1.2, 1.5), 100.0, 11);
+  PinholeIntrinsics k;
+  k.fx = k.fy = 250.0;
+  k.cx = 159.5;
+  k.cy = 119.5;
+  k.width = 320;
+  k.height = 240;
+  Frame f;
+  f.stamp = q;
+  f.image_name = std::to_string(q) + ".png";
+  f.intrinsics = k;
+  const Eigen::Vector3d eye(-35.0 + 0.3 * q, 0.3, 0.1 * std::sin(0.3 * q));
+  f.pose = lookAt(eye, eye + Eigen::Vector3d(0.15, -1.5, 0.0));
+  f.image = colourImageOf(corridor.render(k, f.pose));
+  return f;
+}
+
+TEST(FeaturePointSource, CandidatesComeFromTheGridAndFarDescriptorsAreReleased) {
+  constexpr int kFrames = 160, kKeep = 30;
+  std::vector<Frame> frames;
+  for (int q = 0; q < kFrames; ++q) frames.push_back(corridorFrame(q));
+  FeaturePointSourceConfig keep_all, bounded;
+  keep_all.keep_descriptor_views = 1000000;
+  bounded.keep_descriptor_views = kKeep;
+  FeaturePointSource all(keep_all), few(bounded), resumed(bounded);
+  size_t max_scored = 0, last_scored = 0;
+  for (int q = 0; q < kFrames; ++q) {
+    const PointSourceResult a = all.process(q, frames[static_cast<size_t>(q)]);
+    const PointSourceResult b = few.process(q, frames[static_cast<size_t>(q)]);
+    // Releasing the descriptors of views the walk left behind changes nothing: they are beyond
+    // the grid's radius, no candidates any more.
+    ASSERT_EQ(a.points.cols(), b.points.cols()) << q;
+    EXPECT_TRUE(a.points == b.points) << q;
+    ASSERT_EQ(a.updated.size(), b.updated.size()) << q;
+    EXPECT_EQ(all.lastCandidates(), few.lastCandidates()) << q;
+    EXPECT_LE(few.viewsWithDescriptors(), static_cast<size_t>(kKeep));
+    max_scored = std::max(max_scored, few.lastStats().scored);
+    last_scored = few.lastStats().scored;
+    if (q == kFrames / 2) {  // a saved session, continued with released views in it
+      resumed.restore(few.state());
+      EXPECT_EQ(resumed.viewsWithDescriptors(), static_cast<size_t>(kKeep));
+    } else if (q > kFrames / 2) {
+      const PointSourceResult c = resumed.process(q, frames[static_cast<size_t>(q)]);
+      EXPECT_TRUE(c.points == b.points) << q;
+      EXPECT_EQ(resumed.lastCandidates(), few.lastCandidates()) << q;
+    }
+  }
+  for (ViewId v = 0; v < kFrames; ++v) EXPECT_TRUE(all.pointsOf(v) == few.pointsOf(v)) << v;
+  EXPECT_GT(all.validTracks(), 5000u);
+  // The grid: the views within 5 scene depths (7.5 m: about 50 keyframes), never all of them.
+  EXPECT_LT(max_scored, 70u);
+  EXPECT_GT(last_scored, 10u);
+  EXPECT_EQ(all.viewsWithDescriptors(), static_cast<size_t>(kFrames));
+  const FeaturePointSource::MemoryUse a = all.memoryUse(), b = few.memoryUse();
+  std::printf("[ measure  ] %d keyframes, KB a keyframe, every descriptor kept / %d kept: "
+              "descriptors and strips %.1f / %.1f, features %.1f / %.1f, points %.1f, tracks "
+              "%.1f / %.1f, total %.1f / %.1f; at most %zu views scored for candidates, %zu for "
+              "the last\n",
+              kFrames, kKeep, a.descriptors / 1024.0 / kFrames, b.descriptors / 1024.0 / kFrames,
+              a.features / 1024.0 / kFrames, b.features / 1024.0 / kFrames,
+              a.points / 1024.0 / kFrames, a.tracks / 1024.0 / kFrames, b.tracks / 1024.0 / kFrames,
+              a.total() / 1024.0 / kFrames, b.total() / 1024.0 / kFrames, max_scored, last_scored);
+  // Descriptors as held by kKeep views (the recent ones, with more features than the average
+  // here): bounded whatever the number of keyframes.
+  EXPECT_LT(b.descriptors, a.descriptors * 1.5 * kKeep / kFrames);
+  EXPECT_LT(b.features, a.features);
+  EXPECT_EQ(b.points, a.points);
+}
+
 TEST(FeaturePointSource, BadParametersAndInputsThrow) {
   auto bad = [](auto change) {
     FeaturePointSourceConfig c;

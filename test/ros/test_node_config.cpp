@@ -35,7 +35,7 @@ TEST(NodeConfig, DefaultsAreTheCoresAndTheDocumentedOnes) {
   EXPECT_EQ(c.world_frame, "world");
   EXPECT_EQ(c.camera_frame, "");
   EXPECT_EQ(c.pose_source, PoseSource::kTf);
-  EXPECT_DOUBLE_EQ(c.pose_timeout, 0.1);
+  EXPECT_DOUBLE_EQ(c.pose_timeout, 0.5);
   EXPECT_EQ(c.queue_size, 10);
   EXPECT_TRUE(c.use_depth);
   EXPECT_EQ(c.point_source, "depth");
@@ -146,7 +146,7 @@ TEST(NodeConfig, MisspelledParametersAreNamed) {
   nh.setParam("k", 3);
   nh.setParam("min_covisble_ratio", 0.5);        // misspelled
   nh.setParam("completoin", "reachable");        // misspelled
-  nh.setParam("image_transport/compressed", 1);  // another component's namespace: not judged
+  nh.setParam("image/compressed/mode", 1);  // another component's namespace: not judged
   EXPECT_EQ(unknownParameters(nh), (std::vector<std::string>{"completoin", "min_covisble_ratio"}));
   EXPECT_EQ(loadNodeConfig(nh).selector.selection.k, 3);  // the known ones still arrive
   EXPECT_TRUE(unknownParameters(fresh("clean")).empty());

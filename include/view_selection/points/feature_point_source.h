@@ -2,8 +2,16 @@
 // checked against the epipolar geometry of the known poses, joined into tracks, triangulated
 // with the known poses and refined with Ceres. A point belongs to every keyframe that observes
 // it, so a new keyframe can change the point sets of earlier ones (reported as updates).
+//
+// Bounded: match candidates come from a camera grid (the keyframes whose centres lie within
+// kCandidateDepths scene depths, or the most recent ones before anything is triangulated), not
+// from a scan of every earlier keyframe; and only the keep_descriptor_views keyframes used most
+// recently (inserted or matched) keep their descriptors. An older one's descriptors are
+// released and its features reduced to those in tracks (what triangulation still reads), so it
+// is matched no more but its points stay and its tracks can still grow through other views.
 #pragma once
 
+#include "view_selection/core/camera_grid.h"
 #include "view_selection/core/point_source.h"
 #include "view_selection/points/triangulation.h"
 
@@ -29,6 +37,8 @@ struct FeaturePointSourceConfig {
   double min_parallax_deg = 2.0;     ///< largest angle between a point's observing rays [deg]
   double huber_px = 1.0;             ///< robust loss scale of the refinement [px]
   int max_refine_iterations = 20;
+  /// Keyframes that keep their descriptors (can be matched): the most recently used ones.
+  int keep_descriptor_views = 200;
 
   void visitParameters(core::ParameterVisitor& v);
   /// Throws InvalidArgument naming the first field out of range.
@@ -44,6 +54,7 @@ struct FeatureStats {
   double refine_seconds = 0.0;       ///< the Ceres part of triangulate_seconds
   size_t features = 0;
   size_t candidates = 0;  ///< earlier keyframes matched against
+  size_t scored = 0;      ///< earlier keyframes whose overlap was estimated (the grid's answer)
   size_t matches = 0;     ///< after ratio and epipolar checks
   size_t points = 0;      ///< of the new keyframe
   size_t keyframes = 0;   ///< in totals: keyframes summed over
@@ -69,6 +80,17 @@ class FeaturePointSource : public core::PointSource {
   const std::vector<core::ViewId>& lastCandidates() const { return last_candidates_; }
   /// Tracks with an accepted point.
   size_t validTracks() const;
+  /// Keyframes that still hold their descriptors.
+  size_t viewsWithDescriptors() const { return in_use_.size(); }
+  /// Bytes held (an estimate of the heap use, for tests and reports).
+  struct MemoryUse {
+    size_t features = 0;     ///< keypoints, their tracks, cameras
+    size_t descriptors = 0;  ///< descriptors and the epipolar look-up strips: views kept only
+    size_t points = 0;       ///< each view's current point set
+    size_t tracks = 0;
+    size_t total() const { return features + descriptors + points + tracks; }
+  };
+  MemoryUse memoryUse() const;
 
   /// What a keyframe holds in this source.
   struct ViewState {
@@ -95,8 +117,8 @@ class FeaturePointSource : public core::PointSource {
   };
   State state() const;
   /// Throws InvalidInput (nothing changes then) for inconsistent data: ids that do not ascend,
-  /// descriptors that do not fit the detector or the keypoints, a track or feature index out of
-  /// range, a feature and its track that disagree.
+  /// descriptors that do not fit the detector or the keypoints (empty: released), a track or
+  /// feature index out of range, a feature and its track that disagree.
   void restore(State state);
 
   /// Estimated share of the two frusta that see the same scene, in [0, 1]: grids of pixels of
@@ -130,8 +152,19 @@ class FeaturePointSource : public core::PointSource {
   /// Sampson check. The wider band admits correspondences whose Sampson distance is small but
   /// whose distance to the line in one image is larger (different scales of the two views).
   static constexpr double kBandFactor = 2.0;
+  /// Candidates: keyframes whose centres are within this many scene depths (the largest median
+  /// depth of the recent keyframes). A common point within 1.6 depths of one camera is then
+  /// more than 2.1 times as far from a camera beyond, past the default matchable gate's
+  /// footprint ratio (1.6) and ORB's reliable scale range.
+  static constexpr double kCandidateDepths = 5.0;
+  static constexpr int kDepthViews = 64;  ///< recent keyframes that give the scene depth
+  /// Before anything is triangulated (no depth yet): the most recent keyframes, this many times
+  /// max_match_views.
+  static constexpr int kRecentFactor = 4;
 
-  std::vector<int> chooseCandidates(const TriangulationCamera& camera) const;
+  /// Up to max_match_views earlier views by overlap, from the grid; `scored_views`: how many
+  /// had their overlap estimated.
+  std::vector<int> chooseCandidates(const TriangulationCamera& camera, size_t* scored_views);
   std::vector<cv::DMatch> match(const View& next, int candidate) const;
   bool trackHasView(int track, int view) const;
   /// Joins the new view `n`'s matches with each candidate into tracks; returns the tracks changed.
@@ -140,6 +173,12 @@ class FeaturePointSource : public core::PointSource {
   void triangulateTracks(const std::vector<int>& tracks);
   Eigen::Matrix3Xd pointsOfIndex(int view) const;
   void updateMedianDepth(int view);
+  /// Marks a view used now (it keeps its descriptors longest).
+  void use(int view);
+  /// Releases the descriptors of the least recently used views beyond keep_descriptor_views.
+  void releaseOld();
+  /// Drops a view's descriptors and strips, and its features in no track (indices remapped).
+  void release(int view);
 
   FeaturePointSourceConfig config_;
   cv::Ptr<cv::Feature2D> detector_;
@@ -149,6 +188,10 @@ class FeaturePointSource : public core::PointSource {
   std::map<core::ViewId, int> index_of_;
   std::vector<Track> tracks_;
   std::vector<core::ViewId> last_candidates_;
+  core::CameraGrid grid_;  ///< view index -> camera centre
+  uint64_t clock_ = 0;     ///< counts uses
+  std::vector<uint64_t> last_use_;              ///< by view index
+  std::set<std::pair<uint64_t, int>> in_use_;  ///< (last use, view) of views with descriptors
   FeatureStats last_, total_;
   double refine_seconds_ = 0.0;
 };

@@ -19,6 +19,7 @@
 #include <image_transport/image_transport.h>
 #include <ros/ros.h>
 #include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/CompressedImage.h>
 #include <sensor_msgs/Image.h>
 #include <sensor_msgs/PointCloud2.h>
 
@@ -52,8 +53,18 @@ class FrameInputs {
   void onImage(const sensor_msgs::ImageConstPtr& image);
   void onCameraInfo(const sensor_msgs::CameraInfoConstPtr& info);
   void onDepth(const sensor_msgs::ImageConstPtr& depth);
+  /// ~image_transport compressed, ~depth_image_transport compressedDepth or compressed: decoded
+  /// here; a payload that does not decode enters the synchroniser as a stand-in (the header
+  /// only), so that the frame it belongs to is dropped with the reason (bad_image, bad_depth).
+  void onCompressedImage(const sensor_msgs::CompressedImageConstPtr& image);
+  void onCompressedDepth(const sensor_msgs::CompressedImageConstPtr& depth);
+  void addImage(const sensor_msgs::ImageConstPtr& image);
+  void addDepth(const sensor_msgs::ImageConstPtr& depth);
   /// Frames to the worker, drops to the statistics (under sync_mutex_).
   void deliver(SynchronisedFrames decided);
+  /// Under sync_mutex_: a stand-in for a payload that did not decode, with its drop.
+  sensor_msgs::ImageConstPtr corruptStandIn(const std_msgs::Header& header,
+                                            const std::string& reason, const std::string& why);
   void onMapPoints(const sensor_msgs::PointCloud2ConstPtr& cloud);
   void checkUnmatched();
 
@@ -65,11 +76,17 @@ class FrameInputs {
   std::mutex sync_mutex_;  // the synchroniser and the sequence check
   FrameSynchroniser sync_;
   std::optional<uint32_t> last_seq_;
+  struct Corrupt {
+    sensor_msgs::ImageConstPtr stand_in;
+    std::string reason, message;
+  };
+  std::deque<Corrupt> corrupt_;  ///< stand-ins the synchroniser may still hold, oldest first
 
   ros::CallbackQueue input_queue_;  ///< image, camera_info, depth, the synchroniser's timer
   ros::NodeHandle input_nh_;
   image_transport::ImageTransport it_;
   image_transport::Subscriber image_sub_, depth_sub_;
+  ros::Subscriber compressed_image_sub_, compressed_depth_sub_;
   ros::Subscriber info_sub_;
   ros::WallTimer poll_timer_;
   ros::Subscriber points_sub_;

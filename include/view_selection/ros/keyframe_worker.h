@@ -88,10 +88,13 @@ class KeyframeWorker {
   /// selection is redone; the matrix is recomputed when its gates changed; the keyframe policy
   /// keeps its place. `config` must be valid (validate() first).
   void reconfigure(const core::ViewSelectorConfig& config);
-  /// Loop closure: each keyframe takes the pose of `trajectory` (optical-frame poses, ascending
-  /// stamp) at its stamp, when it moved more than the thresholds (core::matchCorrections); their
-  /// rows and columns are recomputed and a new snapshot published. Returns how many moved.
-  size_t correctPoses(const std::vector<core::TimedPose>& trajectory,
+  /// Loop closure: each keyframe takes `corrections` (world-frame changes at the path's stamps,
+  /// core::pathCorrections) applied to the pose the source gave it (`sourcePose` at its stamp;
+  /// its current pose when the history has none, e.g. continued from ~state_file), when that
+  /// moves it more than the thresholds (core::matchCorrections); their rows and columns are
+  /// recomputed and a new snapshot published. Returns how many moved.
+  size_t correctPoses(const std::vector<core::TimedPose>& corrections,
+                      const std::function<std::optional<core::CameraPose>(double)>& sourcePose,
                       const core::PoseCorrectionConfig& config);
   /// The (normalised) frame_id of the images so far; "" before the first.
   std::string cameraFrame() const;

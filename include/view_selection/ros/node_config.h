@@ -29,14 +29,23 @@ struct NodeConfig {
   std::string camera_frame;           ///< optical frame of the camera; "" = the image's frame_id
   std::string body_frame;  ///< topic sources: frame the poses are of; "" = see visitParameters
   PoseSource pose_source = PoseSource::kTf;
-  double pose_timeout = 0.1;               ///< [s, wall] how long a frame waits for its pose
-  double pose_max_time_difference = 0.02;  ///< [s] topic source: nearest pose must be this close
+  /// [s, wall] how long a frame waits for its pose: odometry at 10 Hz comes up to 0.1 s after a
+  /// frame's stamp, plus the SLAM system's latency.
+  double pose_timeout = 0.5;
+  /// [s] topic sources: the poses on either side of a frame must each be this close (odometry
+  /// at 10 Hz or faster, on any clock; docs/node.md has the measured interpolation error).
+  double pose_max_time_difference = 0.12;
   int queue_size = 10;                     ///< images waiting for their camera_info and depth
   int subscriber_queue_size = 100;         ///< roscpp queue of each of image, camera_info, depth
   double max_stamp_spread = 0.03;  ///< [s] largest |camera_info or depth stamp - image stamp|
   double sync_timeout = 1.0;       ///< [s, wall] longest wait of an image for its partners
   int max_pending_frames = 30;     ///< frames waiting for the worker before the oldest is dropped
   bool use_depth = true;           ///< subscribe to `depth` and synchronise it
+  /// raw: sensor_msgs/Image on `image`; compressed: sensor_msgs/CompressedImage on
+  /// `image`/compressed (JPEG or PNG), decoded by the node (no image_transport plugin needed).
+  std::string image_transport = "raw";
+  /// raw, compressedDepth (`depth`/compressedDepth) or compressed (`depth`/compressed, PNG).
+  std::string depth_image_transport = "raw";
   /// depth | features | map | auto; loadNodeConfig resolves auto (depth with use_depth, else
   /// features, as select_views does by the folder).
   std::string point_source = "auto";

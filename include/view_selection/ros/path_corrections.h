@@ -1,16 +1,19 @@
 // Loop-closure corrections from a nav_msgs/Path on `path` (VINS' pose_graph_path, RTAB-Map's
-// mapPath: the whole corrected trajectory, republished after every loop closure). Its poses are
-// of the same body frame as the topic pose source (~body_frame; else the optical frame) in
-// ~world_frame; each keyframe takes the path's pose nearest its stamp within
-// ~correction_stamp_tolerance, and keyframes that moved more than the thresholds are corrected
-// (rows and columns recomputed; the selection is republished). Its own thread: the extrinsic
-// lookup may wait.
+// mapPath: the whole corrected trajectory, republished after every loop closure, with a pose for
+// each of the SLAM system's own keyframes only). Its poses are of the same body frame as the
+// topic pose source (~body_frame; else the optical frame) in ~world_frame. The correction at each
+// path pose is that pose composed with the inverse of the pose the node had at its stamp (the
+// pose source's history, interpolated within ~correction_max_source_gap); every keyframe of the
+// node takes the correction interpolated at its stamp (the nearest outside the path), and those
+// that moved more than the thresholds are corrected (rows and columns recomputed; the selection
+// is republished). Its own thread: the extrinsic lookup may wait.
 #pragma once
 
 #include "view_selection/ros/camera_extrinsic.h"
 #include "view_selection/ros/input_statistics.h"
 #include "view_selection/ros/keyframe_worker.h"
 #include "view_selection/ros/node_config.h"
+#include "view_selection/ros/pose_provider.h"
 
 #include <nav_msgs/Path.h>
 #include <ros/callback_queue.h>
@@ -24,7 +27,7 @@ class PathCorrections {
  public:
   /// Subscribes to `path` on `nh` when ~use_path_corrections is set; else does nothing.
   PathCorrections(const NodeConfig& config, ros::NodeHandle nh, KeyframeWorker& worker,
-                  InputStatistics& statistics);
+                  const PoseProvider& poses, InputStatistics& statistics);
   ~PathCorrections();
 
  private:
@@ -35,6 +38,7 @@ class PathCorrections {
   const NodeConfig& config_;
   ros::NodeHandle nh_;
   KeyframeWorker& worker_;
+  const PoseProvider& poses_;
   InputStatistics& statistics_;
   std::unique_ptr<CameraExtrinsic> extrinsic_;
   ros::CallbackQueue queue_;

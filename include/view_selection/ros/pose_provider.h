@@ -5,6 +5,7 @@
 // of its own, so poses keep arriving while the worker waits for one.
 #pragma once
 
+#include "view_selection/core/pose_history.h"
 #include "view_selection/core/pose_interpolation.h"
 #include "view_selection/core/types.h"
 #include "view_selection/ros/camera_extrinsic.h"
@@ -41,12 +42,24 @@ class PoseProvider {
   /// The optical frame's pose at `stamp`; `image_frame` is the image's (normalised) frame_id.
   /// Waits at most ~pose_timeout (wall) for it, less once stop() was called.
   virtual PoseLookup lookup(const std::string& image_frame, const ros::Time& stamp) = 0;
-  /// Forgets poses received so far (~reset).
-  virtual void reset() {}
+  /// Forgets poses received so far, and the history (~reset).
+  virtual void reset();
+  /// The pose a lookup returned at `stamp`, or interpolated between the two around it when each
+  /// is within `max_gap` [s]: the pose source's history over the session, for loop-closure
+  /// corrections (core::PoseHistory). Thread-safe.
+  std::optional<core::CameraPose> historyAt(double stamp, double max_gap) const;
   /// Wakes every waiting lookup and makes later ones return at once (shutdown).
   virtual void stop() = 0;
   /// For the start-up log line, e.g. "tf (world <- image frame_id)".
   virtual std::string describe() const = 0;
+
+ protected:
+  /// Lookups keep what they return, by stamp.
+  void record(const ros::Time& stamp, const core::CameraPose& pose);
+
+ private:
+  mutable std::mutex history_mutex_;
+  core::PoseHistory history_;
 };
 
 /// tf2: lookupTransform(world_frame, camera frame, stamp), camera frame = ~camera_frame or the

@@ -4,12 +4,15 @@
 
 #include "view_selection/core/exceptions.h"
 #include "view_selection/core/types.h"
+#include "view_selection/ros/compressed_images.h"
 
 #include <ros/message_traits.h>
 #include <ros/serialization.h>
 #include <ros/time.h>
+#include <rosbag/bag.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <sensor_msgs/image_encodings.h>
 #include <tf2_msgs/TFMessage.h>
 
 #include <opencv2/core.hpp>
@@ -74,6 +77,38 @@ inline sensor_msgs::Image imageMessage(const cv::Mat& mat, const std::string& en
     std::memcpy(msg.data.data() + static_cast<size_t>(r) * msg.step, mat.ptr(r), msg.step);
   return msg;
 }
+
+/// How the colour and depth images are written: raw sensor_msgs/Image on the topics, or
+/// (--compressed) as a robot records them with image_transport_plugins: the colour image as
+/// `compressed` JPEG on <topic>/compressed, the 32FC1 depth as `compressedDepth` (quantised
+/// inverse depth in a PNG) on <topic>/compressedDepth.
+struct ImageTopics {
+  bool compressed = false;
+  int jpeg_quality = 80;  ///< compressed_image_transport's default
+  std::string colour_topic = "/camera/rgb/image_color";
+  std::string depth_topic = "/camera/depth/image";
+
+  /// `rgb`: 8-bit RGB.
+  void writeColour(rosbag::Bag& bag, const ros::Time& time, const cv::Mat& rgb,
+                   const std_msgs::Header& header) const {
+    namespace enc = sensor_msgs::image_encodings;
+    if (!compressed) return bag.write(colour_topic, time, imageMessage(rgb, enc::RGB8, header));
+    sensor_msgs::CompressedImage msg =
+        ros_node::encodeCompressedImage(rgb, enc::RGB8, "jpeg", jpeg_quality);
+    msg.header = header;
+    bag.write(colour_topic + "/compressed", time, msg);
+  }
+  /// `depth`: CV_32FC1 metres, NaN where there is none.
+  void writeDepth(rosbag::Bag& bag, const ros::Time& time, const cv::Mat& depth,
+                  const std_msgs::Header& header) const {
+    if (!compressed)
+      return bag.write(depth_topic, time,
+                       imageMessage(depth, sensor_msgs::image_encodings::TYPE_32FC1, header));
+    sensor_msgs::CompressedImage msg = ros_node::encodeCompressedDepth(depth);
+    msg.header = header;
+    bag.write(depth_topic + "/compressedDepth", time, msg);
+  }
+};
 
 /// tf2_msgs/TFMessage written under the type name "tf/tfMessage", as the TUM bags (recorded
 /// before tf2) carry it: the definition and MD5 sum are the same, so tf2 listeners take it.

@@ -177,7 +177,7 @@ WrittenFrames writeBenchmarkLayout(rosbag::Bag& bag, const io::TumDataset& datas
         cv::Mat depth = points::matOf(frame.depth).clone();
         depth.setTo(nan, depth == 0.0f);
         bag.write("/camera/depth/camera_info", bag_time, cameraInfo(dataset.intrinsics, header));
-        bag.write("/camera/depth/image", bag_time, imageMessage(depth, enc::TYPE_32FC1, header));
+        o.images.writeDepth(bag, bag_time, depth, header);
         continue;
       }
       header.seq = colour_seq++;
@@ -195,7 +195,7 @@ WrittenFrames writeBenchmarkLayout(rosbag::Bag& bag, const io::TumDataset& datas
       cv::Mat rgb;
       cv::cvtColor(image, rgb, cv::COLOR_BGR2RGB);
       bag.write("/camera/rgb/camera_info", bag_time, cameraInfo(dataset.intrinsics, header));
-      bag.write("/camera/rgb/image_color", bag_time, imageMessage(rgb, enc::RGB8, header));
+      o.images.writeColour(bag, bag_time, rgb, header);
       if (written.frames == 0) written.first = header.stamp.toSec();
       written.last = header.stamp.toSec();
       ++written.frames;

@@ -9,6 +9,8 @@
 //    latency), stamps ~1.3e9 s.
 #pragma once
 
+#include "bag_messages.h"
+
 #include "view_selection/core/types.h"
 #include "view_selection/io/tum_dataset.h"
 
@@ -33,6 +35,7 @@ struct BenchmarkLayoutOptions {
   /// /mocap/pose (PoseStamped), /mocap/odometry (Odometry, child /kinect) and
   /// /mocap/pose_with_covariance, all of /kinect in the world frame.
   bool pose_topics = false;
+  ImageTopics images;  ///< raw or compressed colour and depth
   bool quiet = false;
 };
 

@@ -81,6 +81,14 @@ options:
   --mocap-rate HZ           tum: motion-capture rate (default 100)
   --mocap-lead S            tum: motion capture starts S before the first image (default 3)
   --static-period S         tum: period of the fixed links (default 0.1)
+  --compressed              the images as a robot records them with image_transport_plugins:
+                            colour as `compressed` JPEG on /camera/rgb/image_color/compressed
+                            (sensor_msgs/CompressedImage, format "rgb8; jpeg compressed bgr8"),
+                            depth as `compressedDepth` on /camera/depth/image/compressedDepth
+                            (32FC1 as quantised inverse depth in a PNG); replay with
+                            tum_replay.launch image_transport:=compressed
+                            depth_image_transport:=compressedDepth
+  --jpeg-quality Q          with --compressed: JPEG quality 1-100 (default 80, the plugin's)
   --pose-topics             tum: also the motion capture (/kinect in the world frame) as
                             /mocap/pose (PoseStamped), /mocap/odometry (Odometry) and
                             /mocap/pose_with_covariance, for the node's topic pose sources
@@ -112,8 +120,8 @@ Options parse(int argc, char** argv) {
       argc, argv,
       {"dataset", "out", "layout", "max-frames", "every", "max-time-difference", "world-frame",
        "camera-frame", "compression", "stamp-offset", "depth-offset", "depth-jitter", "mocap-rate",
-       "mocap-lead", "static-period"},
-      {"quiet", "help", "pose-topics"});
+       "mocap-lead", "static-period", "jpeg-quality"},
+      {"quiet", "help", "pose-topics", "compressed"});
   if (cli.flag("help")) {
     std::cout << kUsage;
     std::exit(0);
@@ -149,6 +157,11 @@ Options parse(int argc, char** argv) {
   if (cli.flag("pose-topics") && o.layout != "tum")
     throw UsageError("--pose-topics is an option of --layout tum");
   o.tum.pose_topics = cli.flag("pose-topics");
+  o.tum.images.compressed = cli.flag("compressed");
+  if (cli.has("jpeg-quality") && !o.tum.images.compressed)
+    throw UsageError("--jpeg-quality is an option of --compressed");
+  o.tum.images.jpeg_quality =
+      static_cast<int>(cli.integer("jpeg-quality", o.tum.images.jpeg_quality, 1, 100));
   o.tum.world_frame = o.world_frame;
   o.tum.camera_frame = o.camera_frame;
   o.quiet = cli.flag("quiet");
@@ -213,8 +226,7 @@ WrittenFrames writeSimpleLayout(rosbag::Bag& bag, const TumDataset& dataset,
       depth.setTo(nan, depth == 0.0f);  // TUM's 32FC1 bags mark missing depth with NaN
       bag.write("/camera/depth/camera_info", depth_header.stamp,
                 cameraInfo(dataset.intrinsics, depth_header));
-      bag.write("/camera/depth/image", depth_header.stamp,
-                imageMessage(depth, sensor_msgs::image_encodings::TYPE_32FC1, depth_header));
+      o.tum.images.writeDepth(bag, depth_header.stamp, depth, depth_header);
     }
 
     if (image.channels() != 3)
@@ -223,8 +235,7 @@ WrittenFrames writeSimpleLayout(rosbag::Bag& bag, const TumDataset& dataset,
     cv::Mat rgb;
     cv::cvtColor(image, rgb, cv::COLOR_BGR2RGB);
     bag.write("/camera/rgb/camera_info", stamp, cameraInfo(dataset.intrinsics, header));
-    bag.write("/camera/rgb/image_color", stamp,
-              imageMessage(rgb, sensor_msgs::image_encodings::RGB8, header));
+    o.tum.images.writeColour(bag, stamp, rgb, header);
 
     if (written.frames == 0) written.first = tum.stamp;
     written.last = tum.stamp;
@@ -282,9 +293,10 @@ int run(Options o) {
   bag.close();
   std::printf(
       "tum_to_bag: wrote %s (layout %s): %zu frames (%.3f s to %.3f s) of %zu associated in %s, "
-      "depth %s, intrinsics from %s%s\n",
+      "depth %s, images %s, intrinsics from %s%s\n",
       o.out.c_str(), o.layout.c_str(), written.frames, written.first, written.last,
       dataset.frames.size(), o.dataset.c_str(), dataset.has_depth ? "yes" : "no",
+      o.tum.images.compressed ? "compressed (JPEG, compressedDepth)" : "raw",
       dataset.intrinsics_source.c_str(),
       o.layout == "tum" ? (", stamps moved by " + std::to_string(o.tum.stamp_offset) + " s").c_str()
                         : "");

@@ -1,15 +1,25 @@
 #!/usr/bin/env python3
-"""SLAM-system rostests (test/ros/slam_*.test): the package's launch file for one SLAM system,
-fed as that system and its camera driver publish: their topic names, message types, frames and
-body-frame conventions (ORB-SLAM2: PoseStamped in map of x-forward camera_link; ORB-SLAM3:
-PoseStamped of the optical frame; RTAB-Map: tf map -> odom -> base_link -> camera, mapPath of
-base_link; VINS-Fusion: Odometry of the IMU body, pose_graph_path). The frames are the built-in
-synthetic sequence (generate_sequence: exact poses), so no data folder is needed.
+"""SLAM-system rostests (test/ros/slam_*.test): the package's launch file for one SLAM system, at
+its own defaults, next to stand-ins that run under the real system's node names and publish its
+topics, types, frames, clocks and conventions (slam_stand_in.py; ORB-SLAM2: PoseStamped in map
+of x-forward camera_link; ORB-SLAM3: PoseStamped of the optical frame; RTAB-Map: tf map -> odom ->
+base_link, mapPath of its 1 Hz map nodes; VINS-Fusion: Odometry of the IMU body at 15 Hz on a clock
+of its own, pose_graph_path of its keyframes). This tester is the camera driver and the robot
+description: images, camera_info, depth (16UC1) and the fixed chain; it sends each frame's true
+pose to the stand-ins before the frame's image. The frames are the built-in synthetic sequence
+(generate_sequence: exact poses), so no data folder is needed; the first and last LEAD frames are
+tracked by the stand-ins but have no image (odometry on another clock starts before the first).
 
-Checks: every frame reaches the node and none is dropped; each keyframe's pose is the optical
-frame's true pose (1e-6 m, 1e-6 rad) once the body-frame conventions are undone; for the systems
-with a loop-closure path, poses drift first (the keyframes are off by centimetres) and the path
-brings them back to the truth.
+Checks: the node and every stand-in are up at the end under their own names (a clash would have
+stopped roslaunch, or the master would have killed one); every image reaches the node and none is
+dropped, for want of a pose or anything else; each keyframe's pose is the optical frame's true pose
+once the body-frame conventions are undone (1e-6 m and rad for the systems that publish poses at
+the frame stamps and need no correction); for the
+systems with a loop-closure path, poses drift first (the keyframes are off by centimetres) and the
+keyframe-only path brings every keyframe back to the truth: within PATH_POSITION / PATH_ANGLE
+between the path poses the node had frames at, and outside them (VINS' keyframes on its own clock:
+the first one during the images may come 0.27 s after the first image) within what the drift
+moved since the nearest of them, which is the correction those keyframes take.
 """
 import math
 import os
@@ -20,49 +30,39 @@ import time
 import unittest
 
 import numpy
+import rosgraph
 import rospy
 import rostest
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'corrections'))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'replay'))
-from corrections_tester import compose, inverse, pose_msg, yaw  # noqa: E402
+import slam_systems as systems  # noqa: E402
+from slam_systems import CONVENTIONS, compose  # noqa: E402
 from replay_tester import find_tool, msg_stamp_ns, run, stamp_ns  # noqa: E402
 
 from geometry_msgs.msg import PoseStamped, TransformStamped  # noqa: E402
-from nav_msgs.msg import Odometry, Path  # noqa: E402
+from nav_msgs.msg import Path  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
+from std_msgs.msg import Empty  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
 from view_selection.msg import InputStatistics  # noqa: E402
 from view_selection.srv import GetSelection  # noqa: E402
 
 PKG = 'view_selection'
-OPTICAL_FROM_X_FORWARD = numpy.array([-0.5, 0.5, -0.5, 0.5])  # x-forward frame <- optical frame
+LEAD = 4                 # frames at each end with a true pose but no image
+# After a keyframe-only path, between its poses (measured: RTAB-Map 0.47 mm and 0 deg; VINS, whose
+# 15 Hz odometry on its own clock is interpolated twice, by the stand-in and the node, 1.45 mm
+# and 0.12 deg).
+PATH_POSITION = 3e-3     # [m]
+PATH_ANGLE = 0.3         # [deg]
 
-# Per system: inputs, the optical frame, the pose stream and its frames, the fixed chain from the
-# body frame to the optical frame (parent, child, translation, rotation), the loop-closure path.
-CONVENTIONS = {
-    'orb_slam2': dict(image='/camera/rgb/image_raw', info='/camera/rgb/camera_info',
-                      depth='/camera/depth_registered/image_raw', optical='camera_rgb_optical_frame',
-                      pose=('/orb_slam2_rgbd/pose', 'pose_stamped', 'map', 'camera_link'),
-                      chain=[('camera_link', 'camera_rgb_frame', (0.0, -0.045, 0.0), (0, 0, 0, 1)),
-                             ('camera_rgb_frame', 'camera_rgb_optical_frame', (0, 0, 0), OPTICAL_FROM_X_FORWARD)],
-                      path=None),
-    'orb_slam3': dict(image='/camera/rgb/image_raw', info='/camera/rgb/camera_info',
-                      depth='/camera/depth_registered/image_raw', optical='camera',
-                      pose=('/orb_slam3/camera_pose', 'pose_stamped', 'world', 'camera'), chain=[], path=None),
-    'rtabmap': dict(image='/camera/rgb/image_rect_color', info='/camera/rgb/camera_info',
-                    depth='/camera/depth_registered/image_raw', optical='camera_rgb_optical_frame',
-                    pose=('tf', 'tf', 'map', 'base_link'),
-                    chain=[('base_link', 'camera_link', (0.1, 0.0, 0.3), (0, 0, 0, 1)),
-                           ('camera_link', 'camera_rgb_optical_frame', (0.0, -0.045, 0.0), OPTICAL_FROM_X_FORWARD)],
-                    path='/rtabmap/mapPath'),
-    'vins_fusion': dict(image='/camera/color/image_raw', info='/camera/color/camera_info',
-                        depth='/camera/aligned_depth_to_color/image_raw', optical='camera_color_optical_frame',
-                        pose=('/vins_estimator/odometry', 'odometry', 'world', 'body'),
-                        # IMU body: x forward; the camera 2 cm beside it, looking forward.
-                        chain=[('body', 'camera_color_optical_frame', (0.02, 0.01, 0.0), OPTICAL_FROM_X_FORWARD)],
-                        path='/loop_fusion/pose_graph_path'),
-}
+
+def pose_msg(t, q, stamp, frame='world'):
+    m = PoseStamped()
+    m.header.stamp, m.header.frame_id = stamp, frame
+    m.pose.position.x, m.pose.position.y, m.pose.position.z = t
+    m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w = q
+    return m
 
 
 def transform(parent, child, t, q, stamp):
@@ -76,10 +76,11 @@ def transform(parent, child, t, q, stamp):
 class SlamConventions(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        cls.node = rospy.get_param('~node')
         cls.name = rospy.get_param('~convention')
         cls.c = CONVENTIONS[cls.name]
-        cls.frames = int(rospy.get_param('~frames', 40))
+        cls.node = rospy.get_param('~node', cls.c['ours'])
+        cls.frames = int(rospy.get_param('~frames', 96))
+        cls.images = cls.frames - 2 * LEAD
         cls.timeout = float(rospy.get_param('~timeout', 60.0))
         cls.tmp = tempfile.mkdtemp(prefix='view_selection_slam_')
         generate = find_tool('generate_sequence')
@@ -99,6 +100,13 @@ class SlamConventions(unittest.TestCase):
             return [line.split() for line in f if line.strip() and not line.startswith('#')]
 
     @classmethod
+    def wait_for(cls, publishers, what):
+        deadline = time.time() + cls.timeout
+        while time.time() < deadline and not all(p.get_num_connections() >= n for p, n in publishers):
+            time.sleep(0.1)
+        assert all(p.get_num_connections() >= n for p, n in publishers), what
+
+    @classmethod
     def run_sequence(cls):
         import cv2
         c = cls.c
@@ -107,87 +115,76 @@ class SlamConventions(unittest.TestCase):
             k = dict(line.split(':') for line in f if ':' in line and not line.startswith('#'))
         fx, fy, cx, cy = (float(k[n]) for n in ('fx', 'fy', 'cx', 'cy'))
         width, height = int(k['width']), int(k['height'])
-        # body <- optical: the chain composed.
-        optical_in_body = (numpy.zeros(3), numpy.array([0.0, 0.0, 0.0, 1.0]))
-        for _, _, t, q in c['chain']:
-            optical_in_body = compose(optical_in_body, (numpy.array(t, float), numpy.array(q, float)))
-        body_in_optical = inverse(optical_in_body)
+        to_body = systems.body_in_optical(c)
 
         tf_static = rospy.Publisher('/tf_static', TFMessage, queue_size=1, latch=True)
-        tf = rospy.Publisher('/tf', TFMessage, queue_size=100)
         if c['chain']:
             tf_static.publish(TFMessage(transforms=[transform(p, ch, t, q, rospy.Time.now())
                                                     for p, ch, t, q in c['chain']]))
         pubs = {'image': rospy.Publisher(c['image'], Image, queue_size=100),
                 'info': rospy.Publisher(c['info'], CameraInfo, queue_size=100),
                 'depth': rospy.Publisher(c['depth'], Image, queue_size=100)}
-        topic, kind, world, body_frame = c['pose']
-        if kind == 'pose_stamped':
-            pubs['pose'] = rospy.Publisher(topic, PoseStamped, queue_size=100)
-        elif kind == 'odometry':
-            pubs['pose'] = rospy.Publisher(topic, Odometry, queue_size=100)
-        path_pub = rospy.Publisher(c['path'], Path, queue_size=1, latch=True) if c['path'] else None
-        waiting = list(pubs.values()) + ([tf] if kind == 'tf' else [])
-        deadline = time.time() + cls.timeout
-        while time.time() < deadline and not all(p.get_num_connections() > 0 for p in waiting):
-            time.sleep(0.1)
-        assert all(p.get_num_connections() > 0 for p in waiting), 'the node did not subscribe to every input'
+        truth_pub = rospy.Publisher(systems.TRUTH_TOPIC, PoseStamped, queue_size=1000)
+        close_loop = rospy.Publisher(systems.CLOSE_LOOP_TOPIC, Empty, queue_size=1, latch=False)
+        cls.wait_for([(p, 1) for p in pubs.values()], 'the node did not subscribe to the camera')
+        cls.wait_for([(truth_pub, len(c['stand_ins']))], 'the stand-ins did not subscribe to the truth')
+        if c['path']:
+            cls.wait_for([(close_loop, sum(1 for _, role in c['stand_ins'] if role in ('rtabmap', 'loop_fusion')))],
+                         'the stand-in with the path did not subscribe')
+        cls.wait_for_pose_stream()
         time.sleep(0.5)
 
         cls.truth, cls.true_body = [], []
-        t0 = float(rgb[0][0])
         for q, ((s, rgb_path), (_, depth_path), row) in enumerate(zip(rgb, depth, truth)):
             stamp = rospy.Time(int(stamp_ns(float(s)) // 1000000000), int(stamp_ns(float(s)) % 1000000000))
             optical = (numpy.array([float(x) for x in row[1:4]]), numpy.array([float(x) for x in row[4:8]]))
             optical = (optical[0], optical[1] / numpy.linalg.norm(optical[1]))
             cls.truth.append((stamp, optical))
-            body = compose(optical, body_in_optical)
-            cls.true_body.append((stamp, body))
-            # With a loop-closure path the poses drift (4 cm/s, 2 deg/s) until the path corrects them.
-            dt = float(s) - t0
-            if c['path']:
-                body = compose((numpy.array([0.04 * dt, 0.0, 0.02 * dt]), yaw(math.radians(2.0 * dt))), body)
-            if kind == 'pose_stamped':
-                pubs['pose'].publish(pose_msg(body[0], body[1], stamp, world))
-            elif kind == 'odometry':
-                m = Odometry()
-                m.header = pose_msg(body[0], body[1], stamp, world).header
-                m.child_frame_id = body_frame
-                m.pose.pose = pose_msg(body[0], body[1], stamp, world).pose
-                pubs['pose'].publish(m)
-            else:  # tf: map -> odom (fixed here), odom -> base_link (the odometry)
-                tf.publish(TFMessage(transforms=[transform('map', 'odom', (0, 0, 0), (0, 0, 0, 1), stamp),
-                                                 transform('odom', body_frame, body[0], body[1], stamp)]))
-            info = CameraInfo()
-            info.header.stamp, info.header.frame_id = stamp, c['optical']
-            info.width, info.height, info.distortion_model = width, height, 'plumb_bob'
-            info.D = [0.0] * 5
-            info.K = [fx, 0, cx, 0, fy, cy, 0, 0, 1]
-            info.R = [1, 0, 0, 0, 1, 0, 0, 0, 1]
-            info.P = [fx, 0, cx, 0, 0, fy, cy, 0, 0, 0, 1, 0]
-            bgr = cv2.imread(os.path.join(cls.folder, rgb_path), cv2.IMREAD_COLOR)
-            png = cv2.imread(os.path.join(cls.folder, depth_path), cv2.IMREAD_ANYDEPTH)
-            millimetres = numpy.round(png.astype(numpy.float64) / 5.0).astype(numpy.uint16)  # 16UC1, as the drivers
-            for name, encoding, data, step in (('image', 'rgb8', bgr[:, :, ::-1].tobytes(), 3 * width),
-                                               ('depth', '16UC1', millimetres.tobytes(), 2 * width)):
-                m = Image()
-                m.header.stamp, m.header.frame_id, m.header.seq = stamp, c['optical'], q
-                m.height, m.width, m.encoding, m.step, m.data = height, width, encoding, step, data
-                pubs[name].publish(m)
-            pubs['info'].publish(info)
-            time.sleep(0.05)
-        cls.stats = cls.wait_stats(lambda s: s.frames_offered + s.frames_dropped >= cls.frames and
+            cls.true_body.append((stamp, compose(optical, to_body)))
+            truth_pub.publish(pose_msg(optical[0], optical[1], stamp, 'truth'))
+            if LEAD <= q < len(rgb) - LEAD:
+                info = CameraInfo()
+                info.header.stamp, info.header.frame_id = stamp, c['optical']
+                info.width, info.height, info.distortion_model = width, height, 'plumb_bob'
+                info.D = [0.0] * 5
+                info.K = [fx, 0, cx, 0, fy, cy, 0, 0, 1]
+                info.R = [1, 0, 0, 0, 1, 0, 0, 0, 1]
+                info.P = [fx, 0, cx, 0, 0, fy, cy, 0, 0, 0, 1, 0]
+                bgr = cv2.imread(os.path.join(cls.folder, rgb_path), cv2.IMREAD_COLOR)
+                png = cv2.imread(os.path.join(cls.folder, depth_path), cv2.IMREAD_ANYDEPTH)
+                millimetres = numpy.round(png.astype(numpy.float64) / 5.0).astype(numpy.uint16)  # 16UC1, as drivers
+                for name, encoding, data, step in (('image', 'rgb8', bgr[:, :, ::-1].tobytes(), 3 * width),
+                                                   ('depth', '16UC1', millimetres.tobytes(), 2 * width)):
+                    m = Image()
+                    m.header.stamp, m.header.frame_id, m.header.seq = stamp, c['optical'], q
+                    m.height, m.width, m.encoding, m.step, m.data = height, width, encoding, step, data
+                    pubs[name].publish(m)
+                pubs['info'].publish(info)
+            time.sleep(1.0 / 30.0)  # the camera's rate
+        cls.stats = cls.wait_stats(lambda s: s.frames_offered + s.frames_dropped >= cls.images and
                                    s.images_in_synchroniser == 0, 'every frame handled')
         cls.before = rospy.ServiceProxy(cls.node + '/get_selection', GetSelection)().selection
         cls.after = cls.before
-        if path_pub:
-            path = Path()
-            path.header.stamp, path.header.frame_id = rospy.Time.now(), world
-            for stamp, (tb, qb) in cls.true_body:
-                path.poses.append(pose_msg(tb, qb, stamp, world))
-            path_pub.publish(path)
+        if c['path']:
+            cls.paths = []
+            rospy.Subscriber(c['path'], Path, cls.paths.append)
+            close_loop.publish(Empty())
             cls.stats = cls.wait_stats(lambda s: s.paths_applied >= 1, 'the path applied')
             cls.after = rospy.ServiceProxy(cls.node + '/get_selection', GetSelection)().selection
+
+    @classmethod
+    def wait_for_pose_stream(cls):
+        """The node listens to the stand-in's pose topic (or /tf)."""
+        topic = cls.c['pose'][0]
+        topic = '/tf' if topic == 'tf' else topic
+        master = rosgraph.Master(rospy.get_name())
+        deadline = time.time() + cls.timeout
+        while time.time() < deadline:
+            subscribers = {t: set(n) for t, n in master.getSystemState()[1]}
+            if cls.node in subscribers.get(topic, ()):
+                return
+            time.sleep(0.1)
+        raise AssertionError('%s does not subscribe to %s' % (cls.node, topic))
 
     @classmethod
     def wait_stats(cls, predicate, what):
@@ -208,21 +205,60 @@ class SlamConventions(unittest.TestCase):
             o = k.pose.orientation
             dot = abs(sum(a * b for a, b in zip((o.x, o.y, o.z, o.w), q)))
             out.append((math.sqrt((p.x - t[0]) ** 2 + (p.y - t[1]) ** 2 + (p.z - t[2]) ** 2),
-                        2.0 * math.acos(min(1.0, dot))))
+                        math.degrees(2.0 * math.acos(min(1.0, dot)))))
         return out
+
+    def test_names_do_not_clash(self):
+        master = rosgraph.Master(rospy.get_name())
+        names = [self.node] + [n for n, _ in self.c['stand_ins']]
+        self.assertEqual(len(set(names)), len(names), names)
+        for name in names:
+            try:
+                master.lookupNode(name)
+            except Exception as e:
+                self.fail('%s is not running at the end: %s' % (name, e))
 
     def test_every_frame_arrives(self):
         s = self.stats
         self.assertEqual(s.frames_dropped, 0, '%s (last: %s)' % (dict(zip(s.drop_reasons, s.drop_counts)), s.last_error))
-        self.assertEqual(s.images_arrived, self.frames)
-        self.assertEqual(s.frames_received, self.frames)
-        self.assertEqual(s.frames_offered, self.frames)
-        self.assertGreaterEqual(len(self.after.keyframes), 5)
+        self.assertEqual(s.images_arrived, self.images)
+        self.assertEqual(s.frames_received, self.images)
+        self.assertEqual(s.frames_offered, self.images)
+        self.assertGreaterEqual(len(self.after.keyframes), 8)
+
+    def tolerances(self):
+        """(position [m], angle [deg]) allowed for each keyframe after the path."""
+        n = len(self.after.keyframes)
+        if not self.c['path']:
+            return [(1e-6, math.degrees(1e-6))] * n
+        images = [t.to_sec() for t, _ in self.truth[LEAD:len(self.truth) - LEAD]]
+        self.assertTrue(self.paths, 'the path was not received by the tester')
+        usable = [p.header.stamp.to_sec() for p in self.paths[-1].poses
+                  if images[0] <= p.header.stamp.to_sec() <= images[-1]]
+        self.assertTrue(usable)
+        truth = {msg_stamp_ns(t): p for t, p in self.truth}
+        out = []
+        for k in self.after.keyframes:
+            t = k.stamp.to_sec()
+            if usable[0] <= t <= usable[-1]:
+                out.append((PATH_POSITION, PATH_ANGLE))
+                continue
+            # The nearest correction: the drift since then, 4.5 cm/s and 2 deg/s about the origin.
+            dt = min(abs(t - usable[0]), abs(t - usable[-1]))
+            radius = numpy.linalg.norm(truth[msg_stamp_ns(k.stamp)][0])
+            out.append((PATH_POSITION + (0.045 + math.radians(2.0) * radius) * dt, PATH_ANGLE + 2.0 * dt))
+        return out
 
     def test_keyframe_poses_are_the_optical_frames(self):
-        for i, (dp, da) in enumerate(self.pose_errors(self.after)):
-            self.assertLess(dp, 1e-6, '%s keyframe %d is %.3g m off' % (self.name, i, dp))
-            self.assertLess(da, 1e-6, '%s keyframe %d is %.3g rad off' % (self.name, i, da))
+        errors = self.pose_errors(self.after)
+        tolerances = self.tolerances()
+        tight = [e for e, t in zip(errors, tolerances) if t == min(tolerances)]
+        rospy.loginfo('%s: %d keyframes within %.3g m and %.3g deg of the truth; the %d between path poses within '
+                      '%.3g m and %.3g deg', self.name, len(errors), max(dp for dp, _ in errors),
+                      max(da for _, da in errors), len(tight), max(dp for dp, _ in tight), max(da for _, da in tight))
+        for i, ((dp, da), (position, angle)) in enumerate(zip(errors, tolerances)):
+            self.assertLess(dp, position, '%s keyframe %d is %.3g m off' % (self.name, i, dp))
+            self.assertLess(da, angle, '%s keyframe %d is %.3g deg off' % (self.name, i, da))
 
     def test_loop_closure_path(self):
         if not self.c['path']:

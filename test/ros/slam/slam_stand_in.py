@@ -1,0 +1,159 @@
+#!/usr/bin/env python3
+"""A stand-in for one node of a SLAM system (test/ros/slam_*.test): it runs under the real
+node's name and publishes the real node's topics, types, frames and clock, from the true pose of
+each frame that the tester sends on /stand_in/truth before the frame's image (where the real
+system would track the image). ~role (slam_systems.py has the table):
+
+  orb_slam2         /orb_slam2_rgbd/pose: PoseStamped in map of camera_link, 30 ms after the frame
+  orb_slam3         /orb_slam3/camera_pose: PoseStamped in world of the optical frame, 30 ms after
+  rtabmap_odometry  tf odom -> base_link at each frame (drifting)
+  rtabmap           tf map -> odom at each frame; /rtabmap/mapPath (latched) on /stand_in/close_loop:
+                    its map nodes only, one a second (every 30th image it received) and the last
+  vins_estimator    /vins_estimator/odometry: Odometry in world of body (drifting) at 15 Hz on a
+                    clock of its own (13 ms off the frames'), each pose once the frames around it
+                    were tracked
+  loop_fusion       /loop_fusion/pose_graph_path (latched) on /stand_in/close_loop: its keyframes
+                    only, every 4th of VINS' own stamps
+
+~convention names the system. The drifting systems drift 4 cm/s and 2 deg/s until their path.
+"""
+import os
+import sys
+import threading
+
+import rospy
+from geometry_msgs.msg import PoseStamped, TransformStamped
+from nav_msgs.msg import Odometry, Path
+from sensor_msgs.msg import Image
+from std_msgs.msg import Empty
+from tf2_msgs.msg import TFMessage
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import slam_systems as systems  # noqa: E402
+
+
+def stamp_of(seconds):
+    ns = int(round(seconds * 1e9))
+    return rospy.Time(ns // 1000000000, ns % 1000000000)
+
+
+def pose_msg(pose, stamp, frame):
+    m = PoseStamped()
+    m.header.stamp, m.header.frame_id = stamp, frame
+    m.pose.position.x, m.pose.position.y, m.pose.position.z = pose[0]
+    m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w = pose[1]
+    return m
+
+
+def transform(parent, child, pose, stamp):
+    m = TransformStamped()
+    m.header.stamp, m.header.frame_id, m.child_frame_id = stamp, parent, child
+    m.transform.translation.x, m.transform.translation.y, m.transform.translation.z = pose[0]
+    m.transform.rotation.x, m.transform.rotation.y, m.transform.rotation.z, m.transform.rotation.w = pose[1]
+    return m
+
+
+class StandIn:
+    def __init__(self):
+        self.role = rospy.get_param('~role')
+        self.c = systems.CONVENTIONS[rospy.get_param('~convention')]
+        self.topic, self.kind, self.world, self.body_frame = self.c['pose']
+        self.to_body = systems.body_in_optical(self.c)
+        self.lock = threading.Lock()
+        self.truth = []  # (stamp [s], body pose), ascending
+        self.t0 = None
+        self.next_odometry = 0  # index of the next VINS stamp to publish
+        self.drifting = self.c['path'] is not None
+        if self.role in ('orb_slam2', 'orb_slam3'):
+            self.pub = rospy.Publisher(self.topic, PoseStamped, queue_size=100)
+        elif self.role == 'vins_estimator':
+            self.pub = rospy.Publisher(self.topic, Odometry, queue_size=100)
+        elif self.role in ('rtabmap_odometry', 'rtabmap'):
+            self.pub = rospy.Publisher('/tf', TFMessage, queue_size=100)
+        self.image_stamps = []
+        if self.role == 'rtabmap':  # RTAB-Map's map nodes are frames it received
+            rospy.Subscriber(self.c['image'], Image, self.on_image, queue_size=100)
+        if self.role in ('rtabmap', 'loop_fusion'):
+            self.path_pub = rospy.Publisher(self.c['path'], Path, queue_size=1, latch=True)
+            rospy.Subscriber(systems.CLOSE_LOOP_TOPIC, Empty, self.on_close_loop)
+        rospy.Subscriber(systems.TRUTH_TOPIC, PoseStamped, self.on_truth, queue_size=1000)
+
+    def on_image(self, msg):
+        with self.lock:
+            self.image_stamps.append(msg.header.stamp.to_sec())
+
+    def body_at(self, optical):
+        return systems.compose(optical, self.to_body)
+
+    def odometry_of(self, t, body):
+        """What the system's odometry says at t: the truth, drifted when the system drifts."""
+        return systems.compose(systems.drift(t - self.t0), body) if self.drifting else body
+
+    def on_truth(self, msg):
+        p, q = msg.pose.position, msg.pose.orientation
+        optical = (systems.numpy.array([p.x, p.y, p.z]), systems.numpy.array([q.x, q.y, q.z, q.w]))
+        t = msg.header.stamp.to_sec()
+        body = self.body_at(optical)
+        with self.lock:
+            if self.t0 is None:
+                self.t0 = t
+            self.truth.append((t, body))
+        stamp = msg.header.stamp
+        if self.role in ('orb_slam2', 'orb_slam3'):
+            out = pose_msg(self.odometry_of(t, body), stamp, self.world)
+            rospy.Timer(rospy.Duration(systems.ORB_SLAM_LATENCY), lambda _: self.pub.publish(out), oneshot=True)
+        elif self.role == 'rtabmap_odometry':
+            self.pub.publish(TFMessage(transforms=[transform('odom', self.body_frame, self.odometry_of(t, body),
+                                                             stamp)]))
+        elif self.role == 'rtabmap':
+            identity = (systems.numpy.zeros(3), systems.numpy.array([0.0, 0.0, 0.0, 1.0]))
+            self.pub.publish(TFMessage(transforms=[transform(self.world, 'odom', identity, stamp)]))
+        elif self.role == 'vins_estimator':
+            self.publish_vins_odometry()
+
+    def vins_stamp(self, n):
+        return self.t0 + systems.VINS_CLOCK_OFFSET + n / systems.VINS_RATE
+
+    def publish_vins_odometry(self):
+        """Every VINS stamp the frames so far surround, once: its own camera's frames, tracked."""
+        while True:
+            with self.lock:
+                t = self.vins_stamp(self.next_odometry)
+                if t > self.truth[-1][0]:
+                    return
+                body = systems.interpolate(self.truth, t)
+                self.next_odometry += 1
+            pose = self.odometry_of(t, body)
+            m = Odometry()
+            m.header.stamp, m.header.frame_id = stamp_of(t), self.world
+            m.child_frame_id = self.body_frame
+            m.pose.pose = pose_msg(pose, m.header.stamp, self.world).pose
+            self.pub.publish(m)
+
+    def on_close_loop(self, _):
+        with self.lock:
+            truth = list(self.truth)
+        path = Path()
+        path.header.stamp, path.header.frame_id = rospy.Time.now(), self.world
+        if self.role == 'rtabmap':
+            with self.lock:
+                images = list(self.image_stamps)
+            nodes = images[::systems.RTABMAP_NODE_EVERY]
+            if nodes[-1] != images[-1]:
+                nodes.append(images[-1])
+            for t in nodes:
+                path.poses.append(pose_msg(systems.interpolate(truth, t), stamp_of(t), self.world))
+        else:  # loop_fusion: VINS keyframes, on VINS' clock
+            n = 0
+            while self.vins_stamp(n) <= truth[-1][0]:
+                t = self.vins_stamp(n)
+                path.poses.append(pose_msg(systems.interpolate(truth, t), stamp_of(t), self.world))
+                n += systems.VINS_KEYFRAME_EVERY
+        rospy.loginfo('%s: %s with %d poses', rospy.get_name(), self.c['path'], len(path.poses))
+        self.path_pub.publish(path)
+
+
+if __name__ == '__main__':
+    rospy.init_node('slam_stand_in')  # the launch file gives the real system's name
+    StandIn()
+    rospy.spin()
