@@ -30,7 +30,7 @@ import rostest
 from std_srvs.srv import Trigger
 
 from view_selection.msg import PairChanges
-from view_selection.srv import GetPairs, GetPairsRequest, GetSelection
+from view_selection.srv import ExportRequest, Export, GetPairs, GetPairsRequest, GetSelection
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
 from vs_robust import NodeProcess, Statistics, call, find_tool, wait_until  # noqa: E402
@@ -282,6 +282,31 @@ class LiveBridge(unittest.TestCase):
         self.assertEqual(len(self.selection.keyframes), report['registered'])
         self.assertGreater(report['points'], 100)
         self.assertEqual(len(self.final), report['final_pairs_matched'])
+
+    def test_offline_gives_the_same_model(self):
+        """colmap_from_selection --model known_poses on the node's ~export of the same keyframes
+        lays out the same project and builds the same model as the bridge did online."""
+        export = os.path.join(self.tmp, 'export')
+        answer = call(NODE + '/export', Export, ExportRequest(directory=export), 60.0)
+        self.assertTrue(answer.success, answer.message)
+        offline = os.path.join(self.tmp, 'offline')
+        run([find_tool('colmap_from_selection'), export, '--model', 'known_poses', '--image-path',
+             os.path.join(self.a, 'images'), '--out', offline], 900, 'colmap_from_selection')
+        for part in ('database.db', 'images', 'report.json', os.path.join('sparse', '0')):
+            self.assertTrue(os.path.exists(os.path.join(offline, part)), part)
+        online_poses = model_poses(self.colmap, os.path.join(self.a, 'sparse', '0'), os.path.join(self.tmp, 'on'))
+        offline_poses = model_poses(self.colmap, os.path.join(offline, 'sparse', '0'), os.path.join(self.tmp, 'off'))
+        self.assertEqual(sorted(online_poses), sorted(offline_poses))
+        for name in online_poses:
+            for a, b in zip(online_poses[name], offline_poses[name]):
+                self.assertAlmostEqual(a, b, delta=1e-9, msg=name)
+        online = json.load(open(os.path.join(self.a, 'report.json')))
+        off = json.load(open(os.path.join(offline, 'report.json')))
+        self.assertEqual(online['registered'], off['registered'])
+        self.assertEqual(online['final_pairs'], off['final_pairs'])
+        # The same pairs matched; points within COLMAP's run-to-run SIFT differences.
+        self.assertLessEqual(abs(online['points'] - off['points']), 0.03 * online['points'] + 5,
+                             (online['points'], off['points']))
 
     def test_killed_bridge_ends_like_an_uninterrupted_one(self):
         """The same images extracted (the same keypoints), the same pairs matched and verified.
