@@ -95,8 +95,10 @@ void FrameSynchroniser::clear() {
 }
 
 namespace {
+/// A stamp more than `threshold` before `newest` (a zero stamp, "unknown", never is).
 bool jumpsBack(const ros::Time& stamp, const ros::Time& newest, double threshold) {
-  return threshold > 0.0 && !newest.isZero() && (newest - stamp).toSec() > threshold;
+  return threshold > 0.0 && !newest.isZero() && !stamp.isZero() &&
+         (newest - stamp).toSec() > threshold;
 }
 }  // namespace
 
@@ -118,6 +120,9 @@ size_t FrameSynchroniser::discardWaitingBefore(uint64_t generation) {
   waiting_.erase(std::remove_if(waiting_.begin(), waiting_.end(),
                                 [&](const Waiting& w) { return w.generation < generation; }),
                  waiting_.end());
+  // The new session starts over: an image earlier than the old one's is no time jump.
+  newest_image_ = ros::Time();
+  for (const Waiting& w : waiting_) newest_image_ = std::max(newest_image_, w.image->header.stamp);
   return before - waiting_.size();
 }
 

@@ -33,7 +33,7 @@ void KeyframeVerdicts::onPath(const nav_msgs::PathConstPtr& path) {
     ros::Time newest;
     for (const auto& p : path->poses) newest = std::max(newest, p.header.stamp);
     const double jump = config_.time_jump_threshold;
-    if (jump > 0.0 && !path->poses.empty() && !stamps_.empty() &&
+    if (jump > 0.0 && !newest.isZero() && !stamps_.empty() &&
         (*stamps_.rbegin() - newest).toSec() > jump) {
       // A path of another timeline (a restarted SLAM system, a bag played again).
       stamps_.clear();
@@ -86,10 +86,12 @@ void KeyframeVerdicts::reset() {
   arrived_.notify_all();
 }
 
-void KeyframeVerdicts::newTimeline() {
+void KeyframeVerdicts::newTimeline(const ros::Time& stamp) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    if (!timeline_started_) stamps_.clear();
+    const ros::Duration tolerance(config_.keyframe_stamp_tolerance);
+    const ros::Time from = stamp > ros::Time(0) + tolerance ? stamp - tolerance : ros::Time(0);
+    if (!timeline_started_) stamps_.erase(stamps_.lower_bound(from), stamps_.end());
     timeline_started_ = false;
     ++resets_;
   }

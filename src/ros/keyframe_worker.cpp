@@ -154,8 +154,8 @@ size_t KeyframeWorker::reset() {
 void KeyframeWorker::timeJump(const ros::Time& newest, const ros::Time& stamp) {
   // Before the new session's first frame is queued: its pose and verdict come from the new
   // timeline only.
-  poses_.newTimeline();
-  if (verdicts_) verdicts_->newTimeline();
+  poses_.newTimeline(stamp);
+  if (verdicts_) verdicts_->newTimeline(stamp);
   const size_t forgotten = startSession(true);
   ROS_WARN_STREAM("view_selection: time jumped back from "
                   << stampText(newest) << " to " << stampText(stamp) << " ("

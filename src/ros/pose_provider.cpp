@@ -42,8 +42,10 @@ void PoseProvider::record(const ros::Time& stamp, const core::CameraPose& pose) 
 // tf
 
 namespace {
+/// A stamp more than `threshold` before `newest` (a zero stamp, "unknown", never is).
 bool jumpsBack(const ros::Time& stamp, const ros::Time& newest, double threshold) {
-  return threshold > 0.0 && !newest.isZero() && (newest - stamp).toSec() > threshold;
+  return threshold > 0.0 && !newest.isZero() && !stamp.isZero() &&
+         (newest - stamp).toSec() > threshold;
 }
 }  // namespace
 
@@ -102,9 +104,14 @@ void TfPoseProvider::onTf(const ros::MessageEvent<tf2_msgs::TFMessage const>& ev
   }
 }
 
-void TfPoseProvider::newTimeline() {
+void TfPoseProvider::newTimeline(const ros::Time& stamp) {
   std::lock_guard<std::mutex> lock(tf_mutex_);
-  if (!timeline_started_) clearLocked();
+  // Old transforms are those of a frame that reaches beyond the new stamp (the old timeline
+  // went on past it); a frame seen for the first time since is the new timeline's.
+  bool old = false;
+  for (const auto& [child, newest] : newest_)
+    old = old || jumpsBack(stamp, newest, config_.time_jump_threshold);
+  if (!timeline_started_ && old) clearLocked();
   timeline_started_ = false;
 }
 
@@ -239,9 +246,11 @@ void TopicPoseProvider::reset() {
   poses_.clear();
 }
 
-void TopicPoseProvider::newTimeline() {
+void TopicPoseProvider::newTimeline(const ros::Time& stamp) {
   std::lock_guard<std::mutex> lock(mutex_);
-  if (!timeline_started_) poses_.clear();
+  if (!timeline_started_ && !poses_.empty() &&
+      jumpsBack(stamp, poses_.back().stamp, config_.time_jump_threshold))
+    poses_.clear();
   timeline_started_ = false;
 }
 

@@ -261,10 +261,14 @@ TEST(FrameSynchroniser, EachInputForgetsItsOldTimelineWhenItsStampsGoBack) {
   EXPECT_EQ(out.frames[0].depth->header.stamp, at(1.49)) << "not the old timeline's 1.505 s";
 }
 
-TEST(FrameSynchroniser, NoTimeJumpWithAThresholdOfZero) {
-  FrameSynchroniser sync({true, 0.03, 1.0, 10, 100, 0.0});
-  sync.addImage(image(100.0), 0.0);
-  EXPECT_FALSE(sync.isTimeJump(at(0.0)));
+TEST(FrameSynchroniser, NoTimeJumpWithAThresholdOfZeroOrToAZeroStamp) {
+  FrameSynchroniser off({true, 0.03, 1.0, 10, 100, 0.0});
+  off.addImage(image(100.0), 0.0);
+  EXPECT_FALSE(off.isTimeJump(at(0.0)));
+  FrameSynchroniser on({true, 0.03, 1.0, 10, 100, 1.0});
+  on.addImage(image(100.0), 0.0);
+  EXPECT_TRUE(on.isTimeJump(at(0.0)));
+  EXPECT_FALSE(on.isTimeJump(ros::Time())) << "a zero stamp is a bad frame, not a new timeline";
 }
 
 // ~reset: the images waiting from before it are forgotten, the later ones stay.
@@ -274,8 +278,12 @@ TEST(FrameSynchroniser, ImagesOfAnEarlierGenerationAreDiscarded) {
   for (int q = 0; q < 3; ++q) append(all, sync.addImage(image(0.1 * q), 0.0, 0));
   append(all, sync.addImage(image(0.3), 0.0, 1));
   EXPECT_EQ(sync.waiting(), 4u);
+  EXPECT_TRUE(sync.isTimeJump(at(-1.0)));
   EXPECT_EQ(sync.discardWaitingBefore(1), 3u);
   EXPECT_EQ(sync.waiting(), 1u);
+  // The session starts over: stamps before the old session's are no jump, only before its own.
+  EXPECT_FALSE(sync.isTimeJump(at(-0.5)));
+  EXPECT_TRUE(sync.isTimeJump(at(-0.8)));
   append(all, sync.addCameraInfo(info(0.3), 0.0));
   append(all, sync.addDepth(image(0.3), 0.0));
   ASSERT_EQ(all.frames.size(), 1u);

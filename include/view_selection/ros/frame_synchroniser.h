@@ -78,7 +78,8 @@ class FrameSynchroniser {
   /// timeline when its stamps go back.
   void startTimeline();
   /// Forgets the waiting images that arrived in a generation before `generation` (a ~reset
-  /// since); returns how many.
+  /// since), and their stamps: an image earlier than theirs is no time jump (the session starts
+  /// over). Returns how many.
   size_t discardWaitingBefore(uint64_t generation);
 
   size_t waiting() const { return waiting_.size(); }

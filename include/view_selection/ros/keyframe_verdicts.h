@@ -31,11 +31,12 @@ class KeyframeVerdicts {
   Verdict now(const ros::Time& stamp) const;
   /// Forgets every stamp (~reset); a frame waiting for its verdict gives up (kUnknown).
   void reset();
-  /// A time jump started a new session: the stamps so far are of the old timeline and are
-  /// forgotten, unless a path already started a new timeline since the last call (its newest
-  /// stamp more than ~time_jump_threshold before the newest known: then the stamps are that
-  /// path's). A frame waiting for its verdict gives up.
-  void newTimeline();
+  /// A time jump to `stamp` started a new session: the stamps from `stamp` on (less the
+  /// tolerance) are of the old timeline and are forgotten (earlier ones cannot decide a frame
+  /// of the new session), unless a path already started a new timeline since the last call (its
+  /// newest stamp more than ~time_jump_threshold before the newest known: then the stamps are
+  /// that path's). A frame waiting for its verdict gives up.
+  void newTimeline(const ros::Time& stamp);
   void stop();
   std::string describe() const;
 

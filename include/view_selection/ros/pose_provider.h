@@ -45,11 +45,12 @@ class PoseProvider {
   virtual PoseLookup lookup(const std::string& image_frame, const ros::Time& stamp) = 0;
   /// Forgets poses received so far, and the history (~reset).
   virtual void reset();
-  /// A time jump started a new session (before its first frame is looked up): the poses
-  /// received belong to the old timeline and are forgotten, unless the pose input already
-  /// started a new timeline of its own since the last call (its stamps went back by more than
-  /// ~time_jump_threshold: then what it holds is the new timeline's).
-  virtual void newTimeline() {}
+  /// A time jump to `stamp` started a new session (before its first frame is looked up): the
+  /// poses received belong to the old timeline and are forgotten when they reach more than
+  /// ~time_jump_threshold beyond `stamp`, unless the pose input already started a new timeline
+  /// of its own since the last call (its stamps went back by more than the threshold: then what
+  /// it holds is the new timeline's).
+  virtual void newTimeline(const ros::Time& /*stamp*/) {}
   /// Forgets the history (a new session; called by the worker, which records it).
   void clearHistory();
   /// The pose a lookup returned at `stamp`, or interpolated between the two around it when each
@@ -82,7 +83,7 @@ class TfPoseProvider : public PoseProvider {
   TfPoseProvider(const NodeConfig& config, ros::NodeHandle nh);
   ~TfPoseProvider() override;
   PoseLookup lookup(const std::string& image_frame, const ros::Time& stamp) override;
-  void newTimeline() override;
+  void newTimeline(const ros::Time& stamp) override;
   void stop() override { stopping_ = true; }
   std::string describe() const override;
 
@@ -127,7 +128,7 @@ class TopicPoseProvider : public PoseProvider {
   ~TopicPoseProvider() override;
   PoseLookup lookup(const std::string& image_frame, const ros::Time& stamp) override;
   void reset() override;
-  void newTimeline() override;
+  void newTimeline(const ros::Time& stamp) override;
   void stop() override;
   std::string describe() const override;
 
