@@ -27,6 +27,7 @@ SynchroniserConfig synchroniserConfig(const NodeConfig& c) {
   s.timeout = c.sync_timeout;
   s.max_waiting = static_cast<size_t>(c.queue_size);
   s.max_partners = static_cast<size_t>(std::max(c.queue_size, c.subscriber_queue_size));
+  s.time_jump = c.time_jump_threshold;
   return s;
 }
 double wallNow() { return ros::WallTime::now().toSec(); }
@@ -65,9 +66,14 @@ FrameInputs::FrameInputs(const NodeConfig& config, ros::NodeHandle nh, ros::Node
         it_.subscribe("depth", q, &FrameInputs::onDepth, this,
                       image_transport::TransportHints("raw", ros::TransportHints(), private_nh,
                                                       "depth_image_transport"));
+  // A session continued from ~state_file: an image more than ~time_jump_threshold before its
+  // last frame is a time jump too.
+  if (const std::optional<double> last = worker_.lastStamp())
+    if (*last > 0.0) sync_.noteImageStamp(ros::Time(*last));
   poll_timer_ =
       input_nh_.createWallTimer(ros::WallDuration(kPollPeriod), [this](const ros::WallTimerEvent&) {
         std::lock_guard<std::mutex> lock(sync_mutex_);
+        discardEarlierGenerations();
         deliver(sync_.poll(wallNow()));
       });
   check_timer_ = private_nh.createWallTimer(
@@ -87,13 +93,9 @@ FrameInputs::~FrameInputs() {
   points_sub_.shutdown();
 }
 
-void FrameInputs::onImage(const sensor_msgs::ImageConstPtr& image) {
-  statistics_.arrived(InputStatistics::Input::kImage);
-  addImage(image);
-}
+void FrameInputs::onImage(const sensor_msgs::ImageConstPtr& image) { addImage(image); }
 
 void FrameInputs::onCompressedImage(const sensor_msgs::CompressedImageConstPtr& msg) {
-  statistics_.arrived(InputStatistics::Input::kImage);
   sensor_msgs::ImageConstPtr image;
   try {
     image = decodeCompressedImage(*msg);  // outside the lock: decoding takes milliseconds
@@ -134,8 +136,27 @@ sensor_msgs::ImageConstPtr FrameInputs::corruptStandIn(const std_msgs::Header& h
   return stand_in;
 }
 
+void FrameInputs::discardEarlierGenerations() {
+  // Images that arrived before a ~reset belong to the session it ended: they never become
+  // frames of the new one (push() discards those already released).
+  const uint64_t generation = worker_.generation();
+  if (generation == sync_generation_) return;
+  sync_generation_ = generation;
+  sync_.discardWaitingBefore(generation);
+}
+
 void FrameInputs::addImage(const sensor_msgs::ImageConstPtr& image) {
   std::lock_guard<std::mutex> lock(sync_mutex_);
+  discardEarlierGenerations();
+  ros::Time newest;
+  if (sync_.isTimeJump(image->header.stamp, &newest)) {
+    // Before this image is counted: it is the new session's first.
+    sync_.startTimeline();  // the images waiting are the old session's
+    last_seq_.reset();
+    worker_.timeJump(newest, image->header.stamp);
+    sync_generation_ = worker_.generation();
+  }
+  statistics_.arrived(InputStatistics::Input::kImage);
   const uint32_t seq = image->header.seq;
   // Publishers that number their images (rosbag play of a recording, camera drivers): a gap is
   // images that never reached this callback. Publishers that leave seq at 0 show no gap.
@@ -151,12 +172,13 @@ void FrameInputs::addImage(const sensor_msgs::ImageConstPtr& image) {
                        image->header.stamp);
   }
   last_seq_ = seq;
-  deliver(sync_.addImage(image, wallNow()));
+  deliver(sync_.addImage(image, wallNow(), sync_generation_));
 }
 
 void FrameInputs::onCameraInfo(const sensor_msgs::CameraInfoConstPtr& info) {
   statistics_.arrived(InputStatistics::Input::kCameraInfo);
   std::lock_guard<std::mutex> lock(sync_mutex_);
+  discardEarlierGenerations();
   deliver(sync_.addCameraInfo(info, wallNow()));
 }
 
@@ -167,13 +189,17 @@ void FrameInputs::onDepth(const sensor_msgs::ImageConstPtr& depth) {
 
 void FrameInputs::addDepth(const sensor_msgs::ImageConstPtr& depth) {
   std::lock_guard<std::mutex> lock(sync_mutex_);
+  discardEarlierGenerations();
   deliver(sync_.addDepth(depth, wallNow()));
 }
 
 void FrameInputs::deliver(SynchronisedFrames decided) {
+  const uint64_t generation = worker_.generation();
   for (const auto& drop : decided.drops)
-    statistics_.dropInput("unsynchronised", drop.message, drop.stamp);
+    if (drop.generation == generation)  // else the image belongs to a session that ended
+      statistics_.dropInput("unsynchronised", drop.message, drop.stamp);
   for (PendingFrame& frame : decided.frames) {
+    if (frame.generation != generation) continue;  // likewise (push() checks it again)
     const Corrupt* corrupt = nullptr;
     for (const Corrupt& c : corrupt_)
       if (c.stand_in == frame.image || (frame.depth && c.stand_in == frame.depth)) corrupt = &c;

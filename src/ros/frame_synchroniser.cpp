@@ -53,8 +53,9 @@ std::string seconds(double s) { return core::formatNumber(std::round(s * 1e6) / 
 }  // namespace
 
 SynchronisedFrames FrameSynchroniser::addImage(const sensor_msgs::ImageConstPtr& image,
-                                               double now) {
-  waiting_.push_back({image, now, ++arrivals_});
+                                               double now, uint64_t generation) {
+  waiting_.push_back({image, now, ++arrivals_, generation});
+  newest_image_ = std::max(newest_image_, image->header.stamp);
   SynchronisedFrames out;
   release(now, out);
   return out;
@@ -62,6 +63,7 @@ SynchronisedFrames FrameSynchroniser::addImage(const sensor_msgs::ImageConstPtr&
 
 SynchronisedFrames FrameSynchroniser::addCameraInfo(const sensor_msgs::CameraInfoConstPtr& info,
                                                     double now) {
+  newTimelineIfJump(infos_, info->header.stamp);
   insertByStamp(infos_, Partner<sensor_msgs::CameraInfoConstPtr>{info, ++arrivals_});
   SynchronisedFrames out;
   release(now, out);
@@ -71,6 +73,7 @@ SynchronisedFrames FrameSynchroniser::addCameraInfo(const sensor_msgs::CameraInf
 SynchronisedFrames FrameSynchroniser::addDepth(const sensor_msgs::ImageConstPtr& depth,
                                                double now) {
   if (!config_.use_depth) return {};
+  newTimelineIfJump(depths_, depth->header.stamp);
   insertByStamp(depths_, Partner<sensor_msgs::ImageConstPtr>{depth, ++arrivals_});
   SynchronisedFrames out;
   release(now, out);
@@ -88,6 +91,47 @@ void FrameSynchroniser::clear() {
   infos_.clear();
   depths_.clear();
   last_released_ = ros::Time();
+  newest_image_ = ros::Time();
+}
+
+namespace {
+/// A stamp more than `threshold` before `newest` (a zero stamp, "unknown", never is).
+bool jumpsBack(const ros::Time& stamp, const ros::Time& newest, double threshold) {
+  return threshold > 0.0 && !newest.isZero() && !stamp.isZero() &&
+         (newest - stamp).toSec() > threshold;
+}
+}  // namespace
+
+bool FrameSynchroniser::isTimeJump(const ros::Time& stamp, ros::Time* newest) const {
+  if (!jumpsBack(stamp, newest_image_, config_.time_jump)) return false;
+  if (newest) *newest = newest_image_;
+  return true;
+}
+
+void FrameSynchroniser::startTimeline() {
+  waiting_.clear();
+  newest_image_ = ros::Time();
+  // Released stamps of the old timeline would keep no partner of the new one from pruning.
+  last_released_ = ros::Time();
+}
+
+size_t FrameSynchroniser::discardWaitingBefore(uint64_t generation) {
+  const size_t before = waiting_.size();
+  waiting_.erase(std::remove_if(waiting_.begin(), waiting_.end(),
+                                [&](const Waiting& w) { return w.generation < generation; }),
+                 waiting_.end());
+  // The new session starts over: an image earlier than the old one's is no time jump.
+  newest_image_ = ros::Time();
+  for (const Waiting& w : waiting_) newest_image_ = std::max(newest_image_, w.image->header.stamp);
+  return before - waiting_.size();
+}
+
+template <typename P>
+void FrameSynchroniser::newTimelineIfJump(std::deque<P>& messages, const ros::Time& stamp) {
+  if (messages.empty()) return;
+  // The newest of this input: stamps are kept ascending.
+  if (jumpsBack(stamp, messages.back().message->header.stamp, config_.time_jump))
+    messages.clear();
 }
 
 void FrameSynchroniser::release(double now, SynchronisedFrames& out) {
@@ -115,14 +159,15 @@ void FrameSynchroniser::release(double now, SynchronisedFrames& out) {
     else if (config_.use_depth && tooFar(depth_offset))
       missing = "the nearest depth image is " + seconds(depth_offset) + " from it";
     if (missing.empty()) {
-      out.frames.push_back({head.image, info, depth});
+      out.frames.push_back({head.image, info, depth, head.generation});
     } else {
       out.drops.push_back({stamp, "no partner for the image within " + seconds(config_.max_spread) +
                                       " (~max_stamp_spread): " + missing +
                                       (ready ? std::string()
                                              : " (after waiting " + seconds(now - head.arrived) +
                                                    ", or " + std::to_string(config_.max_waiting) +
-                                                   " images waiting: ~queue_size)")});
+                                                   " images waiting: ~queue_size)"),
+                           head.generation});
     }
     last_released_ = std::max(last_released_, stamp);
     waiting_.pop_front();

@@ -139,6 +139,15 @@ void InputStatistics::reset() {
   ++version_;
 }
 
+void InputStatistics::timeJump() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const uint64_t jumps = counts_.time_jumps + 1;
+  counts_ = Counts{};
+  counts_.time_jumps = jumps;
+  ++session_;
+  ++version_;
+}
+
 uint64_t InputStatistics::session() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return session_;
@@ -204,6 +213,7 @@ view_selection::InputStatistics InputStatistics::toMsg() const {
   msg.keyframes_corrected = counts_.keyframes_corrected;
   msg.frames_offered = counts_.frames_offered;
   msg.keyframes = static_cast<uint32_t>(counts_.keyframes);
+  msg.time_jumps = counts_.time_jumps;
   for (const auto& [reason, count] : counts_.dropped) {
     msg.drop_reasons.push_back(reason);
     msg.drop_counts.push_back(count);

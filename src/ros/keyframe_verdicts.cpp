@@ -30,6 +30,15 @@ std::string KeyframeVerdicts::describe() const {
 void KeyframeVerdicts::onPath(const nav_msgs::PathConstPtr& path) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
+    ros::Time newest;
+    for (const auto& p : path->poses) newest = std::max(newest, p.header.stamp);
+    const double jump = config_.time_jump_threshold;
+    if (jump > 0.0 && !newest.isZero() && !stamps_.empty() &&
+        (*stamps_.rbegin() - newest).toSec() > jump) {
+      // A path of another timeline (a restarted SLAM system, a bag played again).
+      stamps_.clear();
+      timeline_started_ = true;
+    }
     for (const auto& p : path->poses) stamps_.insert(p.header.stamp);
     while (stamps_.size() > kMaxStamps) stamps_.erase(stamps_.begin());
   }
@@ -54,8 +63,13 @@ KeyframeVerdicts::Verdict KeyframeVerdicts::wait(const ros::Time& stamp) {
   const auto deadline = std::chrono::steady_clock::now() +
                         std::chrono::duration<double>(config_.keyframe_verdict_timeout);
   std::unique_lock<std::mutex> lock(mutex_);
+  const uint64_t resets = resets_;
   Verdict verdict = verdictLocked(stamp);
   arrived_.wait_until(lock, deadline, [&] {
+    if (resets_ != resets) {  // the frame's session is over
+      verdict = Verdict::kUnknown;
+      return true;
+    }
     verdict = verdictLocked(stamp);
     return stopping_ || verdict != Verdict::kUnknown;
   });
@@ -63,8 +77,25 @@ KeyframeVerdicts::Verdict KeyframeVerdicts::wait(const ros::Time& stamp) {
 }
 
 void KeyframeVerdicts::reset() {
-  std::lock_guard<std::mutex> lock(mutex_);
-  stamps_.clear();
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stamps_.clear();
+    timeline_started_ = false;
+    ++resets_;
+  }
+  arrived_.notify_all();
+}
+
+void KeyframeVerdicts::newTimeline(const ros::Time& stamp) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const ros::Duration tolerance(config_.keyframe_stamp_tolerance);
+    const ros::Time from = stamp > ros::Time(0) + tolerance ? stamp - tolerance : ros::Time(0);
+    if (!timeline_started_) stamps_.erase(stamps_.lower_bound(from), stamps_.end());
+    timeline_started_ = false;
+    ++resets_;
+  }
+  arrived_.notify_all();
 }
 
 void KeyframeVerdicts::stop() {

@@ -1,6 +1,7 @@
 #include "view_selection/ros/keyframe_worker.h"
 
 #include "view_selection/core/exceptions.h"
+#include "view_selection/core/parameters.h"
 #include "view_selection/points/image_conversion.h"
 #include "view_selection/points/map_point_source.h"
 #include "view_selection/points/point_source_factory.h"
@@ -123,6 +124,8 @@ void KeyframeWorker::push(PendingFrame frame) {
   {
     std::lock_guard<std::mutex> lock(queue_mutex_);
     if (stopping_) return;
+    // An image that arrived before a ~reset or a time jump: not part of the new session.
+    if (frame.generation != generation_.load()) return;
     if (queue_.size() >= static_cast<size_t>(config_.max_pending_frames)) {
       overflow = std::move(queue_.front());
       queue_.pop_front();
@@ -155,13 +158,49 @@ size_t KeyframeWorker::pending(double* oldest_age) const {
 }
 
 size_t KeyframeWorker::reset() {
+  // The SLAM system's verdicts so far belong to the old session too (a waiting frame gives up).
+  if (verdicts_) verdicts_->reset();
+  return startSession(false);
+}
+
+void KeyframeWorker::timeJump(const ros::Time& newest, const ros::Time& stamp) {
+  // Before the new session's first frame is queued: its pose and verdict come from the new
+  // timeline only.
+  poses_.newTimeline(stamp);
+  if (verdicts_) verdicts_->newTimeline(stamp);
+  const size_t forgotten = startSession(true);
+  ROS_WARN_STREAM("view_selection: time jumped back from "
+                  << stampText(newest) << " to " << stampText(stamp) << " ("
+                  << core::formatNumber((newest - stamp).toSec())
+                  << " s, more than ~time_jump_threshold " << config_.time_jump_threshold
+                  << " s: a bag played again or looped, or a restarted SLAM system); a new session "
+                     "starts, the old one's "
+                  << forgotten << " keyframes "
+                  << (keeper_.enabled() ? "are kept in " + keeper_.previousPath()
+                                        : std::string("are forgotten (~state_file is empty)")));
+}
+
+std::optional<double> KeyframeWorker::lastStamp() const {
+  std::lock_guard<std::timed_mutex> lock(state_mutex_);
+  return last_stamp_;
+}
+
+size_t KeyframeWorker::startSession(bool time_jump) {
   std::shared_ptr<const ServedSelection> old;  // released after the locks
   size_t forgotten = 0;
   {
     std::lock_guard<std::mutex> queue_lock(queue_mutex_);
     queue_.clear();
     queued_count_ = 0;
-    statistics_.reset();
+    if (time_jump && keeper_.enabled()) {
+      std::lock_guard<std::mutex> lock(aside_mutex_);
+      // Frames of the old session still queued are discarded: its statistics are final here.
+      if (!aside_) aside_ = Aside{generation_.load(), statistics_.toSaved()};
+    }
+    if (time_jump)
+      statistics_.timeJump();
+    else
+      statistics_.reset();
     std::lock_guard<std::mutex> lock(served_mutex_);
     ++generation_;
     forgotten = keyframe_count_.exchange(0);
@@ -179,6 +218,21 @@ size_t KeyframeWorker::reset() {
 }
 
 void KeyframeWorker::applyResetLocked(uint64_t generation) {
+  std::optional<Aside> aside;
+  {
+    std::lock_guard<std::mutex> lock(aside_mutex_);
+    aside = std::move(aside_);
+    aside_.reset();
+  }
+  // Only when the selector holds that session still (no ~reset came between).
+  if (aside && aside->generation == applied_generation_) {
+    StateSnapshot old = captureStateLocked();
+    old.state.statistics = aside->statistics;
+    keeper_.saveAside(std::move(old));
+  }
+  // Every pose a frame was given belongs to the old session (the worker looks poses up, so
+  // none of the new one is recorded yet).
+  poses_.clearHistory();
   selector_->reset();
   if (images_) images_ = newImageCache();  // selections shared before keep the old one
   last_stamp_.reset();

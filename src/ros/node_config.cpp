@@ -50,6 +50,12 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
   core::visitInteger(
       v, "max_pending_frames", max_pending_frames, 1, 100000,
       "frames waiting for the worker; beyond, the oldest is dropped (worker_behind)");
+  core::visitReal(v, "time_jump_threshold", time_jump_threshold, 0.0, 1e6,
+                  "an image stamp more than this before the newest so far is a time jump (a bag "
+                  "played again or looped, a restarted SLAM system): a new session starts, as "
+                  "after ~reset (with ~state_file the old one is kept in the file named "
+                  "state_file + .previous); smaller steps back are out_of_order_stamp drops; 0: "
+                  "never [s]");
   core::visitFlag(v, "use_depth", use_depth,
                   "synchronise `depth` (16UC1 millimetres or 32FC1 metres) with the image");
   core::visitText(v, "image_transport", image_transport, {"raw", "compressed"},

@@ -22,6 +22,11 @@ void PoseProvider::reset() {
   history_.clear();
 }
 
+void PoseProvider::clearHistory() {
+  std::lock_guard<std::mutex> lock(history_mutex_);
+  history_.clear();
+}
+
 std::optional<core::CameraPose> PoseProvider::historyAt(double stamp, double max_gap) const {
   std::lock_guard<std::mutex> lock(history_mutex_);
   return history_.at(stamp, max_gap);
@@ -36,8 +41,79 @@ void PoseProvider::record(const ros::Time& stamp, const core::CameraPose& pose) 
 // ---------------------------------------------------------------------------------------------
 // tf
 
+namespace {
+/// A stamp more than `threshold` before `newest` (a zero stamp, "unknown", never is).
+bool jumpsBack(const ros::Time& stamp, const ros::Time& newest, double threshold) {
+  return threshold > 0.0 && !newest.isZero() && !stamp.isZero() &&
+         (newest - stamp).toSec() > threshold;
+}
+}  // namespace
+
 TfPoseProvider::TfPoseProvider(const NodeConfig& config, ros::NodeHandle nh)
-    : config_(config), buffer_(ros::Duration(kCacheSeconds)), listener_(buffer_, nh, true) {}
+    : config_(config), buffer_(ros::Duration(kCacheSeconds)), tf_spinner_(1, &tf_queue_) {
+  nh.setCallbackQueue(&tf_queue_);
+  tf_sub_ = nh.subscribe<tf2_msgs::TFMessage>(
+      "/tf", kTfQueue,
+      [this](const ros::MessageEvent<tf2_msgs::TFMessage const>& e) { onTf(e, false); });
+  tf_static_sub_ = nh.subscribe<tf2_msgs::TFMessage>(
+      "/tf_static", kTfQueue,
+      [this](const ros::MessageEvent<tf2_msgs::TFMessage const>& e) { onTf(e, true); });
+  tf_spinner_.start();
+}
+
+TfPoseProvider::~TfPoseProvider() {
+  tf_spinner_.stop();
+  tf_sub_.shutdown();
+  tf_static_sub_.shutdown();
+}
+
+void TfPoseProvider::clearLocked() {
+  buffer_.clear();  // static transforms stay
+  newest_.clear();
+}
+
+void TfPoseProvider::onTf(const ros::MessageEvent<tf2_msgs::TFMessage const>& event,
+                          bool is_static) {
+  const std::string authority = event.getPublisherName();
+  std::lock_guard<std::mutex> lock(tf_mutex_);
+  // As tf2_ros::TransformListener: ROS time went back (a bag played again with --clock).
+  const ros::Time now = ros::Time::now();
+  if (now < last_update_) {
+    ROS_WARN_STREAM("view_selection: ROS time went back from " << stampText(last_update_) << " to "
+                                                               << stampText(now)
+                                                               << "; clearing the tf buffer");
+    clearLocked();
+    timeline_started_ = true;
+  }
+  last_update_ = now;
+  for (const geometry_msgs::TransformStamped& t : event.getMessage()->transforms) {
+    if (!is_static) {
+      ros::Time& newest = newest_[t.child_frame_id];
+      if (jumpsBack(t.header.stamp, newest, config_.time_jump_threshold)) {
+        clearLocked();  // the old timeline's transforms, of every frame
+        timeline_started_ = true;
+      }
+      ros::Time& latest = newest_[t.child_frame_id];  // clearLocked() may have removed it
+      latest = std::max(latest, t.header.stamp);
+    }
+    try {
+      buffer_.setTransform(t, authority, is_static);
+    } catch (const tf2::TransformException& e) {
+      ROS_ERROR_STREAM_THROTTLE(5.0, "view_selection: tf from " << authority << ": " << e.what());
+    }
+  }
+}
+
+void TfPoseProvider::newTimeline(const ros::Time& stamp) {
+  std::lock_guard<std::mutex> lock(tf_mutex_);
+  // Old transforms are those of a frame that reaches beyond the new stamp (the old timeline
+  // went on past it); a frame seen for the first time since is the new timeline's.
+  bool old = false;
+  for (const auto& [child, newest] : newest_)
+    old = old || jumpsBack(stamp, newest, config_.time_jump_threshold);
+  if (!timeline_started_ && old) clearLocked();
+  timeline_started_ = false;
+}
 
 std::string TfPoseProvider::describe() const {
   return "tf (" + config_.world_frame + " <- " +
@@ -140,18 +216,26 @@ std::string TopicPoseProvider::describe() const {
          (config_.body_frame.empty() ? std::string("the optical frame") : config_.body_frame) + ")";
 }
 
+bool TopicPoseProvider::addPose(std::deque<ReceivedPose>& poses, ReceivedPose pose,
+                                double time_jump) {
+  const bool jump = !poses.empty() && jumpsBack(pose.stamp, poses.back().stamp, time_jump);
+  if (jump) poses.clear();  // another timeline: a bag played again, a restarted SLAM system
+  auto at =
+      std::upper_bound(poses.begin(), poses.end(), pose.stamp,
+                       [](const ros::Time& t, const ReceivedPose& p) { return t < p.stamp; });
+  poses.insert(at, std::move(pose));
+  // Frames older than the history are long dropped.
+  const ros::Time newest = poses.back().stamp;
+  while (poses.size() > kMaxPoses ||
+         (poses.size() > 1 && newest.toSec() - poses.front().stamp.toSec() > kHistorySeconds))
+    poses.pop_front();
+  return jump;
+}
+
 void TopicPoseProvider::onPose(ReceivedPose pose) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    auto at =
-        std::upper_bound(poses_.begin(), poses_.end(), pose.stamp,
-                         [](const ros::Time& t, const ReceivedPose& p) { return t < p.stamp; });
-    poses_.insert(at, std::move(pose));
-    // Frames older than the history are long dropped.
-    const ros::Time newest = poses_.back().stamp;
-    while (poses_.size() > kMaxPoses ||
-           (poses_.size() > 1 && newest.toSec() - poses_.front().stamp.toSec() > kHistorySeconds))
-      poses_.pop_front();
+    if (addPose(poses_, std::move(pose), config_.time_jump_threshold)) timeline_started_ = true;
   }
   arrived_.notify_all();
 }
@@ -160,6 +244,14 @@ void TopicPoseProvider::reset() {
   PoseProvider::reset();
   std::lock_guard<std::mutex> lock(mutex_);
   poses_.clear();
+}
+
+void TopicPoseProvider::newTimeline(const ros::Time& stamp) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!timeline_started_ && !poses_.empty() &&
+      jumpsBack(stamp, poses_.back().stamp, config_.time_jump_threshold))
+    poses_.clear();
+  timeline_started_ = false;
 }
 
 void TopicPoseProvider::stop() {

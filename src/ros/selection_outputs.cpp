@@ -165,6 +165,7 @@ void SelectionOutputs::diagnose(diagnostic_updater::DiagnosticStatusWrapper& sta
   status.add("frames received", counts.frames_received);
   status.add("frames offered", counts.frames_offered);
   status.add("frames dropped", counts.dropped_total());
+  status.add("time jumps", counts.time_jumps);
   for (const auto& [reason, count] : counts.dropped) status.add("dropped: " + reason, count);
   status.add("frames waiting for the worker", pending);
   status.add("worker lag [s]", lag);

@@ -69,6 +69,7 @@ StateKeeper::~StateKeeper() {
   }
   wake_.notify_all();
   if (thread_.joinable()) thread_.join();
+  if (aside_) writeAside(*aside_);  // a session a time jump ended is not lost on shutdown
 }
 
 std::optional<io::SessionState> StateKeeper::takeLoaded() {
@@ -110,17 +111,47 @@ SaveResult StateKeeper::saveNow(StateSnapshot snapshot) {
   return write(snapshot);
 }
 
+void StateKeeper::saveAside(StateSnapshot snapshot) {
+  if (!enabled()) return;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    aside_ = std::move(snapshot);
+  }
+  wake_.notify_one();
+}
+
 void StateKeeper::loop() {
   while (true) {
-    StateSnapshot snapshot;
+    std::optional<StateSnapshot> aside, snapshot;
     {
       std::unique_lock<std::mutex> lock(mutex_);
-      wake_.wait(lock, [this] { return stopping_ || waiting_.has_value(); });
+      wake_.wait(lock, [this] { return stopping_ || waiting_ || aside_; });
       if (stopping_) return;
-      snapshot = std::move(*waiting_);
+      aside = std::move(aside_);  // first: the session before the one waiting_ holds
+      aside_.reset();
+      snapshot = std::move(waiting_);
       waiting_.reset();
     }
-    write(snapshot);
+    if (aside) writeAside(*aside);
+    if (snapshot) write(*snapshot);
+  }
+}
+
+void StateKeeper::writeAside(StateSnapshot& snapshot) {
+  std::lock_guard<std::mutex> lock(write_mutex_);
+  const std::string path = previousPath();
+  snapshot.state.producer = producer_;
+  try {
+    std::error_code ec;
+    const fs::path folder = fs::path(path).parent_path();
+    if (!folder.empty()) fs::create_directories(folder, ec);
+    const size_t bytes = io::writeStateFile(path, snapshot.state);
+    ROS_INFO_STREAM("view_selection: the session before the time jump ("
+                    << snapshot.state.selector.keyframes.size() << " keyframes, "
+                    << megabytes(bytes) << ") is kept in " << path);
+  } catch (const std::exception& e) {
+    ROS_WARN_STREAM("view_selection: keeping the session before the time jump in "
+                    << path << " failed: " << e.what());
   }
 }
 

@@ -190,5 +190,107 @@ TEST(FrameSynchroniser, AnImageOlderThanTheLastOneWaitsForItsOwnPartners) {
   EXPECT_EQ(all.frames.back().depth->header.stamp, at(0.55));
 }
 
+// A bag played twice (or looped): the second play's partners come first, in either order with
+// its first image, and the images of the first play still waiting belong to the session that
+// ended. Every image of the second play gets its own partners, never the first play's.
+TEST(FrameSynchroniser, ATimeJumpStartsNewTimelinesAndKeepsNoPartnerOfTheOldOne) {
+  FrameSynchroniser sync({true, 0.03, 1.0, 10, 100, 1.0});
+  SynchronisedFrames first;
+  for (int q = 0; q < 59; ++q) {  // 2 s at 30 Hz
+    const double t = q / 30.0;
+    append(first, sync.addCameraInfo(info(t), 0.0));
+    append(first, sync.addDepth(image(t), 0.0));
+    append(first, sync.addImage(image(t), 0.0));
+  }
+  append(first, sync.addImage(image(59 / 30.0), 0.0));  // its partners are late: it waits
+  EXPECT_EQ(first.frames.size(), 59u);
+  EXPECT_EQ(sync.waiting(), 1u);
+  // A step back of less than the threshold is no jump (an out-of-order image).
+  EXPECT_FALSE(sync.isTimeJump(at(59 / 30.0 - 0.9)));
+  // The second play: its first camera_info and depth before its first image.
+  append(first, sync.addCameraInfo(info(0.0), 0.0));
+  append(first, sync.addDepth(image(0.0), 0.0));
+  EXPECT_EQ(first.frames.size(), 59u) << "the old image must not take a new partner";
+  ros::Time newest;
+  ASSERT_TRUE(sync.isTimeJump(at(0.0), &newest));
+  EXPECT_EQ(newest, at(59 / 30.0));
+  sync.startTimeline();
+  EXPECT_EQ(sync.waiting(), 0u) << "the old session's waiting image is forgotten";
+  EXPECT_FALSE(sync.isTimeJump(at(0.0)));
+  SynchronisedFrames second = sync.addImage(image(0.0), 0.0, 7);
+  for (int q = 1; q < 10; ++q) {  // now the image first, then its partners
+    const double t = q / 30.0;
+    EXPECT_FALSE(sync.isTimeJump(at(t)));
+    append(second, sync.addImage(image(t), 0.0, 7));
+    append(second, sync.addCameraInfo(info(t), 0.0));
+    append(second, sync.addDepth(image(t), 0.0));
+  }
+  ASSERT_EQ(second.frames.size(), 10u);
+  EXPECT_TRUE(second.drops.empty());
+  for (int q = 0; q < 10; ++q) {
+    const PendingFrame& f = second.frames[static_cast<size_t>(q)];
+    EXPECT_EQ(f.image->header.stamp, at(q / 30.0));
+    EXPECT_EQ(f.info->header.stamp, at(q / 30.0)) << q;
+    EXPECT_EQ(f.depth->header.stamp, at(q / 30.0)) << q;
+    EXPECT_EQ(f.generation, 7u);
+  }
+}
+
+// Partners of the new timeline that arrive after old ones: each input forgets its old messages
+// when its own stamps go back, so a new image never takes an old partner that happens to lie
+// nearer (a SLAM restart that goes back only a little more than the threshold).
+TEST(FrameSynchroniser, EachInputForgetsItsOldTimelineWhenItsStampsGoBack) {
+  FrameSynchroniser sync({true, 0.03, 1.0, 10, 100, 1.0});
+  SynchronisedFrames all;
+  for (int q = 0; q <= 90; ++q) {
+    const double t = q / 30.0;
+    append(all, sync.addImage(image(t), 0.0));
+    append(all, sync.addCameraInfo(info(t), 0.0));
+    append(all, sync.addDepth(image(t + 0.005), 0.0));  // the old depth 5 ms after colour
+  }
+  ASSERT_EQ(all.frames.size(), 91u);
+  // Back 1.5 s: the old timeline had depth at 1.505 s, the new one has it at 1.49 s.
+  ASSERT_TRUE(sync.isTimeJump(at(1.5)));
+  sync.startTimeline();
+  SynchronisedFrames out = sync.addCameraInfo(info(1.5), 0.0);
+  append(out, sync.addDepth(image(1.49), 0.0));
+  append(out, sync.addImage(image(1.5), 0.0));
+  append(out, sync.addCameraInfo(info(1.5 + 1 / 30.0), 0.0));
+  append(out, sync.addDepth(image(1.49 + 1 / 30.0), 0.0));
+  ASSERT_EQ(out.frames.size(), 1u);
+  EXPECT_EQ(out.frames[0].depth->header.stamp, at(1.49)) << "not the old timeline's 1.505 s";
+}
+
+TEST(FrameSynchroniser, NoTimeJumpWithAThresholdOfZeroOrToAZeroStamp) {
+  FrameSynchroniser off({true, 0.03, 1.0, 10, 100, 0.0});
+  off.addImage(image(100.0), 0.0);
+  EXPECT_FALSE(off.isTimeJump(at(0.0)));
+  FrameSynchroniser on({true, 0.03, 1.0, 10, 100, 1.0});
+  on.addImage(image(100.0), 0.0);
+  EXPECT_TRUE(on.isTimeJump(at(0.0)));
+  EXPECT_FALSE(on.isTimeJump(ros::Time())) << "a zero stamp is a bad frame, not a new timeline";
+}
+
+// ~reset: the images waiting from before it are forgotten, the later ones stay.
+TEST(FrameSynchroniser, ImagesOfAnEarlierGenerationAreDiscarded) {
+  FrameSynchroniser sync({true, 0.03, 1.0, 10, 100});
+  SynchronisedFrames all;
+  for (int q = 0; q < 3; ++q) append(all, sync.addImage(image(0.1 * q), 0.0, 0));
+  append(all, sync.addImage(image(0.3), 0.0, 1));
+  EXPECT_EQ(sync.waiting(), 4u);
+  EXPECT_TRUE(sync.isTimeJump(at(-1.0)));
+  EXPECT_EQ(sync.discardWaitingBefore(1), 3u);
+  EXPECT_EQ(sync.waiting(), 1u);
+  // The session starts over: stamps before the old session's are no jump, only before its own.
+  EXPECT_FALSE(sync.isTimeJump(at(-0.5)));
+  EXPECT_TRUE(sync.isTimeJump(at(-0.8)));
+  append(all, sync.addCameraInfo(info(0.3), 0.0));
+  append(all, sync.addDepth(image(0.3), 0.0));
+  ASSERT_EQ(all.frames.size(), 1u);
+  EXPECT_TRUE(all.drops.empty());
+  EXPECT_EQ(all.frames[0].image->header.stamp, at(0.3));
+  EXPECT_EQ(all.frames[0].generation, 1u);
+}
+
 }  // namespace
 }  // namespace view_selection::ros_node

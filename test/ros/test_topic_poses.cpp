@@ -65,5 +65,29 @@ TEST(TopicPoses, PosesAroundTheStampInDifferentFramesAreABadPose) {
   EXPECT_EQ(out.reason, "bad_pose");
 }
 
+// A restarted SLAM system or a bag played again: poses more than the threshold before the newest
+// are another timeline; the old poses go, so none is interpolated with a new one.
+TEST(TopicPoses, APoseFarBeforeTheNewestStartsANewTimeline) {
+  std::deque<ReceivedPose> poses;
+  for (int q = 0; q <= 30; ++q)
+    EXPECT_FALSE(TopicPoseProvider::addPose(poses, at(0.1 * q, 0.1 * q, 0.0), 1.0));
+  ASSERT_EQ(poses.size(), 31u);
+  // Out of order by less than the threshold: kept in order with the others.
+  EXPECT_FALSE(TopicPoseProvider::addPose(poses, at(2.05, 9.0, 0.0), 1.0));
+  EXPECT_EQ(poses.size(), 32u);
+  // Back 1.5 s: the old timeline had poses on both sides of 1.55 s, the new one has one.
+  EXPECT_TRUE(TopicPoseProvider::addPose(poses, at(1.5, 5.0, 0.0), 1.0));
+  ASSERT_EQ(poses.size(), 1u);
+  PoseLookup out;
+  EXPECT_FALSE(TopicPoseProvider::bodyPoseAt(poses, stampAt(1.55), 0.12, out));
+  EXPECT_FALSE(TopicPoseProvider::addPose(poses, at(1.6, 6.0, 0.0), 1.0));
+  const auto p = TopicPoseProvider::bodyPoseAt(poses, stampAt(1.55), 0.12, out);
+  ASSERT_TRUE(p) << out.message;
+  EXPECT_NEAR(p->pose.position.x(), 5.5, 1e-9);
+  // Threshold 0: never a new timeline.
+  EXPECT_FALSE(TopicPoseProvider::addPose(poses, at(0.0, 0.0, 0.0), 0.0));
+  EXPECT_EQ(poses.size(), 3u);
+}
+
 }  // namespace
 }  // namespace view_selection::ros_node

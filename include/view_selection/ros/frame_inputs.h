@@ -49,7 +49,6 @@ class FrameInputs {
   /// A jump in header.seq larger than this is a restarted publisher, not lost images.
   static constexpr uint32_t kMaxSeqGap = 1000;
 
-  /// Counts the image, checks its sequence number, and hands it to the synchroniser.
   void onImage(const sensor_msgs::ImageConstPtr& image);
   void onCameraInfo(const sensor_msgs::CameraInfoConstPtr& info);
   void onDepth(const sensor_msgs::ImageConstPtr& depth);
@@ -58,7 +57,11 @@ class FrameInputs {
   /// only), so that the frame it belongs to is dropped with the reason (bad_image, bad_depth).
   void onCompressedImage(const sensor_msgs::CompressedImageConstPtr& image);
   void onCompressedDepth(const sensor_msgs::CompressedImageConstPtr& depth);
+  /// Counts the image, checks its sequence number and its stamp (a time jump: a new session),
+  /// and hands it to the synchroniser.
   void addImage(const sensor_msgs::ImageConstPtr& image);
+  /// Under sync_mutex_: after a ~reset, forgets the images waiting from before it.
+  void discardEarlierGenerations();
   void addDepth(const sensor_msgs::ImageConstPtr& depth);
   /// Frames to the worker, drops to the statistics (under sync_mutex_).
   void deliver(SynchronisedFrames decided);
@@ -76,6 +79,7 @@ class FrameInputs {
   std::mutex sync_mutex_;  // the synchroniser and the sequence check
   FrameSynchroniser sync_;
   std::optional<uint32_t> last_seq_;
+  uint64_t sync_generation_ = 0;  ///< the worker's generation the waiting images arrived in
   struct Corrupt {
     sensor_msgs::ImageConstPtr stand_in;
     std::string reason, message;

@@ -10,6 +10,13 @@
 // `max_waiting` images wait. A partner may serve two images
 // (a depth stream slower than the colour stream). No ROS master needed: times come from the
 // caller, which makes it testable on its own.
+//
+// Time jumps (a bag played again or looped, a restarted SLAM system): each input's stamps
+// increase within one timeline. A camera_info or depth stamped more than `time_jump` before the
+// newest of its input starts that input's new timeline: the older messages of that input are
+// forgotten (they would otherwise be the nearest partners of the new images). For images the
+// caller asks first (isTimeJump) and starts the new session itself (startTimeline), because the
+// images waiting then belong to the session that ended.
 #pragma once
 
 #include "view_selection/ros/keyframe_worker.h"
@@ -18,6 +25,7 @@
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 
+#include <algorithm>
 #include <deque>
 #include <string>
 #include <vector>
@@ -30,6 +38,7 @@ struct SynchroniserConfig {
   double timeout = 1.0;       ///< [s, caller's clock] longest wait of an image for its partners
   size_t max_waiting = 10;    ///< images waiting; beyond, the oldest is matched at once
   size_t max_partners = 100;  ///< camera_info and depth messages kept, per input
+  double time_jump = 1.0;     ///< [s] a stamp this much before its input's newest: a new timeline; 0: never
 };
 
 /// What one call decided: frames for the worker, and images dropped with the reason's words.
@@ -37,6 +46,7 @@ struct SynchronisedFrames {
   struct Drop {
     ros::Time stamp;
     std::string message;
+    uint64_t generation = 0;  ///< the image's, as addImage was given it
   };
   std::vector<PendingFrame> frames;
   std::vector<Drop> drops;
@@ -47,14 +57,30 @@ class FrameSynchroniser {
   explicit FrameSynchroniser(SynchroniserConfig config) : config_(config) {}
 
   /// Each add and poll returns the images it decided, in arrival order. `now` [s] is any
-  /// steady clock (the node passes wall time).
-  SynchronisedFrames addImage(const sensor_msgs::ImageConstPtr& image, double now);
+  /// steady clock (the node passes wall time). `generation`: the caller's session when the image
+  /// arrived, handed on in its frame (PendingFrame::generation) or drop.
+  SynchronisedFrames addImage(const sensor_msgs::ImageConstPtr& image, double now,
+                              uint64_t generation = 0);
   SynchronisedFrames addCameraInfo(const sensor_msgs::CameraInfoConstPtr& info, double now);
   SynchronisedFrames addDepth(const sensor_msgs::ImageConstPtr& depth, double now);
   /// Decides the images that waited `timeout` or longer.
   SynchronisedFrames poll(double now);
-  /// Forgets everything (~reset); waiting images are neither output nor counted.
+  /// Forgets everything; waiting images are neither output nor counted.
   void clear();
+  /// Whether an image at `stamp` is more than `time_jump` before the newest image so far (then
+  /// `*newest` is that newest stamp).
+  bool isTimeJump(const ros::Time& stamp, ros::Time* newest = nullptr) const;
+  /// An image stamp seen before (a session continued from a file): later images more than
+  /// `time_jump` before it are a time jump.
+  void noteImageStamp(const ros::Time& stamp) { newest_image_ = std::max(newest_image_, stamp); }
+  /// Images start a new timeline: the waiting images are forgotten (neither output nor counted)
+  /// and the newest image stamp with them. Partners stay: each input starts its own new
+  /// timeline when its stamps go back.
+  void startTimeline();
+  /// Forgets the waiting images that arrived in a generation before `generation` (a ~reset
+  /// since), and their stamps: an image earlier than theirs is no time jump (the session starts
+  /// over). Returns how many.
+  size_t discardWaitingBefore(uint64_t generation);
 
   size_t waiting() const { return waiting_.size(); }
   const SynchroniserConfig& config() const { return config_; }
@@ -64,6 +90,7 @@ class FrameSynchroniser {
     sensor_msgs::ImageConstPtr image;
     double arrived = 0.0;
     uint64_t order = 0;  ///< arrival count, over every input
+    uint64_t generation = 0;
   };
   template <typename Ptr>
   struct Partner {
@@ -73,12 +100,17 @@ class FrameSynchroniser {
 
   void release(double now, SynchronisedFrames& out);
   void prune();
+  /// A partner stamped more than time_jump before its input's newest: forgets that input's
+  /// earlier messages.
+  template <typename P>
+  void newTimelineIfJump(std::deque<P>& messages, const ros::Time& stamp);
 
   SynchroniserConfig config_;
   std::deque<Waiting> waiting_;
   std::deque<Partner<sensor_msgs::CameraInfoConstPtr>> infos_;  // ascending stamp
   std::deque<Partner<sensor_msgs::ImageConstPtr>> depths_;      // ascending stamp
   ros::Time last_released_;
+  ros::Time newest_image_;  ///< of this timeline; zero: none yet
   uint64_t arrivals_ = 0;
 };
 

@@ -31,6 +31,7 @@ class InputStatistics {
     uint64_t keyframes_corrected = 0;     ///< keyframe pose corrections, over all paths
     uint64_t frames_offered = 0;
     uint64_t keyframes = 0;  ///< offered frames that became keyframes
+    uint64_t time_jumps = 0;  ///< times stamps went back and a new session started (since ~reset)
     std::map<std::string, uint64_t> dropped;
     std::string last_error;
     ros::Time last_error_stamp;
@@ -63,6 +64,8 @@ class InputStatistics {
   void dropInput(const std::string& reason, const std::string& message, const ros::Time& stamp);
   /// Starts a new session with zero counts.
   void reset();
+  /// Starts a new session after a time jump: zero counts but time_jumps, which counts it.
+  void timeJump();
   uint64_t session() const;
 
   /// The counts as a saved session keeps them: frames_received counts only the frames handled

@@ -29,7 +29,14 @@ class KeyframeVerdicts {
   Verdict wait(const ros::Time& stamp);
   /// The verdict from the stamps so far, without waiting.
   Verdict now(const ros::Time& stamp) const;
+  /// Forgets every stamp (~reset); a frame waiting for its verdict gives up (kUnknown).
   void reset();
+  /// A time jump to `stamp` started a new session: the stamps from `stamp` on (less the
+  /// tolerance) are of the old timeline and are forgotten (earlier ones cannot decide a frame
+  /// of the new session), unless a path already started a new timeline since the last call (its
+  /// newest stamp more than ~time_jump_threshold before the newest known: then the stamps are
+  /// that path's). A frame waiting for its verdict gives up.
+  void newTimeline(const ros::Time& stamp);
   void stop();
   std::string describe() const;
 
@@ -45,6 +52,8 @@ class KeyframeVerdicts {
   mutable std::mutex mutex_;
   std::condition_variable arrived_;
   std::set<ros::Time> stamps_;
+  bool timeline_started_ = false;  // by a path since the last newTimeline()
+  uint64_t resets_ = 0;            // reset() and newTimeline() calls: waits end
   bool stopping_ = false;
   ros::CallbackQueue queue_;
   ros::Subscriber subscriber_;

@@ -40,6 +40,9 @@ struct PendingFrame {
   sensor_msgs::ImageConstPtr image;
   sensor_msgs::CameraInfoConstPtr info;
   sensor_msgs::ImageConstPtr depth;  ///< null without depth
+  /// The worker's generation() when the image arrived: a frame of an earlier one (a ~reset or a
+  /// time jump since) is discarded by push(), so it never enters the new session.
+  uint64_t generation = 0;
 };
 
 /// What services and publishers read: the selection and, with ~save_keyframe_images, the
@@ -76,12 +79,21 @@ class KeyframeWorker {
   /// Queues a frame (under the queue lock only: never waits for an insertion); when
   /// ~max_pending_frames wait already, the oldest is dropped ("worker_behind").
   void push(PendingFrame frame);
-  /// Forgets every keyframe and waiting frame and starts a new statistics session, at once: the
-  /// served selection is empty when it returns. A frame in flight is discarded, not inserted,
-  /// and not counted in the new session; the worker's thread clears the selector before its
-  /// next frame and saves the empty session (so that a crash after a reset does not bring back
-  /// the old one). Returns the number of keyframes forgotten.
+  /// Forgets every keyframe and waiting frame (and the external keyframe verdicts) and starts a
+  /// new statistics session, at once: the served selection is empty when it returns. A frame in
+  /// flight is discarded, not inserted, and not counted in the new session; the worker's thread
+  /// clears the selector before its next frame and saves the empty session (so that a crash
+  /// after a reset does not bring back the old one). Returns the number of keyframes forgotten.
   size_t reset();
+  /// Time went back from `newest` to `stamp` (more than ~time_jump_threshold): a new session
+  /// starts as with reset(), the jump is logged and counted (time_jumps), the pose source and
+  /// the keyframe verdicts start a new timeline, and with ~state_file the old session is written
+  /// to `<state_file>.previous` first (by the keeper's thread).
+  void timeJump(const ros::Time& newest, const ros::Time& stamp);
+  /// Bumps on every reset() and timeJump(); frames of an earlier one are discarded by push().
+  uint64_t generation() const { return generation_.load(); }
+  /// The last stamp offered to the core (continued from ~state_file: its last frame's), if any.
+  std::optional<double> lastStamp() const;
   /// The whole session now, for ~save_state (copied under the state lock, written outside it).
   StateSnapshot captureState();
   /// Replaces the map of the "map" point source and recomputes the rows of the keyframes whose
@@ -137,8 +149,12 @@ class KeyframeWorker {
   /// Installs `next` as the served selection, unless `generation` is over; the old one is
   /// released outside the lock.
   void installServed(std::shared_ptr<ServedSelection> next, uint64_t generation);
-  /// Under state_mutex_: clears the selector for reset() generation `generation`.
+  /// Under state_mutex_: clears the selector for reset() generation `generation` (after
+  /// handing the old session to the keeper when a time jump ended it).
   void applyResetLocked(uint64_t generation);
+  /// reset() and timeJump(): a new generation and statistics session, the queue emptied, an
+  /// empty selection served. Returns the number of keyframes forgotten.
+  size_t startSession(bool time_jump);
   /// Under state_mutex_: the session for the state file.
   StateSnapshot captureStateLocked();
   /// At construction: continues the session the keeper read, or starts empty.
@@ -177,6 +193,15 @@ class KeyframeWorker {
   mutable std::mutex served_mutex_;
   std::shared_ptr<const ServedSelection> served_;
   uint64_t version_ = 0;  // of served_; guarded by served_mutex_
+
+  // A time jump's old session, to be kept in <state_file>.previous when the worker clears it:
+  // the generation it belonged to and its statistics at the jump. The first one pending wins.
+  struct Aside {
+    uint64_t generation = 0;
+    io::SessionStatistics statistics;
+  };
+  std::mutex aside_mutex_;
+  std::optional<Aside> aside_;
 
   mutable std::mutex queue_mutex_;
   std::condition_variable queue_cv_;

@@ -40,6 +40,9 @@ struct NodeConfig {
   double max_stamp_spread = 0.03;  ///< [s] largest |camera_info or depth stamp - image stamp|
   double sync_timeout = 1.0;       ///< [s, wall] longest wait of an image for its partners
   int max_pending_frames = 30;     ///< frames waiting for the worker before the oldest is dropped
+  /// [s] image stamps that go back by more than this start a new session (a bag played again or
+  /// looped, a restarted SLAM system); 0: never (every such frame is an out_of_order_stamp drop).
+  double time_jump_threshold = 1.0;
   bool use_depth = true;           ///< subscribe to `depth` and synchronise it
   /// raw: sensor_msgs/Image on `image`; compressed: sensor_msgs/CompressedImage on
   /// `image`/compressed (JPEG or PNG), decoded by the node (no image_transport plugin needed).

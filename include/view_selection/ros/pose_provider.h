@@ -16,12 +16,13 @@
 #include <nav_msgs/Odometry.h>
 #include <ros/callback_queue.h>
 #include <ros/ros.h>
+#include <tf2_msgs/TFMessage.h>
 #include <tf2_ros/buffer.h>
-#include <tf2_ros/transform_listener.h>
 
 #include <atomic>
 #include <condition_variable>
 #include <deque>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -44,6 +45,14 @@ class PoseProvider {
   virtual PoseLookup lookup(const std::string& image_frame, const ros::Time& stamp) = 0;
   /// Forgets poses received so far, and the history (~reset).
   virtual void reset();
+  /// A time jump to `stamp` started a new session (before its first frame is looked up): the
+  /// poses received belong to the old timeline and are forgotten when they reach more than
+  /// ~time_jump_threshold beyond `stamp`, unless the pose input already started a new timeline
+  /// of its own since the last call (its stamps went back by more than the threshold: then what
+  /// it holds is the new timeline's).
+  virtual void newTimeline(const ros::Time& /*stamp*/) {}
+  /// Forgets the history (a new session; called by the worker, which records it).
+  void clearHistory();
   /// The pose a lookup returned at `stamp`, or interpolated between the two around it when each
   /// is within `max_gap` [s]: the pose source's history over the session, for loop-closure
   /// corrections (core::PoseHistory). Thread-safe.
@@ -63,22 +72,40 @@ class PoseProvider {
 };
 
 /// tf2: lookupTransform(world_frame, camera frame, stamp), camera frame = ~camera_frame or the
-/// image's frame_id.
+/// image's frame_id. /tf and /tf_static go into the buffer as tf2_ros::TransformListener puts
+/// them (on a thread of their own; the buffer cleared when ROS time goes back), and besides: a
+/// transform stamped more than ~time_jump_threshold before the newest of its child frame starts
+/// a new timeline (the buffer is cleared first), also without simulated time (a bag played
+/// again without --clock, whose transforms tf2 would otherwise mix with the old ones or refuse
+/// as too old).
 class TfPoseProvider : public PoseProvider {
  public:
   TfPoseProvider(const NodeConfig& config, ros::NodeHandle nh);
+  ~TfPoseProvider() override;
   PoseLookup lookup(const std::string& image_frame, const ros::Time& stamp) override;
+  void newTimeline(const ros::Time& stamp) override;
   void stop() override { stopping_ = true; }
   std::string describe() const override;
 
  private:
   static constexpr double kPollPeriod = 0.002;   ///< [s, wall] between canTransform checks
   static constexpr double kCacheSeconds = 30.0;  ///< tf history kept
+  static constexpr uint32_t kTfQueue = 100;      ///< as tf2_ros::TransformListener
+
+  void onTf(const ros::MessageEvent<tf2_msgs::TFMessage const>& event, bool is_static);
+  /// Under tf_mutex_: forgets every transform but the static ones.
+  void clearLocked();
 
   const NodeConfig& config_;
   std::atomic<bool> stopping_{false};
   tf2_ros::Buffer buffer_;
-  tf2_ros::TransformListener listener_;  // spins a thread of its own
+  std::mutex tf_mutex_;  // the timeline below; held while a transform is added
+  std::map<std::string, ros::Time> newest_;  ///< newest stamp by child frame, this timeline
+  bool timeline_started_ = false;            ///< by the transforms since the last newTimeline()
+  ros::Time last_update_;                    ///< ROS time of the last /tf message
+  ros::CallbackQueue tf_queue_;
+  ros::Subscriber tf_sub_, tf_static_sub_;
+  ros::AsyncSpinner tf_spinner_;  // last: started once the subscribers exist
 };
 
 /// One pose as a topic source received it: of `child_frame` (empty: unknown, see ~body_frame)
@@ -101,8 +128,13 @@ class TopicPoseProvider : public PoseProvider {
   ~TopicPoseProvider() override;
   PoseLookup lookup(const std::string& image_frame, const ros::Time& stamp) override;
   void reset() override;
+  void newTimeline(const ros::Time& stamp) override;
   void stop() override;
   std::string describe() const override;
+
+  /// Adds `pose` to `poses` (ascending stamp); when it is more than `time_jump` [s] (> 0) before
+  /// the newest, the poses before it are of another timeline and are forgotten first (true).
+  static bool addPose(std::deque<ReceivedPose>& poses, ReceivedPose pose, double time_jump);
 
   /// The interpolation step alone, for tests: the body pose at `stamp` from `poses` (ascending
   /// stamp), or the drop reason in `out`.
@@ -124,6 +156,7 @@ class TopicPoseProvider : public PoseProvider {
   std::mutex mutex_;
   std::condition_variable arrived_;
   std::deque<ReceivedPose> poses_;  // ascending stamp
+  bool timeline_started_ = false;   // by the poses since the last newTimeline()
   bool stopping_ = false;
   CameraExtrinsic extrinsic_;
   ros::CallbackQueue queue_;

@@ -55,10 +55,18 @@ class StateKeeper {
   void saveLater(StateSnapshot snapshot);
   /// Writes now, after a write in progress (~save_state, shutdown).
   SaveResult saveNow(StateSnapshot snapshot);
+  /// A session a time jump ended: written to previousPath() by the keeper's thread (replacing
+  /// the one kept there before), and on destruction when it is still waiting. Never blocks on a
+  /// write.
+  void saveAside(StateSnapshot snapshot);
+  /// Where saveAside writes: the state file's path + kPreviousSuffix.
+  std::string previousPath() const { return path_ + kPreviousSuffix; }
+  static constexpr const char* kPreviousSuffix = ".previous";
 
  private:
   void loop();
   SaveResult write(StateSnapshot& snapshot);
+  void writeAside(StateSnapshot& snapshot);
 
   std::string path_;
   InputStatistics& statistics_;
@@ -72,6 +80,7 @@ class StateKeeper {
   std::mutex mutex_;
   std::condition_variable wake_;
   std::optional<StateSnapshot> waiting_;
+  std::optional<StateSnapshot> aside_;  // saveAside() not yet written
   bool stopping_ = false;
   std::thread thread_;  // last
 };
