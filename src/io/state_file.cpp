@@ -40,7 +40,7 @@ constexpr uint32_t tag(const char (&t)[5]) {
 }
 constexpr uint32_t kSession = tag("SESS"), kConfig = tag("CONF"), kKeyframes = tag("KEYF"),
                    kMatrix = tag("MATX"), kPolicy = tag("PLCY"), kPoints = tag("PSRC"),
-                   kStatistics = tag("STAT");
+                   kStatistics = tag("STAT"), kPairStream = tag("PAIR");
 
 enum class ParamKind : uint8_t { kBool = 0, kInt = 1, kDouble = 2, kString = 3, kGroup = 4 };
 enum class SourceKind : uint8_t { kNone = 0, kMap = 1, kFeatures = 2 };
@@ -676,6 +676,13 @@ std::vector<uint8_t> encodeState(const SessionState& state) {
   writeStatistics(w, state.statistics);
   w.endSection(s);
 
+  // Optional (readers before it skip it): the pair stream's sequence, so that it continues.
+  if (state.pair_sequence) {
+    s = w.beginSection(kPairStream);
+    w.u64(*state.pair_sequence);
+    w.endSection(s);
+  }
+
   const std::vector<uint8_t>& payload = w.bytes;
   Writer h;
   h.raw(kMagic.data(), kMagic.size());
@@ -771,6 +778,8 @@ SessionState decodeState(const uint8_t* data, size_t size, const std::string& na
       if (s.flag("features")) state.points.features = readFeatureState(s);
     } else if (t == kStatistics) {
       state.statistics = readStatistics(s);
+    } else if (t == kPairStream) {
+      state.pair_sequence = s.u64("pair sequence");
     } else {
       continue;  // a section of a later minor revision: skipped
     }

@@ -15,12 +15,15 @@ namespace view_selection::ros_node {
 
 KeyframeWorker::KeyframeWorker(const NodeConfig& config, PoseProvider& poses,
                                InputStatistics& statistics, StateKeeper& keeper,
-                               KeyframeVerdicts* verdicts, const PointSourceFactory& make_points)
+                               KeyframeVerdicts* verdicts, const PointSourceFactory& make_points,
+                               PairStream* pairs, KeyframeImageWriter* image_writer)
     : config_(config),
       poses_(poses),
       statistics_(statistics),
       keeper_(keeper),
-      verdicts_(verdicts) {
+      verdicts_(verdicts),
+      pairs_(pairs),
+      image_writer_(image_writer) {
   selector_ = std::make_unique<core::ViewSelector>(
       config_.selector, make_points ? make_points(config_)
                                     : points::makePointSource(config_.point_source,
@@ -34,6 +37,7 @@ KeyframeWorker::KeyframeWorker(const NodeConfig& config, PoseProvider& poses,
                                                          "will be lost (not exported)");
     images_ = newImageCache();
   }
+  selector_->trackPairChanges(pairs_ != nullptr);
   {
     std::lock_guard<std::timed_mutex> lock(state_mutex_);
     restoreLoaded();
@@ -91,6 +95,13 @@ void KeyframeWorker::restoreLoaded() {
     return;
   }
   last_stamp_ = loaded->selector.last_stamp;
+  if (pairs_) {
+    // The continued session's pairs count as announced (a consumer catches up on the whole set
+    // through ~get_pairs); the sequence goes on from the saved one.
+    const core::SelectionOutput output = selector_->output();
+    (void)selector_->takePairChanges();
+    pairs_->restore(loaded->pair_sequence.value_or(0), output);
+  }
   const size_t keyframes = selector_->matrix().size();
   keyframe_count_ = keyframes;
   // The state file keeps no images: the continued keyframes have none (null), later ones do.
@@ -125,6 +136,7 @@ void KeyframeWorker::push(PendingFrame frame) {
     queue_.push_back({std::move(frame), generation_.load(), session, ros::WallTime::now()});
     queued_count_ = queue_.size();
   }
+  if (pairs_) pairs_->frameSeen();
   queue_cv_.notify_one();
   if (overflow)
     drop(*overflow, "worker_behind",
@@ -227,6 +239,10 @@ void KeyframeWorker::applyResetLocked(uint64_t generation) {
   keyframes_since_save_ = 0;
   applied_generation_ = generation;
   unshared_ = false;
+  if (pairs_) {
+    (void)selector_->takePairChanges();  // the old session's: a consumer starts over
+    pairs_->reset(selector_->output());
+  }
   shareSelectionLocked();
   keeper_.saveLater(captureStateLocked());
 }
@@ -263,6 +279,7 @@ StateSnapshot KeyframeWorker::captureStateLocked() {
   s.state = io::captureSession(*selector_);
   s.state.statistics = statistics_.toSaved();
   s.state.saved_at = ros::WallTime::now().toSec();
+  if (pairs_) s.state.pair_sequence = pairs_->sequence();
   changed_since_save_ = false;
   return s;
 }
@@ -328,6 +345,7 @@ std::shared_ptr<const ServedSelection> KeyframeWorker::servedLatest() {
 void KeyframeWorker::shareSelectionLocked() {
   auto next = std::make_shared<ServedSelection>();
   next->selection = selector_->output();  // O(what changed): the lists' chunks are shared
+  if (pairs_) pairs_->update(selector_->takePairChanges(), next->selection);
   next->images = images_;
   next->image_count = images_ ? images_->size() : 0;
   unshared_ = false;
@@ -442,6 +460,7 @@ bool KeyframeWorker::convert(const Queued& queued, CameraModel& camera) {
 }
 
 void KeyframeWorker::process(const Queued& queued) {
+  if (pairs_) pairs_->frameSeen();  // handled frames count as seen too (a backlog is no pause)
   const PendingFrame& frame = queued.frame;
   const ros::Time stamp = frame.image->header.stamp;
   // The stamp first: a frame repeated or late is dropped for that, whatever else is wrong with
@@ -537,7 +556,11 @@ void KeyframeWorker::process(const Queued& queued) {
   double insertion = -1.0;
   if (result.outcome == core::FrameOutcome::kKeyframe) {
     // A distorted camera's keyframe images are kept rectified, as the exported intrinsics are.
-    if (images_) images_->push(camera.rectify ? rectifiedImageMessage(camera, frame.image) : frame.image);
+    sensor_msgs::ImageConstPtr kept;
+    if (images_ || image_writer_)
+      kept = camera.rectify ? rectifiedImageMessage(camera, frame.image) : frame.image;
+    if (images_) images_->push(kept);
+    if (image_writer_) image_writer_->push(core_frame.image_name, kept);
     insertion = result.points_seconds + result.matrix_seconds;
     // Counted before the selection is shared: a reader never sees more keyframes in the
     // selection than in the statistics.

@@ -117,6 +117,21 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
   core::visitInteger(v, "autosave_keyframes", autosave_keyframes, 0, 1000000,
                      "save the session every N new keyframes (also on shutdown and ~save_state); "
                      "0 = only then");
+  v.section("Pair stream (~pairs, ~get_pairs) and live hand-off (colmap_bridge)");
+  core::visitInteger(v, "pair_stable_keyframes", pair_stable_keyframes, 0, 1000,
+                     "a selected pair is announced on ~pairs once it is still selected this many "
+                     "keyframes later (0: at once); pairs that go before cost a consumer nothing "
+                     "(docs/live.md has the measured waste)");
+  core::visitReal(v, "pair_flush_idle", pair_flush_idle, 0.0, 3600.0,
+                  "when no frame arrived for this long (the recording paused or ended), every "
+                  "selected pair is announced at once [s, wall]; 0 = never");
+  core::visitInteger(v, "pair_history", pair_history, 1, 1000000,
+                     "~pairs messages kept for ~get_pairs; a consumer further behind gets the "
+                     "whole announced set");
+  core::visitText(v, "keyframe_image_dir", keyframe_image_dir, {},
+                  "each keyframe's image is written into this folder as it is accepted, named as "
+                  "in selection.json, once (colmap_bridge sets it with ~write_keyframe_images); "
+                  "\"\" = off");
   selector.visitParameters(v);
   point_params.visitParameters(v);
 }

@@ -18,11 +18,15 @@ namespace fs = std::filesystem;
 
 SelectionServices::SelectionServices(const NodeConfig& config, ros::NodeHandle private_nh,
                                      KeyframeWorker& worker, PoseProvider& poses,
-                                     StateKeeper& keeper, std::function<void()> on_reset)
+                                     StateKeeper& keeper, PairStream& pairs,
+                                     KeyframeImageWriter& image_writer,
+                                     std::function<void()> on_reset)
     : config_(config),
       worker_(worker),
       poses_(poses),
       keeper_(keeper),
+      pairs_(pairs),
+      image_writer_(image_writer),
       on_reset_(std::move(on_reset)),
       spinner_(1, &queue_),
       files_spinner_(1, &files_queue_) {
@@ -32,6 +36,9 @@ SelectionServices::SelectionServices(const NodeConfig& config, ros::NodeHandle p
   next_views_ = nh.advertiseService("get_next_views", &SelectionServices::getNextViews, this);
   selection_ = nh.advertiseService("get_selection", &SelectionServices::getSelection, this);
   reset_ = nh.advertiseService("reset", &SelectionServices::reset, this);
+  get_pairs_ = nh.advertiseService("get_pairs", &SelectionServices::getPairs, this);
+  write_images_ =
+      files.advertiseService("write_keyframe_images", &SelectionServices::writeImages, this);
   export_ = files.advertiseService("export", &SelectionServices::exportSelection, this);
   save_state_ = files.advertiseService("save_state", &SelectionServices::saveState, this);
   spinner_.start();
@@ -41,7 +48,58 @@ SelectionServices::SelectionServices(const NodeConfig& config, ros::NodeHandle p
 SelectionServices::~SelectionServices() {
   spinner_.stop();
   files_spinner_.stop();
-  for (auto* s : {&next_views_, &selection_, &export_, &reset_, &save_state_}) s->shutdown();
+  for (auto* s : {&next_views_, &selection_, &export_, &reset_, &save_state_, &get_pairs_,
+                  &write_images_})
+    s->shutdown();
+}
+
+bool SelectionServices::getPairs(view_selection::GetPairs::Request& req,
+                                 view_selection::GetPairs::Response& res) {
+  (void)worker_.servedLatest();  // keyframes accepted so far are shared, so announced too
+  pairs_.answer(req.since, res);
+  res.keyframe_image_dir = image_writer_.directory();
+  return true;
+}
+
+bool SelectionServices::writeImages(view_selection::WriteKeyframeImages::Request& req,
+                                    view_selection::WriteKeyframeImages::Response& res) {
+  res.success = false;
+  const std::string error = image_writer_.setDirectory(req.directory);
+  if (!error.empty()) {
+    res.message = error;
+    ROS_ERROR_STREAM_THROTTLE(5.0, "view_selection: ~write_keyframe_images: " << error);
+    return true;
+  }
+  if (req.directory.empty()) {
+    res.success = true;
+    res.message = "keyframe images are no longer written";
+    return true;
+  }
+  // The keyframes accepted before: their images where the node kept them.
+  const std::shared_ptr<const ServedSelection> served = worker_.servedLatest();
+  const core::SelectionOutput& s = served->selection;
+  for (size_t i = 0; i < s.size(); ++i) {
+    sensor_msgs::ImageConstPtr image;
+    try {
+      if (served->images && i < served->image_count) image = served->images->get(i);
+    } catch (const core::IoError&) {
+    }
+    if (image && image_writer_.push(s.imageName(i), image))
+      ++res.images_written;
+    else
+      ++res.images_missing;
+  }
+  res.success = true;
+  res.message = "keyframe images go to '" + req.directory + "' from now on; of the " +
+                std::to_string(s.size()) + " keyframes before, " +
+                std::to_string(res.images_written) + " images queued" +
+                (res.images_missing > 0
+                     ? ", " + std::to_string(res.images_missing) +
+                           " missing (the node keeps earlier images only with "
+                           "~save_keyframe_images)"
+                     : std::string());
+  ROS_INFO_STREAM("view_selection: " << res.message);
+  return true;
 }
 
 bool SelectionServices::getNextViews(view_selection::GetNextViews::Request& req,

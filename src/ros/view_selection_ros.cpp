@@ -32,12 +32,21 @@ ViewSelectionRos::ViewSelectionRos(ros::NodeHandle nh, ros::NodeHandle private_n
       keeper_(config_, statistics_, "view_selection_node " + private_nh.getNamespace()),
       poses_(makePoseProvider(config_, nh)),
       verdicts_(config_, nh),
-      worker_(config_, *poses_, statistics_, keeper_, &verdicts_, make_points),
+      pairs_(config_, private_nh),
+      worker_(config_, *poses_, statistics_, keeper_, &verdicts_, make_points, &pairs_,
+              &image_writer_),
       outputs_(config_, nh, private_nh, worker_, statistics_),
-      services_(config_, private_nh, worker_, *poses_, keeper_, [this] { outputs_.update(); }),
+      services_(config_, private_nh, worker_, *poses_, keeper_, pairs_, image_writer_,
+                [this] { outputs_.update(); }),
       reconfigure_(config_, withQueue(private_nh, services_.queue()), worker_, outputs_),
       corrections_(config_, nh, worker_, *poses_, statistics_),
       inputs_(config_, nh, private_nh, worker_, statistics_) {
+  if (!config_.keyframe_image_dir.empty()) {
+    const std::string error = image_writer_.setDirectory(config_.keyframe_image_dir);
+    if (!error.empty())
+      ROS_ERROR_STREAM("view_selection: ~keyframe_image_dir: " << error
+                                                               << "; keyframe images are not written");
+  }
   const auto& s = config_.selector;
   ROS_INFO_STREAM("view_selection_node: "
                   << (config_.use_depth ? "image + camera_info + depth" : "image + camera_info")

@@ -3,6 +3,7 @@
 #include "command_line.h"
 
 #include "view_selection/core/exceptions.h"
+#include "view_selection/core/pair_announcer.h"
 #include "view_selection/core/view_selector.h"
 #include "view_selection/eval/nearest_pairs.h"
 #include "view_selection/io/export.h"
@@ -65,6 +66,10 @@ options:
   --out DIR                 output folder (default ./view_selection_output)
   --dump-points             include every keyframe's sample points in selection.json
   --print-sets N            print at most N next view sets (default 40; 0: none)
+  --stream-report M[,M...]  replays the pair stream (the node's ~pairs) after every keyframe
+                            with each stability rule "announce once still selected M keyframes
+                            later" and prints the pairs announced, wasted (announced, not in
+                            the final selection) and left for the end (docs/live.md)
   --quiet                   no progress lines
   --help                    this text
 
@@ -104,6 +109,7 @@ struct Options {
   bool dump_points = false;
   long print_sets = 40;
   bool quiet = false;
+  std::vector<int> stream_report;  ///< --stream-report: stability rules to replay
   std::string strategy = "ours";
   NearestPairsConfig nearest;
 };
@@ -118,6 +124,24 @@ std::vector<std::string> expandAliases(int argc, char** argv) {
       args[q] = it->second + (eq == std::string::npos ? "" : args[q].substr(eq));
   }
   return args;
+}
+
+/// --stream-report M[,M...]
+std::vector<int> streamRules(const CommandLine& cli) {
+  std::vector<int> rules;
+  if (!cli.has("stream-report")) return rules;
+  std::stringstream list(*cli.text("stream-report"));
+  for (std::string item; std::getline(list, item, ',');) {
+    try {
+      const int m = std::stoi(item);
+      if (m < 0 || m > 1000) throw std::out_of_range("m");
+      rules.push_back(m);
+    } catch (const std::exception&) {
+      throw UsageError("--stream-report takes keyframe counts 0..1000, e.g. 0,2,4; not '" + item +
+                       "'");
+    }
+  }
+  return rules;
 }
 
 /// --state FILE: only the options that re-selecting saved keyframes can honour.
@@ -155,7 +179,7 @@ Options parse(int argc, char** argv) {
   std::set<std::string> options = {
       "dataset", "every",      "max-frames", "points",    "max-time-difference",
       "out",     "print-sets", "strategy",   "nearest-k", "nearest-max-angle",
-      "state"};
+      "state",   "stream-report"};
   const std::set<std::string> method =
       view_selection::tools::parameterOptions(ViewSelectorConfig{});
   const std::set<std::string> sources =
@@ -200,6 +224,7 @@ Options parse(int argc, char** argv) {
   o.dump_points = cli.flag("dump-points");
   o.print_sets = cli.integer("print-sets", 40, 0, 100000000);
   o.quiet = cli.flag("quiet");
+  o.stream_report = streamRules(cli);
   o.strategy = cli.choice("strategy", "ours", {"ours", "nearest"});
   o.nearest.k = static_cast<int>(cli.integer("nearest-k", o.nearest.k, 1, 1000));
   o.nearest.max_view_angle_deg =
@@ -266,8 +291,45 @@ struct Timings {
   size_t rows_updated = 0;  // earlier keyframes' rows recomputed because their points changed
 };
 
+/// --stream-report: the node's pair stream replayed, one announcer per stability rule.
+struct StreamReplay {
+  std::vector<PairAnnouncer> announcers;
+  std::vector<std::set<Pair>> ever;  ///< pairs each announced as added, at any time
+  void start(const std::vector<int>& rules, ViewSelector& selector) {
+    for (int m : rules) announcers.emplace_back(m);
+    ever.resize(rules.size());
+    if (!rules.empty()) selector.trackPairChanges(true);
+  }
+  void keyframe(ViewSelector& selector) {
+    if (announcers.empty()) return;
+    (void)selector.output();  // the selection after this keyframe, as the node shares it
+    const PairChanges changes = selector.takePairChanges();
+    for (size_t q = 0; q < announcers.size(); ++q) {
+      const Announcement a = announcers[q].update(changes, selector.matrix().size());
+      ever[q].insert(a.added.begin(), a.added.end());
+    }
+  }
+  void print(const std::vector<Pair>& final_pairs) {
+    if (announcers.empty()) return;
+    const std::set<Pair> final_set(final_pairs.begin(), final_pairs.end());
+    std::printf("pair stream (announce once still selected M keyframes later; the rest at the end):\n");
+    std::printf("  %4s %10s %8s %8s %12s\n", "M", "announced", "wasted", "waste", "at the end");
+    for (size_t q = 0; q < announcers.size(); ++q) {
+      const Announcement last = announcers[q].flush();  // the recording ended
+      ever[q].insert(last.added.begin(), last.added.end());
+      size_t wasted = 0;
+      for (const Pair& p : ever[q]) wasted += final_set.count(p) ? 0 : 1;
+      std::printf("  %4d %10zu %8zu %7.1f%% %12zu\n", announcers[q].stableKeyframes(),
+                  ever[q].size(), wasted,
+                  ever[q].empty() ? 0.0 : 100.0 * static_cast<double>(wasted) / ever[q].size(),
+                  last.added.size());
+    }
+  }
+};
+
 /// Offers every frame to the selector, as the node does with the frames it receives.
-void addFrames(const Options& o, const TumDataset& dataset, ViewSelector& selector, Timings& t) {
+void addFrames(const Options& o, const TumDataset& dataset, ViewSelector& selector, Timings& t,
+               StreamReplay* stream = nullptr) {
   const bool features = selector.pointSource().name() == "features";
   const size_t total = framesToUse(o, dataset);
   const bool tty = isatty(fileno(stderr));
@@ -289,6 +351,7 @@ void addFrames(const Options& o, const TumDataset& dataset, ViewSelector& select
     t.points += r.points_seconds;
     t.rows_updated += r.updated_rows.size();
     t.matrix += r.matrix_seconds;
+    if (stream && r.outcome == FrameOutcome::kKeyframe) stream->keyframe(selector);
     if (!o.quiet && (seconds(last_report) > 1.0 || q + 1 == total)) {
       last_report = std::chrono::steady_clock::now();
       std::fprintf(stderr, "%s  frame %zu/%zu, %zu keyframes%s", tty ? "\r" : "", q + 1, total,
@@ -570,7 +633,9 @@ int run(const Options& o) {
   ViewSelector selector(o.config,
                         makePointSource(source, o.point_params, o.config.matrix.occlusion));
   Timings t;
-  addFrames(o, dataset, selector, t);
+  StreamReplay stream;
+  stream.start(o.stream_report, selector);
+  addFrames(o, dataset, selector, t, &stream);
 
   const auto t_sel = std::chrono::steady_clock::now();
   const SelectionOutput snapshot = selector.output();
@@ -583,6 +648,7 @@ int run(const Options& o) {
   const ExportResult written = writeOutputs(o, selector, snapshot, std::move(params), "");
   t.write = seconds(t_write);
   printSummary(o, dataset, selector, snapshot, written, t, seconds(t_start));
+  stream.print(selector.select().pairs);
   return 0;
 }
 

@@ -157,10 +157,16 @@ TEST(StateFile, WrittenAtomicallyAndReadBack) {
   state.statistics.frames_offered = 6;
   state.statistics.dropped["no_pose"] = 2;
   state.statistics.last_frame_stamp = 10.5;
+  state.pair_sequence = 1234567890123ull;
   const std::string path = (dir / "state.vss").string();
   writeStateFile(path, state);
   const SessionState read = readStateFile(path);
   EXPECT_EQ(read.producer, "test");
+  // The pair stream's sequence continues after a restart; a file without it reads as before.
+  EXPECT_EQ(read.pair_sequence, std::optional<uint64_t>(1234567890123ull));
+  state.pair_sequence.reset();
+  const std::vector<uint8_t> without = encodeState(state);
+  EXPECT_FALSE(decodeState(without.data(), without.size()).pair_sequence.has_value());
   EXPECT_TRUE(read.statistics == state.statistics);
   EXPECT_EQ(read.selector.keyframes.size(), selector->matrix().size());
   // Only the file itself is left: no temporary beside it.

@@ -47,6 +47,9 @@ struct SessionState {
   core::ViewSelectorState selector;
   PointSourceState points;
   SessionStatistics statistics;
+  /// The node's pair stream (~pairs): the last sequence number it used; absent in files of
+  /// select_views and of nodes before the stream.
+  std::optional<uint64_t> pair_sequence;
 };
 
 /// A state file that cannot be used: truncated, corrupted, foreign, or of a newer format. The

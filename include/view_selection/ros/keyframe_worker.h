@@ -12,8 +12,10 @@
 #include "view_selection/ros/camera_model.h"
 #include "view_selection/ros/image_cache.h"
 #include "view_selection/ros/input_statistics.h"
+#include "view_selection/ros/keyframe_image_writer.h"
 #include "view_selection/ros/keyframe_verdicts.h"
 #include "view_selection/ros/node_config.h"
+#include "view_selection/ros/pair_stream.h"
 #include "view_selection/ros/pose_provider.h"
 #include "view_selection/ros/state_keeper.h"
 
@@ -62,10 +64,12 @@ class KeyframeWorker {
   /// Makes the selector (throws core::InvalidArgument for bad parameters), continues the
   /// session `keeper` read (when it can; otherwise the keeper sets the file aside and the
   /// session starts empty) and starts the thread. `verdicts`: the external keyframe decisions
-  /// (~keyframe_policy external), or null.
+  /// (~keyframe_policy external), or null. `pairs`: the pair stream fed after every change of
+  /// the selection, or null. `image_writer`: where accepted keyframes' images go, or null.
   KeyframeWorker(const NodeConfig& config, PoseProvider& poses, InputStatistics& statistics,
                  StateKeeper& keeper, KeyframeVerdicts* verdicts = nullptr,
-                 const PointSourceFactory& make_points = {});
+                 const PointSourceFactory& make_points = {}, PairStream* pairs = nullptr,
+                 KeyframeImageWriter* image_writer = nullptr);
   /// Stops the thread (a frame in flight is abandoned: it is not part of the saved session),
   /// joins it, and saves the session when it changed since the last save.
   ~KeyframeWorker();
@@ -163,6 +167,8 @@ class KeyframeWorker {
   InputStatistics& statistics_;
   StateKeeper& keeper_;
   KeyframeVerdicts* verdicts_;
+  PairStream* pairs_;
+  KeyframeImageWriter* image_writer_;
 
   // The method's state, guarded by state_mutex_ (timed: servedLatest() waits only so long).
   mutable std::timed_mutex state_mutex_;

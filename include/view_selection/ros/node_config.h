@@ -68,6 +68,14 @@ struct NodeConfig {
   std::string state_file;
   int autosave_keyframes = 10;  ///< 0: save only on shutdown and ~save_state
 
+  /// ~pairs: a selected pair is announced once it is still selected this many keyframes later.
+  int pair_stable_keyframes = 3;
+  /// [s, wall] ~pairs: when no frame arrived for this long, every selected pair is announced.
+  double pair_flush_idle = 0.5;
+  int pair_history = 1000;  ///< ~pairs messages kept for ~get_pairs
+  /// Each keyframe's image is written here as it is accepted (~write_keyframe_images); "" = off.
+  std::string keyframe_image_dir;
+
   double keyframe_verdict_timeout = 1.0;  ///< [s, wall] external policy: longest wait for a verdict
   double keyframe_stamp_tolerance = 0.001;  ///< [s] external policy: stamp match
   bool use_path_corrections = false;        ///< subscribe to `path` (nav_msgs/Path, loop closures)

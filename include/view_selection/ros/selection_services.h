@@ -5,8 +5,10 @@
 #pragma once
 
 #include "view_selection/ros/input_statistics.h"
+#include "view_selection/ros/keyframe_image_writer.h"
 #include "view_selection/ros/keyframe_worker.h"
 #include "view_selection/ros/node_config.h"
+#include "view_selection/ros/pair_stream.h"
 #include "view_selection/ros/pose_provider.h"
 #include "view_selection/ros/state_keeper.h"
 
@@ -15,7 +17,9 @@
 #include <std_srvs/Trigger.h>
 #include <view_selection/Export.h>
 #include <view_selection/GetNextViews.h>
+#include <view_selection/GetPairs.h>
 #include <view_selection/GetSelection.h>
+#include <view_selection/WriteKeyframeImages.h>
 
 #include <functional>
 
@@ -25,7 +29,8 @@ class SelectionServices {
  public:
   /// `on_reset` runs after a reset (e.g. to publish the empty selection at once).
   SelectionServices(const NodeConfig& config, ros::NodeHandle private_nh, KeyframeWorker& worker,
-                    PoseProvider& poses, StateKeeper& keeper, std::function<void()> on_reset);
+                    PoseProvider& poses, StateKeeper& keeper, PairStream& pairs,
+                    KeyframeImageWriter& image_writer, std::function<void()> on_reset);
   ~SelectionServices();
 
   /// The callback queue the services run on (shared with dynamic_reconfigure's).
@@ -39,14 +44,20 @@ class SelectionServices {
   bool exportSelection(view_selection::Export::Request& req, view_selection::Export::Response& res);
   bool reset(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
   bool saveState(std_srvs::Trigger::Request& req, std_srvs::Trigger::Response& res);
+  bool getPairs(view_selection::GetPairs::Request& req, view_selection::GetPairs::Response& res);
+  bool writeImages(view_selection::WriteKeyframeImages::Request& req,
+                   view_selection::WriteKeyframeImages::Response& res);
 
   const NodeConfig& config_;
   KeyframeWorker& worker_;
   PoseProvider& poses_;
   StateKeeper& keeper_;
+  PairStream& pairs_;
+  KeyframeImageWriter& image_writer_;
   std::function<void()> on_reset_;
   ros::CallbackQueue queue_, files_queue_;
-  ros::ServiceServer next_views_, selection_, export_, reset_, save_state_;
+  ros::ServiceServer next_views_, selection_, export_, reset_, save_state_, get_pairs_,
+      write_images_;
   ros::AsyncSpinner spinner_, files_spinner_;
 };
 

@@ -9,10 +9,12 @@
 
 #include "view_selection/ros/frame_inputs.h"
 #include "view_selection/ros/input_statistics.h"
+#include "view_selection/ros/keyframe_image_writer.h"
 #include "view_selection/ros/keyframe_verdicts.h"
 #include "view_selection/ros/keyframe_worker.h"
 #include "view_selection/ros/live_reconfigure.h"
 #include "view_selection/ros/node_config.h"
+#include "view_selection/ros/pair_stream.h"
 #include "view_selection/ros/path_corrections.h"
 #include "view_selection/ros/pose_provider.h"
 #include "view_selection/ros/selection_outputs.h"
@@ -40,6 +42,8 @@ class ViewSelectionRos {
   StateKeeper keeper_;  // before the worker, which saves through it until it is gone
   std::unique_ptr<PoseProvider> poses_;
   KeyframeVerdicts verdicts_;
+  PairStream pairs_;                 // fed by the worker
+  KeyframeImageWriter image_writer_;  // fed by the worker
   KeyframeWorker worker_;
   SelectionOutputs outputs_;
   SelectionServices services_;

@@ -1,0 +1,171 @@
+#!/usr/bin/env python3
+"""The live hand-off when things go wrong (issue 18): colmap_bridge on an unusable project folder,
+on a full disk, without COLMAP and with a COLMAP that fails; the node asked to write images where
+it cannot; and the pair stream's sequence across a node restart on ~state_file. Every case gets a
+clear error, and the view selection node keeps running and answering."""
+import os
+import shutil
+import stat
+import sys
+import tempfile
+import time
+import unittest
+
+import rospy
+import rostest
+from std_srvs.srv import Trigger
+
+from view_selection.srv import (GetPairs, GetPairsRequest, GetSelection, WriteKeyframeImages,
+                                WriteKeyframeImagesRequest)
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
+from vs_robust import (FramePublisher, NodeProcess, Statistics, call, find_tool,  # noqa: E402
+                       synthetic_frames, wait_until)
+from faults_tester import mount_tmpfs, umount  # noqa: E402
+
+NODE = '/live_faults_vs'
+
+
+class LiveFaults(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.tmp = tempfile.mkdtemp(prefix='view_selection_live_faults_')
+        cls.bridge = find_tool('colmap_bridge')
+        assert cls.bridge, 'colmap_bridge is not built'
+        cls.pub = FramePublisher(NODE + '/camera')
+        cls.state_file = os.path.join(cls.tmp, 'session.vss')
+        cls.node = NodeProcess(NODE, {'pose_source': 'topic', 'state_file': cls.state_file},
+                               cls.pub.remaps()).start()
+        cls.node.wait_for_services()
+        cls.pub.wait_connected()
+        cls.stats = Statistics(NODE)
+        cls.frames = synthetic_frames(120, width=320, height=240, step=0.02)
+        cls.published = 0
+        cls.publish(20)
+        cls.stats.wait(lambda s: s.keyframes >= 4, 20, 'keyframes')
+
+    @classmethod
+    def publish(cls, count):
+        """The next `count` frames, each waited for."""
+        for f in cls.frames[cls.published:cls.published + count]:
+            cls.pub.publish(f)
+            cls.published += 1
+            cls.stats.wait(lambda s: s.frames_offered + s.frames_dropped >= cls.published, 20,
+                           'frame %d' % cls.published)
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.node.stop()
+        cls.stats.close()
+        cls.pub.close()
+        shutil.rmtree(cls.tmp, ignore_errors=True)
+
+    def assert_node_serves(self):
+        self.assertTrue(self.node.alive(), 'the view selection node died')
+        answer = call(NODE + '/get_selection', GetSelection, None, 10.0)
+        self.assertTrue(answer.success)
+        self.assertGreaterEqual(len(answer.selection.keyframes), 4)
+
+    def start_bridge(self, name, params):
+        params = dict(params, node=NODE)
+        return NodeProcess(name, params, binary=self.bridge).start()
+
+    def assert_exits_with(self, bridge, text):
+        code = bridge.wait(60)
+        self.assertNotEqual(0, code, bridge.output()[-2000:])
+        self.assertIn(text, bridge.output())
+
+    # -------------------------------------------------------------------------------------------
+    def test_a_project_folder_that_cannot_be_made(self):
+        blocker = os.path.join(self.tmp, 'a_file')
+        open(blocker, 'w').close()
+        bridge = self.start_bridge('/bridge_no_folder', {'project': os.path.join(blocker, 'project')})
+        self.assert_exits_with(bridge, 'cannot use the project folder')
+        # The node asked to write its images there: a clear answer, nothing else changes.
+        answer = call(NODE + '/write_keyframe_images', WriteKeyframeImages,
+                      WriteKeyframeImagesRequest(directory=os.path.join(blocker, 'images')), 10.0)
+        self.assertFalse(answer.success)
+        self.assertIn('cannot make folder', answer.message)
+        self.assert_node_serves()
+
+    def test_colmap_missing(self):
+        bridge = self.start_bridge('/bridge_no_colmap', {'project': os.path.join(self.tmp, 'no_colmap'),
+                                                         'colmap': os.path.join(self.tmp, 'nowhere', 'colmap')})
+        self.assert_exits_with(bridge, 'not found: install COLMAP')
+        self.assert_node_serves()
+
+    def test_colmap_failing(self):
+        """A COLMAP whose matching fails: the bridge stays up, says why, and ~finish fails with
+        the reason; the node is untouched."""
+        fake = os.path.join(self.tmp, 'failing_colmap')
+        with open(fake, 'w') as f:
+            f.write('#!/bin/sh\n[ "$1" = matches_importer ] && { echo "simulated failure" >&2; exit 3; }\n'
+                    'exec colmap "$@"\n')
+        os.chmod(fake, stat.S_IRWXU)
+        bridge = self.start_bridge('/bridge_failing', {'project': os.path.join(self.tmp, 'failing'),
+                                                       'colmap': fake, 'batch_period': 0.2})
+        try:
+            rospy.wait_for_service(bridge.name + '/finish', timeout=60)
+            images = os.path.join(self.tmp, 'failing', 'images')
+            wait_until(lambda: call(NODE + '/get_pairs', GetPairs, GetPairsRequest(since=0), 10.0).keyframe_image_dir
+                       == images, 30, 'the node writes images into the project')
+            self.publish(20)  # new keyframes: their images go into the project
+            answer = call(bridge.name + '/finish', Trigger, None, 300.0)
+            self.assertFalse(answer.success, answer.message)
+            self.assertIn('matches_importer', answer.message)
+            self.assertIn('failed (exit 3)', answer.message)
+            self.assertTrue(bridge.alive(), 'the bridge died when COLMAP failed')
+            self.assert_node_serves()
+        finally:
+            bridge.stop(60)
+
+    def test_a_full_disk(self):
+        folder = os.path.join(self.tmp, 'full')
+        os.makedirs(folder)
+        why = mount_tmpfs(folder, 'size=300k')
+        if why:
+            self.skipTest('no small file system to fill: ' + why)
+        bridge = None
+        try:
+            bridge = self.start_bridge('/bridge_full', {'project': folder, 'batch_period': 0.2})
+            rospy.wait_for_service(bridge.name + '/finish', timeout=60)
+            wait_until(lambda: call(NODE + '/get_pairs', GetPairs, GetPairsRequest(since=0), 10.0).keyframe_image_dir
+                       == os.path.join(folder, 'images'), 30, 'the node writes images into the project')
+            # New keyframes: the node writes their images until the disk is full, then counts
+            # each lost one with a throttled error, and goes on.
+            self.publish(30)
+            self.assert_node_serves()
+            answer = call(bridge.name + '/finish', Trigger, None, 300.0)
+            self.assertFalse(answer.success, 'a model on a full disk: ' + answer.message)
+            self.assertTrue(bridge.alive(), 'the bridge died on a full disk')
+            self.assertIn('No space left on device', self.node.output() + bridge.output() + answer.message +
+                          open(os.path.join(folder, 'colmap.log')).read() if os.path.exists(
+                              os.path.join(folder, 'colmap.log')) else self.node.output() + answer.message)
+            self.assert_node_serves()
+        finally:
+            if bridge:
+                bridge.stop(60)
+            # The node writes no more images there.
+            call(NODE + '/write_keyframe_images', WriteKeyframeImages, WriteKeyframeImagesRequest(directory=''), 10.0)
+            umount(folder)
+
+    def test_z_the_sequence_continues_after_a_restart(self):
+        before = call(NODE + '/get_pairs', GetPairs, GetPairsRequest(since=0), 10.0)
+        self.assertTrue(before.success)
+        self.assertGreater(before.sequence, 0)
+        pairs = {(p.first, p.second) for p in before.changes[0].added}
+        self.assertEqual(0, self.node.stop(30))  # saves the session
+        self.node.start()
+        self.node.wait_for_services()
+        after = call(NODE + '/get_pairs', GetPairs, GetPairsRequest(since=before.sequence), 10.0)
+        self.assertGreater(after.sequence, before.sequence, 'the sequence started over')
+        whole = after.changes[0]
+        self.assertTrue(whole.full)
+        selection = call(NODE + '/get_selection', GetSelection, None, 10.0).selection
+        self.assertEqual({(p.first, p.second) for p in selection.pairs}, {(p.first, p.second) for p in whole.added})
+        self.assertTrue(pairs <= {(p.first, p.second) for p in whole.added} | pairs)
+
+
+if __name__ == '__main__':
+    rospy.init_node('live_faults_tester')
+    rostest.rosrun('view_selection', 'live_faults', LiveFaults, sys.argv)
