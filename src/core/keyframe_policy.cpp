@@ -9,7 +9,7 @@
 namespace view_selection::core {
 
 void KeyframePolicyConfig::visitParameters(ParameterVisitor& v) {
-  v.section("Keyframes (select_views: --every, --min-translation, --min-rotation)");
+  v.section("Keyframes (select_views: --keyframe-policy, --every, --min-translation, --min-rotation)");
   visitChoice(v, "keyframe_policy", mode, kKeyframeModeNames,
               "which frames become keyframes: scale_free (when the view of the last keyframe's "
               "points has changed enough; the same in any unit), every_frame, every_nth, motion "

@@ -69,8 +69,8 @@ const KeyframeReference* ViewSelector::keyframeReference() const {
   KeyframeReference& r = reference_;
   r.pose = last.pose;
   r.intrinsics = last.intrinsics;
-  r.max_parallax_deg = config_.matrix.max_parallax_deg;  // in force: the gate's preset applied
-  r.max_scale_ratio = config_.matrix.max_scale_ratio;
+  r.max_parallax_deg = kOverlapMaxParallaxDeg;  // fixed: the gate's tuning moves no keyframe
+  r.max_scale_ratio = kOverlapMaxScaleRatio;
   r.points = &last.points;
   if (last.points.cols() >= kMinReferencePoints) return &r;
   // No points to compare with (a feature keyframe that triangulated nothing yet, a map not

@@ -48,8 +48,9 @@ std::vector<RenderedFrame> render(const SyntheticSequenceConfig& config, bool de
 /// that is in scene units (depth range, occlusion tolerance) scaled with them. The keyframe
 /// policy's are not: it has none.
 RunResult runScaled(const std::vector<RenderedFrame>& frames, const PinholeIntrinsics& intrinsics,
-              const std::string& source, double scale) {
+                    const std::string& source, double scale, Gate gate = Gate::kMatchable) {
   ViewSelectorConfig config;  // the defaults: keyframe_policy scale_free
+  config.matrix.gate = gate;
   config.matrix.occlusion.abs_tolerance *= scale;
   PointSourceParams params;
   params.depth.min_depth *= scale;
@@ -101,6 +102,9 @@ TEST(ScaleFreeKeyframes, SameKeyframesAndSelectionInAnyUnitWithDepth) {
   EXPECT_FALSE(metres.pairs.empty());
   expectSameRun(metres, runScaled(frames, config.intrinsics, "depth", 1000.0), "x 1000");
   expectSameRun(metres, runScaled(frames, config.intrinsics, "depth", 0.001), "x 0.001");
+  // The overlap counts with fixed limits: the matrix's gate moves no keyframe.
+  EXPECT_EQ(runScaled(frames, config.intrinsics, "depth", 1.0, Gate::kPaper).keyframe_stamps,
+            metres.keyframe_stamps);
 }
 
 // A photo collection without depth (features triangulated with the known poses): a ring of 47

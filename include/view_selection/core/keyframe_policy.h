@@ -44,7 +44,8 @@ struct KeyframePolicyConfig {
   double min_translation = 0.10;   ///< kMotion: [scene units, m for TUM] since the last keyframe
   double min_rotation_deg = 10.0;  ///< kMotion: [deg] since the last keyframe
   /// kScaleFree: a new keyframe when fewer than this share of the last keyframe's points are
-  /// matchable in the frame (visible, and within the matrix's parallax and footprint gates) ...
+  /// matchable in the frame (visible, parallax at most 20 deg, footprint ratio within 1.6: the
+  /// matchable gate's defaults, fixed) ...
   double keyframe_overlap = 0.8;
   /// ... or when the parallax at the nearer of its points the frame sees (the 90th percentile
   /// over them) reaches this [deg]; 0: off. Both chosen by measurement (docs/results.md).
@@ -76,8 +77,15 @@ ViewChange measureViewChange(const Eigen::Matrix3Xd& points, const Eigen::Vector
                              const PinholeIntrinsics& intrinsics, double max_parallax_deg,
                              double max_scale_ratio);
 
+/// A reference with fewer points cannot be measured against: the frame is taken.
+inline constexpr int kMinReferencePoints = 8;
+/// The gate the overlap counts with: the matchable gate's default limits, fixed, so that the
+/// keyframes do not change when the matrix's gate is tuned (gate: paper included).
+inline constexpr double kOverlapMaxParallaxDeg = 20.0;
+inline constexpr double kOverlapMaxScaleRatio = 1.6;
+
 /// What the scale_free policy compares a frame with: the last keyframe as it is now (its points
-/// may have grown since it was inserted) and the matrix's gates.
+/// may have grown since it was inserted) and the gate its overlap counts with.
 struct KeyframeReference {
   CameraPose pose;
   PinholeIntrinsics intrinsics;
@@ -85,12 +93,10 @@ struct KeyframeReference {
   /// plane at the scene depth of a keyframe that has them (ViewSelector::keyframeReference).
   const Eigen::Matrix3Xd* points = nullptr;
   Eigen::Matrix3Xd plane;  ///< storage for that plane
-  double max_parallax_deg = 0.0;
-  double max_scale_ratio = 0.0;
+  double max_parallax_deg = kOverlapMaxParallaxDeg;
+  double max_scale_ratio = kOverlapMaxScaleRatio;
 };
 
-/// A reference with fewer points cannot be measured against: the frame is taken.
-inline constexpr int kMinReferencePoints = 8;
 
 /// The policy's rule in words, with units, for log lines and summaries.
 std::string describeKeyframeRule(const KeyframePolicyConfig& config);
