@@ -106,7 +106,7 @@ TEST(NodeConfig, BadValuesNameTheParameter) {
       {"pose_timeout", XmlRpc::XmlRpcValue(-1.0), "/bad/pose_timeout"},
       {"completion", XmlRpc::XmlRpcValue("best"), "is not one of: paper, reachable"},
       {"keyframe_policy", XmlRpc::XmlRpcValue("sometimes"),
-       "is not one of: every_frame, every_nth, motion, external"},
+       "is not one of: scale_free, every_frame, every_nth, motion, external"},
       {"pose_source", XmlRpc::XmlRpcValue("gps"), "is not one of: tf, topic, odometry, pose_with_covariance"},
       {"occlusion_test", XmlRpc::XmlRpcValue("yes"), "must be true or false"},
       {"world_frame", XmlRpc::XmlRpcValue("/"), "must name a frame"},
