@@ -10,6 +10,7 @@
 #include "view_selection/core/error_resistance_matrix.h"
 #include "view_selection/core/selection.h"
 #include "view_selection/core/selection_output.h"
+#include "view_selection/core/view_selector.h"
 #include "view_selection/eval/reference_error_resistance.h"
 
 #include <benchmark/benchmark.h>
@@ -352,6 +353,47 @@ BENCHMARK(BM_InsertKeyframeCorridorAtScale)
     ->Arg(100000)
     ->Iterations(200)
     ->Unit(benchmark::kMillisecond);
+
+/// A point source that gives nothing: the scale_free decision benchmark never inserts.
+class NoPoints : public PointSource {
+ public:
+  std::string name() const override { return "none"; }
+  PointSourceResult process(ViewId, const Frame&) override { return {}; }
+  void reset() override {}
+};
+
+// The default keyframe policy's decision (scale_free: the next frame against the last
+// keyframe's 256 points) with n keyframes in the selector: ViewSelector::wantsFrame, which is
+// the whole policy step of addFrame (a frame it skips costs nothing else). Frames 0.02 m apart
+// along the corridor past the last keyframe. It compares with the last keyframe only, so the
+// time must not grow with n.
+void BM_ScaleFreeDecisionAtScale(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  Grown& g = grownCorridor(n);
+  ViewSelectorState saved;  // the grown matrix in a selector (its finite entries as they are)
+  saved.config.keyframes.mode = KeyframeMode::kScaleFree;
+  const ErrorResistanceMatrix& m = *g.matrix;
+  for (size_t i = 0; i < m.size(); ++i) {
+    saved.keyframes.push_back(m.keyframe(static_cast<ViewId>(i)));
+    saved.rows.push_back(m.table().row(static_cast<ViewId>(i)));
+  }
+  ViewSelector selector(saved.config, std::make_unique<NoPoints>());
+  selector.restore(saved);
+  saved = {};
+  const Keyframe& last = m.keyframe(static_cast<ViewId>(m.size() - 1));
+  Frame frame;
+  frame.intrinsics = last.intrinsics;
+  size_t wanted = 0, offered = 0;
+  for (auto _ : state) {
+    frame.pose = last.pose;
+    frame.pose.position.z() += 0.02 * static_cast<double>(offered % 10);
+    wanted += selector.wantsFrame(frame) ? 1 : 0;
+    ++offered;
+  }
+  state.counters["keyframes"] = static_cast<double>(selector.matrix().size());
+  state.counters["wanted_share"] = static_cast<double>(wanted) / static_cast<double>(offered);
+}
+BENCHMARK(BM_ScaleFreeDecisionAtScale)->Arg(10000)->Arg(100000)->Unit(benchmark::kMicrosecond);
 
 // Selection after each insertion, at scale: the incremental cache that ViewSelector keeps (each
 // iteration inserts one keyframe untimed, then updates the selection), and the plain

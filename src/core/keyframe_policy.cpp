@@ -4,29 +4,124 @@
 
 #include <algorithm>
 #include <cmath>
+#include <sstream>
 
 namespace view_selection::core {
 
 void KeyframePolicyConfig::visitParameters(ParameterVisitor& v) {
-  v.section("Keyframes (select_views: --every, --min-translation, --min-rotation)");
+  v.section("Keyframes (select_views: --keyframe-policy, --every, --min-translation, --min-rotation)");
   visitChoice(v, "keyframe_policy", mode, kKeyframeModeNames,
-              "which frames become keyframes: every_frame, every_nth, motion (after enough "
-              "translation or rotation), or external (the node only: the stamps on `keyframes`, "
-              "e.g. a SLAM system's keyframe path)");
+              "which frames become keyframes: scale_free (when the view of the last keyframe's "
+              "points has changed enough; the same in any unit), every_frame, every_nth, motion "
+              "(after enough translation or rotation, in scene units), or external (the node "
+              "only: the stamps on `keyframes`, e.g. a SLAM system's keyframe path)");
+  visitReal(v, "keyframe_overlap", keyframe_overlap, 0.0, 1.0,
+            "scale_free: a new keyframe when fewer than this share of the last keyframe's points "
+            "are matchable in the frame ...");
+  visitReal(v, "keyframe_parallax_deg", keyframe_parallax_deg, 0.0, 180.0,
+            "... or when the parallax at the nearer of them (90th percentile) reaches this "
+            "[deg]; 0 = off");
   visitInteger(v, "every_n", every_n, 1, 1000000, "every_nth: one keyframe every N valid frames");
   visitReal(v, "min_translation", min_translation, 0.0, 1e9,
-            "motion: a new keyframe after this much translation [m, scene units] ...");
+            "motion: a new keyframe after this much translation [scene units: m when the poses "
+            "are in m] ...");
   visitReal(v, "min_rotation_deg", min_rotation_deg, 0.0, 360.0,
             "... or this much rotation since the last keyframe [deg]");
+}
+
+ViewChange measureViewChange(const Eigen::Matrix3Xd& points, const Eigen::Vector3d& reference,
+                             double reference_focal, const CameraPose& pose,
+                             const PinholeIntrinsics& k, double max_parallax_deg,
+                             double max_scale_ratio) {
+  ViewChange c;
+  c.points = static_cast<size_t>(points.cols());
+  if (points.cols() == 0) return c;
+  const Eigen::Matrix3d world_to_camera = pose.rotation().transpose();
+  const double cos_max_parallax =
+      max_parallax_deg > 0.0 ? std::cos(max_parallax_deg * M_PI / 180.0) : -2.0;
+  const double focal = std::sqrt(k.fx * k.fy);
+  std::vector<double> cosines;
+  cosines.reserve(static_cast<size_t>(points.cols()));
+  for (Eigen::Index q = 0; q < points.cols(); ++q) {
+    const Eigen::Vector3d x = points.col(q);
+    const Eigen::Vector3d p = world_to_camera * (x - pose.position);
+    if (!(p.z() > 0.0) || !k.inImage(k.project(p))) continue;
+    ++c.visible;
+    const Eigen::Vector3d to_ref = reference - x, to_frame = pose.position - x;
+    const double d_ref = to_ref.norm(), d_frame = to_frame.norm();
+    // A camera on the point: no angle; counts as the widest parallax.
+    const double cosine =
+        d_ref > 0.0 && d_frame > 0.0 ? std::clamp(to_ref.dot(to_frame) / (d_ref * d_frame), -1.0, 1.0)
+                                     : -1.0;
+    cosines.push_back(cosine);
+    if (cosine < cos_max_parallax) continue;
+    if (max_scale_ratio > 0.0) {
+      const double s = (d_frame / focal) / (d_ref / reference_focal);
+      if (!(std::max(s, 1.0 / s) <= max_scale_ratio)) continue;
+    }
+    ++c.matchable;
+  }
+  c.overlap = static_cast<double>(c.matchable) / static_cast<double>(c.points);
+  if (!cosines.empty()) {
+    // The parallax of the nearer points: the angle's 90th percentile is the cosine's 10th
+    // (acos decreases), the element of rank floor(0.1 (n - 1)) in ascending order.
+    const size_t rank = static_cast<size_t>(0.1 * static_cast<double>(cosines.size() - 1));
+    std::nth_element(cosines.begin(), cosines.begin() + static_cast<std::ptrdiff_t>(rank),
+                     cosines.end());
+    c.parallax_deg = std::acos(cosines[rank]) * 180.0 / M_PI;
+  }
+  return c;
+}
+
+std::string describeKeyframeRule(const KeyframePolicyConfig& kf) {
+  std::ostringstream s;
+  s.precision(6);
+  switch (kf.mode) {
+    case KeyframeMode::kScaleFree:
+      s << "scale_free: a new keyframe when under " << kf.keyframe_overlap
+        << " of the last keyframe's points are matchable or the parallax at the nearer of "
+           "them (90th percentile) reaches "
+        << kf.keyframe_parallax_deg << " deg";
+      break;
+    case KeyframeMode::kMotion:
+      s << "motion: a new keyframe after " << kf.min_translation
+        << " scene units (metres if the poses are in metres) or " << kf.min_rotation_deg
+        << " deg";
+      break;
+    case KeyframeMode::kEveryFrame:
+      s << "every frame";
+      break;
+    case KeyframeMode::kEveryNth:
+      s << "every " << kf.every_n << " frames";
+      break;
+    case KeyframeMode::kExternal:
+      s << "external: the frames the keyframe stamps name";
+      break;
+  }
+  return s.str();
 }
 
 KeyframePolicy::KeyframePolicy(KeyframePolicyConfig config) : config_(config) {
   config_.validate();
 }
 
-bool KeyframePolicy::offer(const CameraPose& pose, bool external) {
+bool KeyframePolicy::offer(const CameraPose& pose, bool external,
+                           const KeyframeReference* reference,
+                           const PinholeIntrinsics* intrinsics) {
   const long index = frames_offered_++;
+  last_change_.reset();
   switch (config_.mode) {
+    case KeyframeMode::kScaleFree: {
+      if (!reference || !reference->points || reference->points->cols() < kMinReferencePoints)
+        return true;
+      if (!intrinsics) throw InvalidArgument("keyframe policy scale_free needs the frame's intrinsics");
+      const ViewChange& c = last_change_.emplace(measureViewChange(
+          *reference->points, reference->pose.position,
+          std::sqrt(reference->intrinsics.fx * reference->intrinsics.fy), pose, *intrinsics,
+          reference->max_parallax_deg, reference->max_scale_ratio));
+      return c.overlap < config_.keyframe_overlap ||
+             (config_.keyframe_parallax_deg > 0.0 && c.parallax_deg >= config_.keyframe_parallax_deg);
+    }
     case KeyframeMode::kEveryFrame:
       return true;
     case KeyframeMode::kEveryNth:

@@ -2,6 +2,7 @@
 
 #include "view_selection/core/exceptions.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <sstream>
@@ -61,9 +62,54 @@ FrameResult ViewSelector::addFrame(const Frame& frame) {
   }
 }
 
+const KeyframeReference* ViewSelector::keyframeReference() const {
+  const size_t n = matrix_.size();
+  if (n == 0) return nullptr;
+  const Keyframe& last = matrix_.keyframe(static_cast<ViewId>(n - 1));
+  KeyframeReference& r = reference_;
+  r.pose = last.pose;
+  r.intrinsics = last.intrinsics;
+  r.max_parallax_deg = kOverlapMaxParallaxDeg;  // fixed: the gate's tuning moves no keyframe
+  r.max_scale_ratio = kOverlapMaxScaleRatio;
+  r.points = &last.points;
+  if (last.points.cols() >= kMinReferencePoints) return &r;
+  // No points to compare with (a feature keyframe that triangulated nothing yet, a map not
+  // there yet): a plane across the last keyframe's image at the scene depth of the latest
+  // keyframe before it that has points, so the rule keeps its scale. None: no reference.
+  const long stop = std::max<long>(0, static_cast<long>(n) - 1 - kReferenceLookBack);
+  for (long j = static_cast<long>(n) - 2; j >= stop; --j) {
+    const Keyframe& k = matrix_.keyframe(static_cast<ViewId>(j));
+    if (k.points.cols() < kMinReferencePoints) continue;
+    const Eigen::Matrix3d world_to_camera = k.pose.rotation().transpose();
+    std::vector<double> depths;
+    for (Eigen::Index q = 0; q < k.points.cols(); ++q) {
+      const double z = (world_to_camera * (k.points.col(q) - k.pose.position)).z();
+      if (z > 0.0) depths.push_back(z);
+    }
+    if (depths.size() < static_cast<size_t>(kMinReferencePoints)) continue;
+    std::nth_element(depths.begin(), depths.begin() + static_cast<std::ptrdiff_t>(depths.size() / 2),
+                     depths.end());
+    const double depth = depths[depths.size() / 2];
+    constexpr int kCols = 8, kRows = 6;
+    r.plane.resize(3, kCols * kRows);
+    const Eigen::Matrix3d rotation = last.pose.rotation();
+    const PinholeIntrinsics& in = last.intrinsics;
+    for (int y = 0; y < kRows; ++y)
+      for (int x = 0; x < kCols; ++x) {
+        const Eigen::Vector2d pixel((x + 0.5) * in.width / kCols, (y + 0.5) * in.height / kRows);
+        r.plane.col(y * kCols + x) = last.pose.position + rotation * (in.backProject(pixel) * depth);
+      }
+    r.points = &r.plane;
+    return &r;
+  }
+  return nullptr;
+}
+
 FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
   FrameResult result;
-  if (!policy_.offer(pose, frame.external_keyframe)) return result;
+  const KeyframeReference* reference = policy_.needsReference() ? keyframeReference() : nullptr;
+  const bool take = policy_.offer(pose, frame.external_keyframe, reference, &frame.intrinsics);
+  if (!take) return result;
 
   const auto t_points = std::chrono::steady_clock::now();
   const ViewId id = static_cast<ViewId>(matrix_.size());
@@ -105,9 +151,12 @@ FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
   return result;
 }
 
-bool ViewSelector::wantsFrame(const CameraPose& pose, bool external_keyframe) const {
+bool ViewSelector::wantsFrame(const Frame& frame) const {
   KeyframePolicy probe = policy_;
-  return probe.offer(pose, external_keyframe);
+  CameraPose pose = frame.pose;
+  pose.orientation.normalize();  // as addFrame does
+  const KeyframeReference* reference = probe.needsReference() ? keyframeReference() : nullptr;
+  return probe.offer(pose, frame.external_keyframe, reference, &frame.intrinsics);
 }
 
 std::vector<ViewId> ViewSelector::applyPointUpdates() {

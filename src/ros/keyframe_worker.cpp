@@ -525,7 +525,7 @@ void KeyframeWorker::process(const Queued& queued) {
   // point source sees bit-identical rotations and the matrix equals select_views' exactly.
   core_frame.pose.orientation.normalize();
   // As select_views does: only frames the policy will take get their images converted.
-  const bool wanted = selector_->wantsFrame(core_frame.pose, external);
+  const bool wanted = selector_->wantsFrame(core_frame);
   try {
     core_frame.image = wanted ? colourImageForCore(frame.image) : borrowedImageView(frame.image);
     // Distortion applied: the core's pinhole model holds for the rectified image only.

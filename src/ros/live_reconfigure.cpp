@@ -21,6 +21,8 @@ void forEachField(Values& r, Config& c, F f) {
   f(r.every_n, kf.every_n);
   f(r.min_translation, kf.min_translation);
   f(r.min_rotation_deg, kf.min_rotation_deg);
+  f(r.keyframe_overlap, kf.keyframe_overlap);
+  f(r.keyframe_parallax_deg, kf.keyframe_parallax_deg);
   f(r.publish_period, c.publish_period);
 }
 

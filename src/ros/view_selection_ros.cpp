@@ -54,7 +54,7 @@ ViewSelectionRos::ViewSelectionRos(ros::NodeHandle nh, ros::NodeHandle private_n
                   << ", points from " << config_.point_source
                   << (config_.point_source == "map" ? " ('" + nh.resolveName("points") + "')"
                                                     : std::string())
-                  << ", keyframes " << core::toString(s.keyframes.mode) << ", k " << s.selection.k
+                  << ", keyframes " << core::describeKeyframeRule(s.keyframes) << ", k " << s.selection.k
                   << ", completion " << core::toString(s.selection.completion)
                   << (keeper_.enabled() ? ", session saved in " + keeper_.path()
                                         : std::string(", session not saved (~state_file empty)")));

@@ -55,6 +55,13 @@ std::string describe(const SyntheticSequence& sequence) {
     << "- seed " << c.seed << ", " << sequence.size() << " frames at " << c.fps << " Hz, "
     << k.width << "x" << k.height << ", fx " << k.fx << " fy " << k.fy << " cx " << k.cx << " cy "
     << k.cy << "\n"
+    << (c.ring_step_deg > 0.0
+            ? "- a ring of views " + std::to_string(c.ring_step_deg) +
+                  " deg apart around the box on the table, " + std::to_string(c.ring_distance) +
+                  " m from its centre, " + std::to_string(c.ring_elevation_deg) +
+                  " deg above it" + (c.write_depth ? "" : ", no depth (a photo collection)") +
+                  ", positions in metres x " + std::to_string(c.unit_scale) + "\n"
+            : std::string())
     << "- walking speed " << c.speed << " m/s, colour noise sigma " << c.noise_sigma
     << " grey levels, depth range " << c.max_range << " m\n"
     << "- scene: a " << c.scene.room_size.x() << " x " << c.scene.room_size.y() << " x "
@@ -75,7 +82,7 @@ void SyntheticSequence::writeTumFolder(const std::string& folder,
                                        const SyntheticProgress& progress) const {
   const fs::path root(folder);
   createFolder(root / "rgb");
-  createFolder(root / "depth");
+  if (config_.write_depth) createFolder(root / "depth");
   // Lists of an earlier sequence go first, so a run cut short cannot leave them pointing at a
   // mix of old and new images.
   for (const char* list : {"rgb.txt", "depth.txt", "groundtruth.txt"}) {
@@ -104,7 +111,7 @@ void SyntheticSequence::writeTumFolder(const std::string& folder,
             const SyntheticFrame frame = render(i);
             const std::string name = sixDecimals(frame.stamp) + ".png";
             writePng(root / "rgb" / name, frame.colour);
-            writePng(root / "depth" / name, frame.depth);
+            if (config_.write_depth) writePng(root / "depth" / name, frame.depth);
             rgb[i] = {frame.stamp, "rgb/" + name};
             depth[i] = {frame.stamp, "depth/" + name};
           } catch (const std::exception& e) {  // nothing may escape a worker thread
@@ -127,9 +134,15 @@ void SyntheticSequence::writeTumFolder(const std::string& folder,
   if (!source) throw core::IoError("cannot write '" + (root / "SOURCE.md").string() + "'");
   io::writeCameraYaml((root / "camera.yaml").string(), config_.intrinsics);
   const std::string comment = "synthetic sequence, seed " + std::to_string(config_.seed);
-  io::writeTumTrajectory((root / "groundtruth.txt").string(), path_,
-                         comment + "\nexact camera-to-world poses of the optical frame");
-  io::writeTumImageList((root / "depth.txt").string(), depth, comment + "\ndepth images");
+  std::vector<io::TumPoseEntry> poses = path_;
+  for (io::TumPoseEntry& e : poses) e.pose.position *= config_.unit_scale;
+  io::writeTumTrajectory((root / "groundtruth.txt").string(), poses,
+                         comment + "\nexact camera-to-world poses of the optical frame" +
+                             (config_.unit_scale != 1.0
+                                  ? ", positions in metres x " + std::to_string(config_.unit_scale)
+                                  : std::string()));
+  if (config_.write_depth)
+    io::writeTumImageList((root / "depth.txt").string(), depth, comment + "\ndepth images");
   io::writeTumImageList((root / "rgb.txt").string(), rgb, comment + "\ncolour images");
 }
 

@@ -118,4 +118,29 @@ std::vector<io::TumPoseEntry> syntheticCameraPath(const SyntheticSequenceConfig&
   return path;
 }
 
+std::vector<io::TumPoseEntry> syntheticRingPath(const SyntheticSequenceConfig& config,
+                                                const Eigen::Vector3d& target) {
+  config.validate();
+  std::vector<io::TumPoseEntry> path;
+  const double elevation = config.ring_elevation_deg * kPi / 180.0;
+  for (int i = 0; i < config.frames; ++i) {
+    const double azimuth = i * config.ring_step_deg * kPi / 180.0;
+    const Eigen::Vector3d from_target(std::cos(elevation) * std::cos(azimuth),
+                                      std::cos(elevation) * std::sin(azimuth),
+                                      std::sin(elevation));
+    const Eigen::Vector3d forward = -from_target;
+    const Eigen::Vector3d right = forward.cross(Eigen::Vector3d::UnitZ()).normalized();
+    Eigen::Matrix3d r;
+    r.col(0) = right;
+    r.col(1) = forward.cross(right);
+    r.col(2) = forward;
+    io::TumPoseEntry entry;
+    entry.stamp = std::round((config.start_stamp + i / config.fps) * 1e6) / 1e6;
+    entry.pose.position = target + config.ring_distance * from_target;
+    entry.pose.orientation = stableUnit(r);
+    path.push_back(entry);
+  }
+  return path;
+}
+
 }  // namespace view_selection::sim

@@ -46,6 +46,15 @@ void SyntheticSequenceConfig::validate() const {
     msg << "noise_sigma = " << noise_sigma << " must be 0..50 grey levels";
   } else if (!(max_range > 0.0 && max_range <= 65535.0 / kDepthUnitsPerMetre)) {
     msg << "max_range = " << max_range << " m must be in (0, 13.107] (16-bit depth at 5000/m)";
+  } else if (!(ring_step_deg >= 0.0 && ring_step_deg <= 360.0) ||
+             !(ring_distance > 0.0 && ring_distance <= 10.0) ||
+             !(ring_elevation_deg > -90.0 && ring_elevation_deg < 90.0)) {
+    msg << "ring: step " << ring_step_deg << " deg must be 0..360, distance " << ring_distance
+        << " m in (0, 10], elevation " << ring_elevation_deg << " deg in (-90, 90)";
+  } else if (!(unit_scale > 0.0 && std::isfinite(unit_scale))) {
+    msg << "unit_scale = " << unit_scale << " must be positive";
+  } else if (unit_scale != 1.0 && write_depth) {
+    msg << "unit_scale " << unit_scale << " needs no depth (depth PNGs hold 5000 units a metre)";
   } else {
     scene.validate();
     return;
@@ -59,12 +68,19 @@ const SyntheticSequenceConfig& validated(const SyntheticSequenceConfig& config) 
   config.validate();
   return config;
 }
+/// The centre of the box on the table (the room's centre at table height without a table).
+Eigen::Vector3d ringTarget(const SyntheticScene& scene) {
+  for (const SceneBox& b : scene.boxes())
+    if (b.name == "box on table") return b.centre;
+  return Eigen::Vector3d(0.0, 0.0, 0.8);
+}
 }  // namespace
 
 SyntheticSequence::SyntheticSequence(const SyntheticSequenceConfig& config)
     : config_(validated(config)),
       scene_(config.seed, config.scene),
-      path_(syntheticCameraPath(config)) {
+      path_(config.ring_step_deg > 0.0 ? syntheticRingPath(config, ringTarget(scene_))
+                                       : syntheticCameraPath(config)) {
   for (const io::TumPoseEntry& e : path_) {
     if (!scene_.isFree(e.pose.position, 0.2)) {
       throw core::InvalidArgument(

@@ -42,6 +42,12 @@ The same seed and options give byte-identical files.
   --speed V        walking speed [m/s] (default 0.7: about one loop in 300 frames)
   --noise SIGMA    colour noise [grey levels] (default 2; 0 for none)
   --threads N      frames rendered at once (default 0: one per core; the files are the same)
+  --ring-step DEG  a photo collection instead of the walk: --frames views on a ring (or an arc,
+                   when --frames x DEG < 360) around the box on the table, DEG apart in azimuth
+  --ring-distance M  from the box's centre [m] (default 0.8)
+  --ring-elevation DEG  above it (default 30)
+  --no-depth       no depth images (a photo collection, as DTU)
+  --unit-scale S   write the poses in metres x S (1000: millimetres); needs --no-depth
   --points-only    no rendering: a walk down a long corridor (a building-sized SLAM session),
                    one keyframe every 0.2 m with 256 points ray-cast onto its walls, written as
                    points.bin (poses and points), groundtruth.txt, camera.yaml; select_views
@@ -64,8 +70,9 @@ struct Options {
 Options parse(int argc, char** argv) {
   const CommandLine cli(argc, argv,
                         {"out", "frames", "seed", "width", "height", "fx", "fy", "cx", "cy", "fps",
-                         "speed", "noise", "threads"},
-                        {"force", "quiet", "points-only", "help"});
+                         "speed", "noise", "threads", "ring-step", "ring-distance",
+                         "ring-elevation", "unit-scale"},
+                        {"force", "quiet", "points-only", "no-depth", "help"});
   if (cli.flag("help")) {
     std::cout << kUsage;
     std::exit(0);
@@ -87,10 +94,19 @@ Options parse(int argc, char** argv) {
   c.fps = cli.real("fps", c.fps, 0.1, 1000.0);
   c.speed = cli.real("speed", c.speed, 0.0, 10.0);
   c.noise_sigma = cli.real("noise", c.noise_sigma, 0.0, 50.0);
+  c.ring_step_deg = cli.real("ring-step", 0.0, 0.0, 360.0);
+  c.ring_distance = cli.real("ring-distance", c.ring_distance, 1e-3, 10.0);
+  c.ring_elevation_deg = cli.real("ring-elevation", c.ring_elevation_deg, -89.0, 89.0);
+  c.unit_scale = cli.real("unit-scale", 1.0, 1e-9, 1e9);
+  c.write_depth = !cli.flag("no-depth");
+  if (c.unit_scale != 1.0 && c.write_depth)
+    throw UsageError("--unit-scale needs --no-depth (depth PNGs hold 5000 units a metre)");
+  if (c.ring_step_deg == 0.0 && (cli.has("ring-distance") || cli.has("ring-elevation")))
+    throw UsageError("--ring-distance and --ring-elevation need --ring-step");
   o.threads = static_cast<int>(cli.integer("threads", 0, 0, 1024));
   o.points_only = cli.flag("points-only");
   if (o.points_only)
-    for (const char* name : {"fps", "speed", "noise", "threads"})
+    for (const char* name : {"fps", "speed", "noise", "threads", "ring-step", "unit-scale"})
       if (cli.has(name))
         throw UsageError(std::string("--") + name + " does not apply with --points-only");
   o.force = cli.flag("force");
@@ -151,10 +167,17 @@ int run(const Options& o) {
       "wrote %zu frames (%dx%d, fx %.2f fy %.2f cx %.2f cy %.2f, seed %llu) to %s in %.1f s\n",
       sequence.size(), k.width, k.height, k.fx, k.fy, k.cx, k.cy,
       static_cast<unsigned long long>(c.seed), o.out.c_str(), seconds);
-  std::printf("      rgb/ depth/ rgb.txt depth.txt groundtruth.txt camera.yaml SOURCE.md\n");
-  std::printf("scene %zu boxes in a %.1f x %.1f x %.1f m room; path %.2f s at %.2f m/s\n",
-              sequence.scene().boxes().size() - 1, c.scene.room_size.x(), c.scene.room_size.y(),
-              c.scene.room_size.z(), sequence.size() / c.fps, c.speed);
+  std::printf("      %s\n", c.write_depth
+                                ? "rgb/ depth/ rgb.txt depth.txt groundtruth.txt camera.yaml SOURCE.md"
+                                : "rgb/ rgb.txt groundtruth.txt camera.yaml SOURCE.md (no depth)");
+  std::printf("scene %zu boxes in a %.1f x %.1f x %.1f m room; ", sequence.scene().boxes().size() - 1,
+              c.scene.room_size.x(), c.scene.room_size.y(), c.scene.room_size.z());
+  if (c.ring_step_deg > 0.0)
+    std::printf("a ring of views %.2f deg apart, %.2f m from the box on the table, %.1f deg above "
+                "it; poses in metres x %g\n",
+                c.ring_step_deg, c.ring_distance, c.ring_elevation_deg, c.unit_scale);
+  else
+    std::printf("path %.2f s at %.2f m/s\n", sequence.size() / c.fps, c.speed);
   return 0;
 }
 

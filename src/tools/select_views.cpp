@@ -204,10 +204,11 @@ Options parse(int argc, char** argv) {
   o.dataset = *cli.text("dataset");
 
   if (cli.has("every") && (cli.has("min-translation") || cli.has("min-rotation-deg") ||
-                           cli.has("keyframe-policy") || cli.has("every-n")))
+                           cli.has("keyframe-policy") || cli.has("every-n") ||
+                           cli.has("keyframe-overlap") || cli.has("keyframe-parallax-deg")))
     throw UsageError(
-        "--every and --min-translation/--min-rotation/--keyframe-policy/--every-n exclude each "
-        "other");
+        "--every and --min-translation/--min-rotation/--keyframe-policy/--every-n/"
+        "--keyframe-overlap/--keyframe-parallax-deg exclude each other");
   if (cli.has("no-occlusion") && cli.has("occlusion-test"))
     throw UsageError("--no-occlusion and --occlusion-test exclude each other");
   view_selection::tools::readParameters(cli, o.config);
@@ -253,13 +254,43 @@ size_t framesToUse(const Options& o, const TumDataset& dataset) {
              : dataset.frames.size();
 }
 
+struct Timings {
+  double read = 0.0, points = 0.0, matrix = 0.0, selection = 0.0, write = 0.0;
+  size_t rows_updated = 0;  // earlier keyframes' rows recomputed because their points changed
+};
+
+struct StreamReplay;
+void addFrames(const Options& o, const TumDataset& dataset, ViewSelector& selector, Timings& t,
+               StreamReplay* stream = nullptr);
+
+/// The point source a run on `dataset` uses (--points, auto: depth when the folder has it).
+std::unique_ptr<PointSource> pointSourceFor(const Options& o, const TumDataset& dataset) {
+  const std::string source =
+      o.points == "auto" ? (dataset.has_depth ? "depth" : "features") : o.points;
+  if (source == "depth" && !dataset.has_depth)
+    throw InvalidInput("'" + o.dataset +
+                       "' has no depth (no depth.txt): the depth point source cannot run on it");
+  return makePointSource(source, o.point_params, o.config.matrix.occlusion);
+}
+
 /// --strategy nearest: the same keyframes (same policy, same frames), paired by pose alone.
 int runNearest(const Options& o, const TumDataset& dataset) {
   const size_t total = framesToUse(o, dataset);
   KeyframePolicy policy(o.config.keyframes);
   std::vector<CameraPose> poses;
   std::vector<std::string> names;
-  for (size_t q = 0; q < total; ++q) {
+  if (policy.needsReference()) {
+    // The policy measures against the keyframes' points: the keyframes are those of a full run.
+    ViewSelector selector(o.config, pointSourceFor(o, dataset));
+    Timings t;
+    addFrames(o, dataset, selector, t);
+    for (size_t i = 0; i < selector.matrix().size(); ++i) {
+      const Keyframe& k = selector.matrix().keyframe(static_cast<ViewId>(i));
+      poses.push_back(k.pose);
+      names.push_back(k.image_name);
+    }
+  }
+  for (size_t q = 0; q < total && !policy.needsReference(); ++q) {
     const TumFrame& f = dataset.frames[q];
     if (!f.pose.isValid())
       throw InvalidInput("frame " + std::to_string(q) + " (" + f.rgb_path + "): invalid pose");
@@ -277,7 +308,7 @@ int runNearest(const Options& o, const TumDataset& dataset) {
       poses.size() > 1 ? 0.5 * static_cast<double>(poses.size()) * (poses.size() - 1) : 0.0;
   std::printf("dataset     %s: %zu frames used of %zu in rgb.txt\n", o.dataset.c_str(), total,
               dataset.rgb_entries);
-  std::printf("keyframes   %zu\n", poses.size());
+  std::printf("keyframes   %zu (%s)\n", poses.size(), describeKeyframeRule(o.config.keyframes).c_str());
   std::printf("strategy    nearest: k %d, max view angle %.1f deg\n", o.nearest.k,
               o.nearest.max_view_angle_deg);
   std::printf("pairs       %zu to match, exhaustive would be %.0f (%s)\n", pairs.size(), exhaustive,
@@ -285,11 +316,6 @@ int runNearest(const Options& o, const TumDataset& dataset) {
   std::printf("wrote       %s\n", (o.out / "pairs.txt").c_str());
   return 0;
 }
-
-struct Timings {
-  double read = 0.0, points = 0.0, matrix = 0.0, selection = 0.0, write = 0.0;
-  size_t rows_updated = 0;  // earlier keyframes' rows recomputed because their points changed
-};
 
 /// --stream-report: the node's pair stream replayed, one announcer per stability rule.
 struct StreamReplay {
@@ -329,7 +355,7 @@ struct StreamReplay {
 
 /// Offers every frame to the selector, as the node does with the frames it receives.
 void addFrames(const Options& o, const TumDataset& dataset, ViewSelector& selector, Timings& t,
-               StreamReplay* stream = nullptr) {
+               StreamReplay* stream) {
   const bool features = selector.pointSource().name() == "features";
   const size_t total = framesToUse(o, dataset);
   const bool tty = isatty(fileno(stderr));
@@ -337,7 +363,10 @@ void addFrames(const Options& o, const TumDataset& dataset, ViewSelector& select
   for (size_t q = 0; q < total; ++q) {
     const auto t0 = std::chrono::steady_clock::now();
     // Frames the policy will skip are passed without depth: reading PNGs is the slow part.
-    const bool wanted = selector.wantsFrame(dataset.frames[q].pose);
+    Frame probe;
+    probe.pose = dataset.frames[q].pose;
+    probe.intrinsics = dataset.intrinsics;
+    const bool wanted = selector.wantsFrame(probe);
     const Frame frame =
         loadTumFrame(dataset, dataset.frames[q], {wanted && !features, wanted && features});
     t.read += seconds(t0);
@@ -361,13 +390,6 @@ void addFrames(const Options& o, const TumDataset& dataset, ViewSelector& select
   }
 }
 
-std::string keyframeRule(const KeyframePolicyConfig& kf) {
-  if (kf.mode == KeyframeMode::kMotion)
-    return "motion >= " + formatNumber(kf.min_translation) + " or " +
-           formatNumber(kf.min_rotation_deg) + " deg";
-  return "every " + std::to_string(kf.mode == KeyframeMode::kEveryFrame ? 1 : kf.every_n) +
-         " frames";
-}
 
 void printFeatureStats(const FeaturePointSource& fs, size_t rows_updated) {
   const FeatureStats& t = fs.totalStats();
@@ -424,7 +446,7 @@ void printSummary(const Options& o, const TumDataset& dataset, const ViewSelecto
               dataset.intrinsics.cx, dataset.intrinsics.cy, dataset.intrinsics.width,
               dataset.intrinsics.height);
   std::printf("keyframes   %zu (%s), %zu sample points each (median), source: %s\n", n,
-              keyframeRule(o.config.keyframes).c_str(), median_points,
+              describeKeyframeRule(o.config.keyframes).c_str(), median_points,
               selector.pointSource().name().c_str());
   if (const auto* fs = dynamic_cast<const FeaturePointSource*>(&selector.pointSource()))
     printFeatureStats(*fs, t.rows_updated);
@@ -588,7 +610,7 @@ int runPointsOnly(const Options& o, const fs::path& points_file) {
   std::printf("dataset     %s: points.bin, %zu records used of %llu (points only)\n",
               o.dataset.c_str(), total, static_cast<unsigned long long>(reader.size()));
   std::printf("keyframes   %zu (%s), %.0f sample points each (mean)\n", n,
-              keyframeRule(o.config.keyframes).c_str(),
+              describeKeyframeRule(o.config.keyframes).c_str(),
               total > 0 ? static_cast<double>(points) / static_cast<double>(total) : 0.0);
   std::printf("matrix      %zu finite entries (%.1f a row, %s of the off-diagonal)\n",
               selector.matrix().table().finiteCount(),
@@ -625,13 +647,7 @@ int run(const Options& o) {
   const TumDataset dataset = loadTumDataset(o.dataset, dataset_options);
   if (o.strategy == "nearest") return runNearest(o, dataset);
 
-  const std::string source =
-      o.points == "auto" ? (dataset.has_depth ? "depth" : "features") : o.points;
-  if (source == "depth" && !dataset.has_depth)
-    throw InvalidInput("'" + o.dataset +
-                       "' has no depth (no depth.txt): the depth point source cannot run on it");
-  ViewSelector selector(o.config,
-                        makePointSource(source, o.point_params, o.config.matrix.occlusion));
+  ViewSelector selector(o.config, pointSourceFor(o, dataset));
   Timings t;
   StreamReplay stream;
   stream.start(o.stream_report, selector);

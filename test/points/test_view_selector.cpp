@@ -138,9 +138,9 @@ TEST(ViewSelector, WantsFrameAsksThePolicyWithoutChangingIt) {
   ViewSelector selector(config, depthSource());
   for (int q = 0; q < 7; ++q) {
     Frame f = frameAt(q, q * 0.05);
-    const bool wanted = selector.wantsFrame(f.pose);
+    const bool wanted = selector.wantsFrame(f);
     EXPECT_EQ(wanted, q % 3 == 0) << q;
-    EXPECT_EQ(selector.wantsFrame(f.pose), wanted);  // asking twice changes nothing
+    EXPECT_EQ(selector.wantsFrame(f), wanted);  // asking twice changes nothing
     if (!wanted) f.depth = {};                       // skipped frames need no depth
     EXPECT_EQ(selector.addFrame(f).outcome == FrameOutcome::kKeyframe, wanted);
   }

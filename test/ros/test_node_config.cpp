@@ -41,7 +41,10 @@ TEST(NodeConfig, DefaultsAreTheCoresAndTheDocumentedOnes) {
   EXPECT_EQ(c.point_source, "depth");
   EXPECT_DOUBLE_EQ(c.publish_period, 0.5);
   EXPECT_FALSE(c.save_keyframe_images);
-  EXPECT_EQ(c.selector.keyframes.mode, core::KeyframeMode::kMotion);
+  EXPECT_EQ(c.selector.keyframes.mode, core::KeyframeMode::kScaleFree);  // issue 20
+  EXPECT_DOUBLE_EQ(c.selector.keyframes.keyframe_overlap, defaults.keyframes.keyframe_overlap);
+  EXPECT_DOUBLE_EQ(c.selector.keyframes.keyframe_parallax_deg,
+                   defaults.keyframes.keyframe_parallax_deg);
   EXPECT_EQ(c.selector.keyframes.every_n, defaults.keyframes.every_n);
   EXPECT_DOUBLE_EQ(c.selector.keyframes.min_translation, defaults.keyframes.min_translation);
   EXPECT_DOUBLE_EQ(c.selector.keyframes.min_rotation_deg, defaults.keyframes.min_rotation_deg);
@@ -103,7 +106,7 @@ TEST(NodeConfig, BadValuesNameTheParameter) {
       {"pose_timeout", XmlRpc::XmlRpcValue(-1.0), "/bad/pose_timeout"},
       {"completion", XmlRpc::XmlRpcValue("best"), "is not one of: paper, reachable"},
       {"keyframe_policy", XmlRpc::XmlRpcValue("sometimes"),
-       "is not one of: every_frame, every_nth, motion, external"},
+       "is not one of: scale_free, every_frame, every_nth, motion, external"},
       {"pose_source", XmlRpc::XmlRpcValue("gps"), "is not one of: tf, topic, odometry, pose_with_covariance"},
       {"occlusion_test", XmlRpc::XmlRpcValue("yes"), "must be true or false"},
       {"world_frame", XmlRpc::XmlRpcValue("/"), "must name a frame"},

@@ -1,12 +1,16 @@
-// Which frames become keyframes: every frame, every Nth frame, after enough motion, or as an
-// outside decision (the SLAM system's keyframes) says.
+// Which frames become keyframes: every frame, every Nth frame, when the view has changed enough
+// against the last keyframe's points (scale_free, the default), after enough motion in scene
+// units, or as an outside decision (the SLAM system's keyframes) says.
 #pragma once
 
 #include "view_selection/core/parameters.h"
 #include "view_selection/core/types.h"
 
+#include <Eigen/Core>
+
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace view_selection::core {
 
@@ -15,30 +19,87 @@ enum class KeyframeMode {
   kEveryNth,    ///< frames 0, N, 2N, ... of those offered
   kMotion,      ///< the first frame, then one after min_translation OR min_rotation_deg of motion
   kExternal,    ///< the caller's verdict for each frame (Frame::external_keyframe)
+  /// the first frame, then one whose view of the last keyframe's points has changed enough:
+  /// fewer than keyframe_overlap of them matchable, or the parallax of the nearer ones (90th
+  /// percentile) at least keyframe_parallax_deg (angles and ratios only: any unit alike)
+  kScaleFree,
 };
 
-inline constexpr EnumNames<KeyframeMode, 4> kKeyframeModeNames{
-    {{KeyframeMode::kEveryFrame, "every_frame"},
+inline constexpr EnumNames<KeyframeMode, 5> kKeyframeModeNames{
+    {{KeyframeMode::kScaleFree, "scale_free"},
+     {KeyframeMode::kEveryFrame, "every_frame"},
      {KeyframeMode::kEveryNth, "every_nth"},
      {KeyframeMode::kMotion, "motion"},
      {KeyframeMode::kExternal, "external"}}};
 
 inline std::string toString(KeyframeMode mode) { return nameOf(mode, kKeyframeModeNames); }
-/// "every_frame", "every_nth" or "motion"; throws InvalidArgument otherwise.
+/// One of kKeyframeModeNames; throws InvalidArgument otherwise.
 inline KeyframeMode keyframeModeFromString(const std::string& text) {
   return valueOf(text, kKeyframeModeNames, "keyframe_policy");
 }
 
 struct KeyframePolicyConfig {
-  KeyframeMode mode = KeyframeMode::kMotion;
+  KeyframeMode mode = KeyframeMode::kScaleFree;
   int every_n = 10;                ///< kEveryNth: keep one frame in every_n
-  double min_translation = 0.10;   ///< kMotion: [m, scene units] since the last keyframe
+  double min_translation = 0.10;   ///< kMotion: [scene units, m for TUM] since the last keyframe
   double min_rotation_deg = 10.0;  ///< kMotion: [deg] since the last keyframe
+  /// kScaleFree: a new keyframe when fewer than this share of the last keyframe's points are
+  /// matchable in the frame (visible, parallax at most 20 deg, footprint ratio within 1.6: the
+  /// matchable gate's defaults, fixed) ...
+  double keyframe_overlap = 0.8;
+  /// ... or when the parallax at the nearer of its points the frame sees (the 90th percentile
+  /// over them) reaches this [deg]; 0: off. Both chosen by measurement (docs/results.md).
+  double keyframe_parallax_deg = 5.0;
 
   void visitParameters(ParameterVisitor& v);
   /// Throws InvalidArgument naming the first field out of range.
   void validate() const { checkRanges(*this); }
 };
+
+/// How a frame sees the points of a reference keyframe (the scale_free policy's measure).
+struct ViewChange {
+  size_t points = 0;         ///< reference points
+  size_t visible = 0;        ///< in front of the frame and inside its image
+  size_t matchable = 0;      ///< visible, and within the parallax and footprint gates
+  double overlap = 0.0;      ///< matchable / points (0 without points)
+  /// The parallax of the nearer points: the 90th percentile over the visible points of the angle
+  /// at the point between the rays to the two camera centres [deg]
+  double parallax_deg = 0.0;
+};
+
+/// What a frame at `pose` with `intrinsics` sees of `points` observed from `reference` (focal
+/// length `reference_focal` = sqrt(fx fy)). The gates are the matrix's (METHOD.md version 2):
+/// parallax at most `max_parallax_deg` and footprint ratio within `max_scale_ratio` (0: off).
+/// No occlusion test (it has a tolerance in metres, and the frame's depth is not read yet).
+/// Angles and ratios only: scaling the world changes nothing. O(points).
+ViewChange measureViewChange(const Eigen::Matrix3Xd& points, const Eigen::Vector3d& reference,
+                             double reference_focal, const CameraPose& pose,
+                             const PinholeIntrinsics& intrinsics, double max_parallax_deg,
+                             double max_scale_ratio);
+
+/// A reference with fewer points cannot be measured against: the frame is taken.
+inline constexpr int kMinReferencePoints = 8;
+/// The gate the overlap counts with: the matchable gate's default limits, fixed, so that the
+/// keyframes do not change when the matrix's gate is tuned (gate: paper included).
+inline constexpr double kOverlapMaxParallaxDeg = 20.0;
+inline constexpr double kOverlapMaxScaleRatio = 1.6;
+
+/// What the scale_free policy compares a frame with: the last keyframe as it is now (its points
+/// may have grown since it was inserted) and the gate its overlap counts with.
+struct KeyframeReference {
+  CameraPose pose;
+  PinholeIntrinsics intrinsics;
+  /// The last keyframe's points (not owned); when it has fewer than kMinReferencePoints, a
+  /// plane at the scene depth of a keyframe that has them (ViewSelector::keyframeReference).
+  const Eigen::Matrix3Xd* points = nullptr;
+  Eigen::Matrix3Xd plane;  ///< storage for that plane
+  double max_parallax_deg = kOverlapMaxParallaxDeg;
+  double max_scale_ratio = kOverlapMaxScaleRatio;
+};
+
+
+/// The policy's rule in words, with units, for log lines and summaries.
+std::string describeKeyframeRule(const KeyframePolicyConfig& config);
 
 class KeyframePolicy {
  public:
@@ -47,8 +108,15 @@ class KeyframePolicy {
   /// Offers the next frame; true when it should become a keyframe. Counts the frame either way.
   /// The policy remembers the pose only once the caller confirms with keyframeAccepted(), so a
   /// frame that is dropped later (no points, bad depth) does not move the reference.
-  /// `external`: the verdict in kExternal mode (ignored otherwise).
-  bool offer(const CameraPose& pose, bool external = false);
+  /// `external`: the verdict in kExternal mode (ignored otherwise). `reference`: what kScaleFree
+  /// compares with (null: no keyframe yet, or nothing to measure against: the frame is taken);
+  /// `intrinsics`: the frame's, for kScaleFree.
+  bool offer(const CameraPose& pose, bool external = false,
+             const KeyframeReference* reference = nullptr, const PinholeIntrinsics* intrinsics = nullptr);
+  /// Whether this mode needs a KeyframeReference (the keyframes' points) to decide.
+  bool needsReference() const { return config_.mode == KeyframeMode::kScaleFree; }
+  /// The last decision's measure (kScaleFree; empty before one was measured).
+  const std::optional<ViewChange>& lastChange() const { return last_change_; }
   /// The frame offered last did become a keyframe at `pose`.
   void keyframeAccepted(const CameraPose& pose);
   void reset();
@@ -59,7 +127,8 @@ class KeyframePolicy {
   }
   const KeyframePolicyConfig& config() const { return config_; }
 
-  /// Where the policy is: what a saved session needs to continue exactly.
+  /// Where the policy is: what a saved session needs to continue exactly. kScaleFree keeps no
+  /// state of its own: it measures against the keyframes, which the session saves.
   struct State {
     long frames_offered = 0;                  ///< frames offered so far (every_nth counts them)
     std::optional<CameraPose> last_keyframe;  ///< motion: the reference pose
@@ -72,6 +141,7 @@ class KeyframePolicy {
   KeyframePolicyConfig config_;
   long frames_offered_ = 0;
   std::optional<CameraPose> last_keyframe_;
+  std::optional<ViewChange> last_change_;
 };
 
 }  // namespace view_selection::core

@@ -62,10 +62,17 @@ class ViewSelector {
   /// stamp not after the previous frame's (duplicate or out of order), applies the keyframe
   /// policy, gets the points and inserts the keyframe.
   FrameResult addFrame(const Frame& frame);
-  /// Whether the keyframe policy would take a frame at `pose` next, without changing anything.
+  /// Whether the keyframe policy would take `frame` next, without changing anything; it reads
+  /// the frame's stamp-free parts only (pose, intrinsics, external_keyframe), not its images.
   /// Lets callers skip loading depth and images for frames that will not become keyframes
   /// (they still pass those frames to addFrame, without depth, to keep counts and stamps).
-  bool wantsFrame(const CameraPose& pose, bool external_keyframe = false) const;
+  bool wantsFrame(const Frame& frame) const;
+  /// What the scale_free policy compares the next frame with: the last keyframe, with its points
+  /// as they are now; when it has fewer than kMinReferencePoints, a plane across its image at
+  /// the median depth of the latest of the kReferenceLookBack keyframes before it that has
+  /// them; null without a keyframe or without any such depth. O(points), not O(keyframes).
+  const KeyframeReference* keyframeReference() const;
+  static constexpr int kReferenceLookBack = 64;
   /// The selection for the keyframes so far (selectViews, kept current incrementally), as a
   /// plain Selection (O(n): for tools and tests; outputs take output()).
   Selection select() const;
@@ -114,6 +121,7 @@ class ViewSelector {
   KeyframePolicy policy_;
   ErrorResistanceMatrix matrix_;
   std::optional<double> last_stamp_;  // of the last valid frame offered
+  mutable KeyframeReference reference_;  // keyframeReference()'s, rebuilt on each call
   // What select() last returned, updated from the rows that changed since. Not shared between
   // threads: like every other member, one thread at a time drives a ViewSelector.
   mutable SelectionCache selection_;

@@ -112,6 +112,16 @@ struct SyntheticSequenceConfig {
   double noise_sigma = 2.0;     ///< colour noise [8-bit grey levels]; 0 for none
   double max_range = 8.0;       ///< depth beyond this is 0 (no surface) [m]; at most 13.1
   SyntheticSceneConfig scene;
+  /// A photo collection instead of the walk: `frames` views on a ring (or arc) around the box on
+  /// the table, `ring_step_deg` apart in azimuth, each looking at the box's centre from
+  /// `ring_distance` [m] and `ring_elevation_deg` above it. 0: the walk.
+  double ring_step_deg = 0.0;
+  double ring_distance = 0.8;
+  double ring_elevation_deg = 30.0;
+  /// writeTumFolder: poses written in metres times this (1000: millimetres). Depth PNGs hold
+  /// 5000 units per metre, so a scale other than 1 needs write_depth = false.
+  double unit_scale = 1.0;
+  bool write_depth = true;  ///< false: no depth/ and no depth.txt (a photo collection)
 
   /// Throws InvalidArgument naming the bad value.
   void validate() const;
@@ -159,5 +169,10 @@ class SyntheticSequence {
 /// there, tilted down), and small fast jitter like a hand's. Stamps start_stamp + i / fps,
 /// rounded to whole microseconds. Quaternions are unit length and have qw >= 0.
 std::vector<io::TumPoseEntry> syntheticCameraPath(const SyntheticSequenceConfig& config);
+
+/// The ring (or arc) of SyntheticSequenceConfig::ring_step_deg around `target`: view i at
+/// azimuth i * ring_step_deg, z up. Stamps as the walk's.
+std::vector<io::TumPoseEntry> syntheticRingPath(const SyntheticSequenceConfig& config,
+                                                const Eigen::Vector3d& target);
 
 }  // namespace view_selection::sim

@@ -39,9 +39,9 @@ class LiveFaults(unittest.TestCase):
         cls.node.wait_for_services()
         cls.pub.wait_connected()
         cls.stats = Statistics(NODE)
-        cls.frames = synthetic_frames(120, width=320, height=240, step=0.02)
+        cls.frames = synthetic_frames(160, width=320, height=240, step=0.02)
         cls.published = 0
-        cls.publish(20)
+        cls.publish(40)  # 0.02 m a frame 2 m from the wall: a keyframe every ~9 frames (5 deg parallax)
         cls.stats.wait(lambda s: s.keyframes >= 4, 20, 'keyframes')
 
     @classmethod
@@ -109,7 +109,7 @@ class LiveFaults(unittest.TestCase):
             images = os.path.join(self.tmp, 'failing', 'images')
             wait_until(lambda: call(NODE + '/get_pairs', GetPairs, GetPairsRequest(since=0), 10.0).keyframe_image_dir
                        == images, 30, 'the node writes images into the project')
-            self.publish(20)  # new keyframes: their images go into the project
+            self.publish(40)  # new keyframes: their images go into the project
             answer = call(bridge.name + '/finish', Trigger, None, 300.0)
             self.assertFalse(answer.success, answer.message)
             self.assertIn('matches_importer', answer.message)

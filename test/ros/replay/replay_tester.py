@@ -228,13 +228,16 @@ class Replay(unittest.TestCase):
         def get(name):
             return rospy.get_param(node + '/' + name, None)
         options = []
-        policy = get('keyframe_policy') or 'motion'
+        policy = get('keyframe_policy') or 'scale_free'
         if policy == 'every_frame':
             options += ['--every', '1']
         elif policy == 'every_nth':
             options += ['--every', str(get('every_n') or 10)]
         else:
-            for param, option in (('min_translation', '--min-translation'), ('min_rotation_deg', '--min-rotation')):
+            options += ['--keyframe-policy', policy]
+            for param, option in (('min_translation', '--min-translation'), ('min_rotation_deg', '--min-rotation'),
+                                  ('keyframe_overlap', '--keyframe-overlap'),
+                                  ('keyframe_parallax_deg', '--keyframe-parallax-deg')):
                 if get(param) is not None:
                     options += [option, repr(float(get(param)))]
         for param, option in (('k', '--k'), ('completion', '--completion'),
