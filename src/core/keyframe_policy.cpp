@@ -107,13 +107,20 @@ KeyframePolicy::KeyframePolicy(KeyframePolicyConfig config) : config_(config) {
 
 bool KeyframePolicy::offer(const CameraPose& pose, bool external,
                            const KeyframeReference* reference,
-                           const PinholeIntrinsics* intrinsics) {
+                           const PinholeIntrinsics* intrinsics, double stamp) {
   const long index = frames_offered_++;
   last_change_.reset();
   switch (config_.mode) {
     case KeyframeMode::kScaleFree: {
-      if (!reference || !reference->points || reference->points->cols() < kMinReferencePoints)
-        return true;
+      if (!reference) return true;  // the first frame
+      if (!reference->points || reference->points->cols() < kMinReferencePoints) {
+        // No keyframe has points yet: turned far enough, or long enough after the last one.
+        const Eigen::Vector3d a = reference->pose.rotation().col(2), b = pose.rotation().col(2);
+        const double turned = std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / M_PI;
+        return !std::isfinite(stamp) || !(stamp > reference->stamp) ||
+               stamp - reference->stamp >= kNoPointsInterval ||
+               (config_.keyframe_parallax_deg > 0.0 && turned >= config_.keyframe_parallax_deg);
+      }
       if (!intrinsics) throw InvalidArgument("keyframe policy scale_free needs the frame's intrinsics");
       const ViewChange& c = last_change_.emplace(measureViewChange(
           *reference->points, reference->pose.position,

@@ -72,6 +72,7 @@ const KeyframeReference* ViewSelector::keyframeReference() const {
   r.max_parallax_deg = kOverlapMaxParallaxDeg;  // fixed: the gate's tuning moves no keyframe
   r.max_scale_ratio = kOverlapMaxScaleRatio;
   r.points = &last.points;
+  r.stamp = last.stamp;
   if (last.points.cols() >= kMinReferencePoints) return &r;
   // No points to compare with (a feature keyframe that triangulated nothing yet, a map not
   // there yet): a plane across the last keyframe's image at the scene depth of the latest
@@ -102,13 +103,15 @@ const KeyframeReference* ViewSelector::keyframeReference() const {
     r.points = &r.plane;
     return &r;
   }
-  return nullptr;
+  r.points = nullptr;  // no keyframe has points: the policy's start-up rule (kNoPointsInterval)
+  return &r;
 }
 
 FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
   FrameResult result;
   const KeyframeReference* reference = policy_.needsReference() ? keyframeReference() : nullptr;
-  const bool take = policy_.offer(pose, frame.external_keyframe, reference, &frame.intrinsics);
+  const bool take =
+      policy_.offer(pose, frame.external_keyframe, reference, &frame.intrinsics, frame.stamp);
   if (!take) return result;
 
   const auto t_points = std::chrono::steady_clock::now();
@@ -156,7 +159,7 @@ bool ViewSelector::wantsFrame(const Frame& frame) const {
   CameraPose pose = frame.pose;
   pose.orientation.normalize();  // as addFrame does
   const KeyframeReference* reference = probe.needsReference() ? keyframeReference() : nullptr;
-  return probe.offer(pose, frame.external_keyframe, reference, &frame.intrinsics);
+  return probe.offer(pose, frame.external_keyframe, reference, &frame.intrinsics, frame.stamp);
 }
 
 std::vector<ViewId> ViewSelector::applyPointUpdates() {

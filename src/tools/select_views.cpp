@@ -366,6 +366,7 @@ void addFrames(const Options& o, const TumDataset& dataset, ViewSelector& select
     Frame probe;
     probe.pose = dataset.frames[q].pose;
     probe.intrinsics = dataset.intrinsics;
+    probe.stamp = dataset.frames[q].stamp;
     const bool wanted = selector.wantsFrame(probe);
     const Frame frame =
         loadTumFrame(dataset, dataset.frames[q], {wanted && !features, wanted && features});

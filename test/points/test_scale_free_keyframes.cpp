@@ -136,6 +136,7 @@ size_t keyframesOf(const std::filesystem::path& folder, KeyframeMode mode) {
     Frame probe;
     probe.pose = tum.pose;
     probe.intrinsics = dataset.intrinsics;
+    probe.stamp = tum.stamp;
     const bool wanted = selector.wantsFrame(probe);
     selector.addFrame(loadTumFrame(dataset, tum, {wanted && dataset.has_depth,
                                                   wanted && !dataset.has_depth}));

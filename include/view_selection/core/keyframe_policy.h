@@ -8,6 +8,7 @@
 
 #include <Eigen/Core>
 
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -79,6 +80,11 @@ ViewChange measureViewChange(const Eigen::Matrix3Xd& points, const Eigen::Vector
 
 /// A reference with fewer points cannot be measured against: the frame is taken.
 inline constexpr int kMinReferencePoints = 8;
+/// [s] scale_free before any keyframe has points (a feature or map source starting): a new
+/// keyframe once the optical axis turned keyframe_parallax_deg or this long after the last one
+/// (a time, not a distance: no unit of the world enters), so the start of a video does not make
+/// every frame a keyframe while the first points cannot be triangulated yet.
+inline constexpr double kNoPointsInterval = 0.5;
 /// The gate the overlap counts with: the matchable gate's default limits, fixed, so that the
 /// keyframes do not change when the matrix's gate is tuned (gate: paper included).
 inline constexpr double kOverlapMaxParallaxDeg = 20.0;
@@ -91,8 +97,9 @@ struct KeyframeReference {
   PinholeIntrinsics intrinsics;
   /// The last keyframe's points (not owned); when it has fewer than kMinReferencePoints, a
   /// plane at the scene depth of a keyframe that has them (ViewSelector::keyframeReference).
-  const Eigen::Matrix3Xd* points = nullptr;
+  const Eigen::Matrix3Xd* points = nullptr;  ///< null: no keyframe has points yet
   Eigen::Matrix3Xd plane;  ///< storage for that plane
+  double stamp = 0.0;      ///< the last keyframe's stamp [s]
   double max_parallax_deg = kOverlapMaxParallaxDeg;
   double max_scale_ratio = kOverlapMaxScaleRatio;
 };
@@ -111,8 +118,10 @@ class KeyframePolicy {
   /// `external`: the verdict in kExternal mode (ignored otherwise). `reference`: what kScaleFree
   /// compares with (null: no keyframe yet, or nothing to measure against: the frame is taken);
   /// `intrinsics`: the frame's, for kScaleFree.
+  /// `stamp`: the frame's [s] (kScaleFree before any keyframe has points; NaN: unknown).
   bool offer(const CameraPose& pose, bool external = false,
-             const KeyframeReference* reference = nullptr, const PinholeIntrinsics* intrinsics = nullptr);
+             const KeyframeReference* reference = nullptr, const PinholeIntrinsics* intrinsics = nullptr,
+             double stamp = std::numeric_limits<double>::quiet_NaN());
   /// Whether this mode needs a KeyframeReference (the keyframes' points) to decide.
   bool needsReference() const { return config_.mode == KeyframeMode::kScaleFree; }
   /// The last decision's measure (kScaleFree; empty before one was measured).
