@@ -184,6 +184,10 @@ class MatchableTest {
 
 }  // namespace
 
+namespace {
+std::atomic<std::uint64_t> next_keyframe_version{1};
+}  // namespace
+
 ErrorResistanceMatrix::View ErrorResistanceMatrix::makeView(Keyframe keyframe) {
   View v;
   keyframe.pose.orientation.normalize();
@@ -208,9 +212,19 @@ ErrorResistanceMatrix::View ErrorResistanceMatrix::makeView(Keyframe keyframe) {
     v.sphere_radius = -1.0;
   }
   v.keyframe = std::move(keyframe);
-  static std::atomic<std::uint64_t> next_version{1};
-  v.version = next_version.fetch_add(1, std::memory_order_relaxed);
+  v.version = next_keyframe_version.fetch_add(1, std::memory_order_relaxed);
   return v;
+}
+
+std::uint64_t ErrorResistanceMatrix::lastKeyframeVersionIssued() {
+  return next_keyframe_version.load(std::memory_order_relaxed) - 1;
+}
+
+void ErrorResistanceMatrix::placed(ViewId id) {
+  const size_t chunk = static_cast<size_t>(id) / ErrorResistanceTable::kVersionChunk;
+  if (chunk >= keyframe_chunk_version_.size()) keyframe_chunk_version_.resize(chunk + 1, 0);
+  keyframe_chunk_version_[chunk] =
+      std::max(keyframe_chunk_version_[chunk], views_[static_cast<size_t>(id)].version);
 }
 
 double computeErrorResistance(const ErrorResistanceMatrix::View& view_i,
@@ -421,6 +435,7 @@ void ErrorResistanceMatrix::index(ViewId id) {
   View& v = views_[static_cast<size_t>(id)];
   v.reach = countedReach(v);
   reaches_.emplace(v.reach, id);
+  placed(id);
   updateGridReach();
   min_focal_ = id == 0 ? v.focal : std::min(min_focal_, v.focal);
   max_focal_ = std::max(max_focal_, v.focal);
@@ -457,6 +472,7 @@ void ErrorResistanceMatrix::setPoints(ViewId id, Eigen::Matrix3Xd points) {
   const double reach = countedReach(views_[static_cast<size_t>(id)]);
   views_[static_cast<size_t>(id)].reach = old_reach;
   setReach(id, reach);
+  placed(id);
   table_.replaceRow(id, computeRow(id));
 }
 
@@ -508,6 +524,7 @@ void ErrorResistanceMatrix::restore(std::vector<Keyframe> keyframes,
   // What insertion's candidate search needs of the views so far.
   grid_.clear();
   reaches_.clear();
+  keyframe_chunk_version_.clear();
   grid_reach_ = min_focal_ = max_focal_ = 0.0;
   for (size_t i = 0; i < views_.size(); ++i) index(static_cast<ViewId>(i));
 }
@@ -540,6 +557,7 @@ void ErrorResistanceMatrix::setPoses(const std::vector<std::pair<ViewId, CameraP
     const double reach = view.reach;  // counted; a rigid motion keeps it
     view = makeView(movedKeyframe(std::move(view.keyframe), pose));
     view.reach = reach;
+    placed(id);
     summaries_.edit(static_cast<size_t>(id)).pose = view.keyframe.pose;
     // A rigid motion keeps a view's reach and focal length; only its centre moves in the grid.
     grid_.move(id, view.keyframe.pose.position);
@@ -582,6 +600,7 @@ void ErrorResistanceMatrix::clear() {
   pairs_evaluated_ = 0;
   grid_.clear();
   reaches_.clear();
+  keyframe_chunk_version_.clear();
   grid_reach_ = min_focal_ = max_focal_ = 0.0;
 }
 

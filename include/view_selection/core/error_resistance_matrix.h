@@ -97,6 +97,12 @@ class ErrorResistanceMatrix {
   std::uint64_t keyframeVersion(ViewId id) const {
     return views_[static_cast<size_t>(id)].version;
   }
+  /// The largest keyframe version of views [c * kVersionChunk, (c + 1) * kVersionChunk) (as
+  /// ErrorResistanceTable::chunkVersion for rows), and the last version any view got.
+  std::uint64_t keyframeChunkVersion(size_t c) const {
+    return c < keyframe_chunk_version_.size() ? keyframe_chunk_version_[c] : 0;
+  }
+  static std::uint64_t lastKeyframeVersionIssued();
   double at(ViewId i, ViewId j) const { return table_.at(i, j); }
   const ErrorResistanceTable& table() const { return table_; }
   /// What the outputs show of each keyframe, by id (chunked: a copy shares it).
@@ -170,6 +176,9 @@ class ErrorResistanceMatrix {
   /// Views past the grid's reach, looked at one by one in the column direction.
   static constexpr size_t kFarViews = 32;
   void updateGridReach();
+  /// View `id` was made or replaced: its chunk's keyframe version follows.
+  void placed(ViewId id);
+  std::vector<std::uint64_t> keyframe_chunk_version_;
   double grid_reach_ = 0.0;         // the (kFarViews + 1)-th largest reach now
   std::multimap<double, ViewId> reaches_;  // every view's counted reach
   double min_focal_ = 0.0, max_focal_ = 0.0;
