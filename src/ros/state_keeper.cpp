@@ -122,6 +122,7 @@ std::optional<io::SessionState> StateKeeper::takeLoaded() {
 void StateKeeper::refuseLoaded(const std::string& why) {
   loaded_.reset();
   std::string kept;
+  std::lock_guard<std::mutex> lock(write_mutex_);
   base_id_.reset();
   need_full_ = true;
   try {
