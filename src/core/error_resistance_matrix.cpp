@@ -361,11 +361,11 @@ void ErrorResistanceMatrix::candidates(ViewId id, bool row, std::vector<ViewId>&
     candidates_examined_ += grid_.lastExamined();
     // The farthest-reaching views (beyond grid_reach_) one by one.
     size_t far = 0;
-    for (auto it = reaches_.rbegin(); it != reaches_.rend() && far < kFarViews; ++it, ++far)
-      if (it->first > grid_reach_) {
-        out.push_back(it->second);
-        ++candidates_examined_;
-      }
+    for (auto it = reaches_.rbegin(); it != reaches_.rend() && it->first > grid_reach_; ++it) {
+      out.push_back(it->second);
+      ++far;
+    }
+    candidates_examined_ += far;
     if (far > 0) {
       std::sort(out.begin(), out.end());
       out.erase(std::unique(out.begin(), out.end()), out.end());
