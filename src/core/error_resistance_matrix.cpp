@@ -4,7 +4,9 @@
 #include "view_selection/core/exceptions.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <functional>
 #include <string>
 
 namespace view_selection::core {
@@ -182,6 +184,10 @@ class MatchableTest {
 
 }  // namespace
 
+namespace {
+std::atomic<std::uint64_t> next_keyframe_version{1};
+}  // namespace
+
 ErrorResistanceMatrix::View ErrorResistanceMatrix::makeView(Keyframe keyframe) {
   View v;
   keyframe.pose.orientation.normalize();
@@ -206,7 +212,19 @@ ErrorResistanceMatrix::View ErrorResistanceMatrix::makeView(Keyframe keyframe) {
     v.sphere_radius = -1.0;
   }
   v.keyframe = std::move(keyframe);
+  v.version = next_keyframe_version.fetch_add(1, std::memory_order_relaxed);
   return v;
+}
+
+std::uint64_t ErrorResistanceMatrix::lastKeyframeVersionIssued() {
+  return next_keyframe_version.load(std::memory_order_relaxed) - 1;
+}
+
+void ErrorResistanceMatrix::placed(ViewId id) {
+  const size_t chunk = static_cast<size_t>(id) / ErrorResistanceTable::kVersionChunk;
+  if (chunk >= keyframe_chunk_version_.size()) keyframe_chunk_version_.resize(chunk + 1, 0);
+  keyframe_chunk_version_[chunk] =
+      std::max(keyframe_chunk_version_[chunk], views_[static_cast<size_t>(id)].version);
 }
 
 double computeErrorResistance(const ErrorResistanceMatrix::View& view_i,
@@ -328,6 +346,7 @@ void ErrorResistanceMatrix::candidates(ViewId id, bool row, std::vector<ViewId>&
     // No footprint-ratio gate: no distance bound, every other view is a candidate (O(n)).
     for (size_t j = 0; j < views_.size(); ++j)
       if (static_cast<ViewId>(j) != id) out.push_back(static_cast<ViewId>(j));
+    candidates_examined_ += views_.size();
     return;
   }
   // A point X of X_i counts in j only when |O_j X| <= ratio |O_i X| f_j / f_i, so
@@ -336,8 +355,21 @@ void ErrorResistanceMatrix::candidates(ViewId id, bool row, std::vector<ViewId>&
   const double slack = 1.0 + 1e-9;
   if (row) {  // X_id in the others
     grid_.query(centre, slack * v.reach * (1.0 + ratio * max_focal_ / v.focal), out);
-  } else {  // the others' points in id: bound by the largest reach, then each by its own
-    grid_.query(centre, slack * max_reach_ * (1.0 + ratio * v.focal / min_focal_), out);
+    candidates_examined_ += grid_.lastExamined();
+  } else {  // the others' points in id: bound by the grid's reach, then each by its own
+    grid_.query(centre, slack * grid_reach_ * (1.0 + ratio * v.focal / min_focal_), out);
+    candidates_examined_ += grid_.lastExamined();
+    // The farthest-reaching views (beyond grid_reach_) one by one.
+    size_t far = 0;
+    for (auto it = reaches_.rbegin(); it != reaches_.rend() && it->first > grid_reach_; ++it) {
+      out.push_back(it->second);
+      ++far;
+    }
+    candidates_examined_ += far;
+    if (far > 0) {
+      std::sort(out.begin(), out.end());
+      out.erase(std::unique(out.begin(), out.end()), out.end());
+    }
     out.erase(std::remove_if(out.begin(), out.end(),
                              [&](ViewId i) {
                                const View& w = views_[static_cast<size_t>(i)];
@@ -361,9 +393,50 @@ std::vector<TableEntry> ErrorResistanceMatrix::computeRow(ViewId id) {
   return row;
 }
 
+double ErrorResistanceMatrix::countedReach(const View& v) const {
+  // E[i][j] is finite only when at least m points of X_i count in j, and a point X counts only
+  // when |O_i O_j| <= |O_i X| (1 + ratio f_j / f_i): so |O_i O_j| is bounded by the m-th
+  // farthest point, not the farthest (a few far points do not widen the search).
+  const Keyframe& k = v.keyframe;
+  const Eigen::Index n = k.points.cols();
+  const double needed = std::max(static_cast<double>(config_.min_covisible_points),
+                                 config_.min_covisible_ratio * static_cast<double>(n));
+  const auto m = static_cast<Eigen::Index>(std::max(1.0, std::ceil(needed)));
+  if (n < m) return 0.0;  // no entry of its row can be finite
+  std::vector<double> d(static_cast<size_t>(n));
+  for (Eigen::Index c = 0; c < n; ++c)
+    d[static_cast<size_t>(c)] = (k.points.col(c) - k.pose.position).norm();
+  std::nth_element(d.begin(), d.begin() + (m - 1), d.end(), std::greater<double>());
+  return d[static_cast<size_t>(m - 1)];
+}
+
+void ErrorResistanceMatrix::setReach(ViewId id, double reach) {
+  View& v = views_[static_cast<size_t>(id)];
+  const auto [from, to] = reaches_.equal_range(v.reach);
+  for (auto it = from; it != to; ++it)
+    if (it->second == id) {
+      reaches_.erase(it);
+      break;
+    }
+  v.reach = reach;
+  reaches_.emplace(reach, id);
+  updateGridReach();
+}
+
+void ErrorResistanceMatrix::updateGridReach() {
+  // The kFarViews farthest-reaching views are looked at one by one; the grid is searched with
+  // the next one's reach, so a few outliers never widen every search.
+  auto it = reaches_.rbegin();
+  for (size_t q = 0; q < kFarViews && it != reaches_.rend(); ++q) ++it;
+  grid_reach_ = it == reaches_.rend() ? 0.0 : it->first;
+}
+
 void ErrorResistanceMatrix::index(ViewId id) {
-  const View& v = views_[static_cast<size_t>(id)];
-  max_reach_ = std::max(max_reach_, v.reach);
+  View& v = views_[static_cast<size_t>(id)];
+  v.reach = countedReach(v);
+  reaches_.emplace(v.reach, id);
+  placed(id);
+  updateGridReach();
   min_focal_ = id == 0 ? v.focal : std::min(min_focal_, v.focal);
   max_focal_ = std::max(max_focal_, v.focal);
   grid_.insert(id, v.keyframe.pose.position);
@@ -389,12 +462,17 @@ void ErrorResistanceMatrix::setPoints(ViewId id, Eigen::Matrix3Xd points) {
   if (id < 0 || static_cast<size_t>(id) >= views_.size())
     throw InvalidArgument("setPoints: unknown view id " + std::to_string(id));
   if (!points.allFinite()) throw InvalidInput("setPoints: non-finite sample points");
+  const double old_reach = views_[static_cast<size_t>(id)].reach;
   Keyframe keyframe = std::move(views_[static_cast<size_t>(id)].keyframe);
   keyframe.points = std::move(points);
   views_[static_cast<size_t>(id)] = makeView(std::move(keyframe));
   summaries_.edit(static_cast<size_t>(id)).num_points =
       static_cast<size_t>(views_[static_cast<size_t>(id)].keyframe.points.cols());
-  max_reach_ = std::max(max_reach_, views_[static_cast<size_t>(id)].reach);
+  // The old reach leaves the bound (a far point replaced: the search narrows again).
+  const double reach = countedReach(views_[static_cast<size_t>(id)]);
+  views_[static_cast<size_t>(id)].reach = old_reach;
+  setReach(id, reach);
+  placed(id);
   table_.replaceRow(id, computeRow(id));
 }
 
@@ -403,6 +481,9 @@ void ErrorResistanceMatrix::setConfig(const ErrorResistanceConfig& requested) {
   config.validate();
   if (config == config_) return;
   config_ = config;
+  // The reach bound depends on the co-visibility gate.
+  for (size_t i = 0; i < views_.size(); ++i)
+    setReach(static_cast<ViewId>(i), countedReach(views_[i]));
   for (size_t i = 0; i < views_.size(); ++i)
     table_.replaceRow(static_cast<ViewId>(i), computeRow(static_cast<ViewId>(i)));
 }
@@ -442,7 +523,9 @@ void ErrorResistanceMatrix::restore(std::vector<Keyframe> keyframes,
   pairs_evaluated_ = 0;
   // What insertion's candidate search needs of the views so far.
   grid_.clear();
-  max_reach_ = min_focal_ = max_focal_ = 0.0;
+  reaches_.clear();
+  keyframe_chunk_version_.clear();
+  grid_reach_ = min_focal_ = max_focal_ = 0.0;
   for (size_t i = 0; i < views_.size(); ++i) index(static_cast<ViewId>(i));
 }
 
@@ -471,7 +554,10 @@ void ErrorResistanceMatrix::setPoses(const std::vector<std::pair<ViewId, CameraP
   }
   for (const auto& [id, pose] : poses) {
     View& view = views_[static_cast<size_t>(id)];
+    const double reach = view.reach;  // counted; a rigid motion keeps it
     view = makeView(movedKeyframe(std::move(view.keyframe), pose));
+    view.reach = reach;
+    placed(id);
     summaries_.edit(static_cast<size_t>(id)).pose = view.keyframe.pose;
     // A rigid motion keeps a view's reach and focal length; only its centre moves in the grid.
     grid_.move(id, view.keyframe.pose.position);
@@ -513,7 +599,9 @@ void ErrorResistanceMatrix::clear() {
   table_.clear();
   pairs_evaluated_ = 0;
   grid_.clear();
-  max_reach_ = min_focal_ = max_focal_ = 0.0;
+  reaches_.clear();
+  keyframe_chunk_version_.clear();
+  grid_reach_ = min_focal_ = max_focal_ = 0.0;
 }
 
 }  // namespace view_selection::core

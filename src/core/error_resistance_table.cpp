@@ -40,9 +40,20 @@ void ErrorResistanceTable::resize(size_t size) {
   row_version_.resize(size, 0);
 }
 
+namespace {
+std::atomic<std::uint64_t> next_row_version{1};
+}  // namespace
+
+std::uint64_t ErrorResistanceTable::lastVersionIssued() {
+  return next_row_version.load(std::memory_order_relaxed) - 1;
+}
+
 void ErrorResistanceTable::touch(size_t i) {
-  static std::atomic<std::uint64_t> next_version{1};
-  row_version_.edit(i) = next_version.fetch_add(1, std::memory_order_relaxed);
+  const std::uint64_t version = next_row_version.fetch_add(1, std::memory_order_relaxed);
+  row_version_.edit(i) = version;
+  const size_t chunk = i / kVersionChunk;
+  if (chunk >= chunk_version_.size()) chunk_version_.resize(chunk + 1, 0);
+  chunk_version_[chunk] = version;  // versions only grow: the chunk's largest
 }
 
 void ErrorResistanceTable::clear() {
@@ -50,6 +61,7 @@ void ErrorResistanceTable::clear() {
   cols_.clear();
   top_.clear();
   row_version_.clear();
+  chunk_version_.clear();
   finite_count_ = 0;
 }
 

@@ -40,7 +40,8 @@ constexpr uint32_t tag(const char (&t)[5]) {
 }
 constexpr uint32_t kSession = tag("SESS"), kConfig = tag("CONF"), kKeyframes = tag("KEYF"),
                    kMatrix = tag("MATX"), kPolicy = tag("PLCY"), kPoints = tag("PSRC"),
-                   kStatistics = tag("STAT"), kPairStream = tag("PAIR");
+                   kStatistics = tag("STAT"), kPairStream = tag("PAIR"),
+                   kJournalBase = tag("JRNL");
 
 enum class ParamKind : uint8_t { kBool = 0, kInt = 1, kDouble = 2, kString = 3, kGroup = 4 };
 enum class SourceKind : uint8_t { kNone = 0, kMap = 1, kFeatures = 2 };
@@ -342,49 +343,53 @@ class ParamsReader : public core::ParameterVisitor {
 // ---------------------------------------------------------------------------------------------
 // Sections.
 
+void writeKeyframe(Writer& w, const core::Keyframe& k) {
+  w.f64(k.stamp);
+  w.text(k.image_name);
+  writeIntrinsics(w, k.intrinsics);
+  writePose(w, k.pose);
+  writePoints(w, k.points);
+  writeDepthMap(w, k.depth);
+}
+void readKeyframe(Reader& r, core::Keyframe& k) {
+  k.stamp = r.finite("keyframe stamp");
+  k.image_name = r.text("image name");
+  k.intrinsics = readIntrinsics(r);
+  k.pose = readPose(r);
+  k.points = readPoints(r);
+  k.depth = readDepthMap(r);
+}
 void writeKeyframes(Writer& w, const std::vector<core::Keyframe>& keyframes) {
   w.u64(keyframes.size());
-  for (const core::Keyframe& k : keyframes) {
-    w.f64(k.stamp);
-    w.text(k.image_name);
-    writeIntrinsics(w, k.intrinsics);
-    writePose(w, k.pose);
-    writePoints(w, k.points);
-    writeDepthMap(w, k.depth);
-  }
+  for (const core::Keyframe& k : keyframes) writeKeyframe(w, k);
 }
 std::vector<core::Keyframe> readKeyframes(Reader& r) {
   std::vector<core::Keyframe> keyframes(r.count(117, "keyframes"));
-  for (core::Keyframe& k : keyframes) {
-    k.stamp = r.finite("keyframe stamp");
-    k.image_name = r.text("image name");
-    k.intrinsics = readIntrinsics(r);
-    k.pose = readPose(r);
-    k.points = readPoints(r);
-    k.depth = readDepthMap(r);
-  }
+  for (core::Keyframe& k : keyframes) readKeyframe(r, k);
   return keyframes;
 }
 
+void writeRow(Writer& w, const std::vector<core::TableEntry>& row) {
+  w.u64(row.size());
+  for (const core::TableEntry& e : row) {
+    w.i32(e.view);
+    w.f64(e.value);
+  }
+}
+void readRow(Reader& r, std::vector<core::TableEntry>& row) {
+  row.resize(r.count(12, "matrix row"));
+  for (core::TableEntry& e : row) {
+    e.view = r.i32("matrix entry");
+    e.value = r.f64("matrix entry");
+  }
+}
 void writeRows(Writer& w, const std::vector<std::vector<core::TableEntry>>& rows) {
   w.u64(rows.size());
-  for (const auto& row : rows) {
-    w.u64(row.size());
-    for (const core::TableEntry& e : row) {
-      w.i32(e.view);
-      w.f64(e.value);
-    }
-  }
+  for (const auto& row : rows) writeRow(w, row);
 }
 std::vector<std::vector<core::TableEntry>> readRows(Reader& r) {
   std::vector<std::vector<core::TableEntry>> rows(r.count(8, "matrix rows"));
-  for (auto& row : rows) {
-    row.resize(r.count(12, "matrix row"));
-    for (core::TableEntry& e : row) {
-      e.view = r.i32("matrix entry");
-      e.value = r.f64("matrix entry");
-    }
-  }
+  for (auto& row : rows) readRow(r, row);
   return rows;
 }
 
@@ -636,8 +641,10 @@ void restoreSession(core::ViewSelector& selector, const SessionState& state) {
   }
 }
 
-std::vector<uint8_t> encodeState(const SessionState& state) {
-  Writer w;
+namespace {
+
+// The sections of a state (the file's content after the header; a journal record's trailer).
+void encodeContent(Writer& w, const SessionState& state) {
   size_t s = w.beginSection(kSession);
   w.text(state.producer);
   w.f64(state.saved_at);
@@ -682,7 +689,21 @@ std::vector<uint8_t> encodeState(const SessionState& state) {
     w.u64(*state.pair_sequence);
     w.endSection(s);
   }
+  // Optional: the id a journal's records name to follow this file.
+  if (state.base_id) {
+    s = w.beginSection(kJournalBase);
+    w.u64(*state.base_id);
+    w.endSection(s);
+  }
+}
 
+SessionState decodeContent(Reader& r, const std::string& what);
+
+}  // namespace
+
+std::vector<uint8_t> encodeState(const SessionState& state) {
+  Writer w;
+  encodeContent(w, state);
   const std::vector<uint8_t>& payload = w.bytes;
   Writer h;
   h.raw(kMagic.data(), kMagic.size());
@@ -726,9 +747,14 @@ SessionState decodeState(const uint8_t* data, size_t size, const std::string& na
   const uint8_t* payload = data + kHeaderSize;
   if (payload_crc != crc32(payload, static_cast<size_t>(payload_size)))
     throw StateFileError(what + " is corrupted: the content's checksum does not match");
-
-  SessionState state;
   Reader r(payload, static_cast<size_t>(payload_size), what);
+  return decodeContent(r, what);
+}
+
+namespace {
+
+SessionState decodeContent(Reader& r, const std::string& what) {
+  SessionState state;
   uint32_t seen = 0;  // bit per required section
   const std::array<uint32_t, 7> required = {kSession, kConfig, kKeyframes, kMatrix,
                                             kPolicy,  kPoints, kStatistics};
@@ -780,6 +806,8 @@ SessionState decodeState(const uint8_t* data, size_t size, const std::string& na
       state.statistics = readStatistics(s);
     } else if (t == kPairStream) {
       state.pair_sequence = s.u64("pair sequence");
+    } else if (t == kJournalBase) {
+      state.base_id = s.u64("journal base id");
     } else {
       continue;  // a section of a later minor revision: skipped
     }
@@ -796,6 +824,8 @@ SessionState decodeState(const uint8_t* data, size_t size, const std::string& na
                          " keyframes");
   return state;
 }
+
+}  // namespace
 
 size_t writeStateFile(const std::string& path, const SessionState& state) {
   const std::vector<uint8_t> bytes = encodeState(state);
@@ -870,6 +900,320 @@ std::string moveAside(const std::string& path) {
                           "': " + std::strerror(errno));
   }
   throw core::IoError("cannot keep '" + path + "' aside: too many earlier bad copies");
+}
+
+// ---------------------------------------------------------------------------------------------
+// The journal (docs/state_file.md, "The journal").
+
+namespace {
+
+constexpr std::array<uint8_t, 4> kJournalMagic = {'V', 'S', 'J', 'R'};
+constexpr uint32_t kJournalVersion = 1;
+constexpr size_t kRecordHeaderSize = 24;
+
+/// The trailer of a record: `rest` without keyframes and rows (whatever it holds).
+SessionState trailerOf(const SessionState& rest) {
+  SessionState t;
+  t.producer = rest.producer;
+  t.saved_at = rest.saved_at;
+  t.selector.config = rest.selector.config;
+  t.selector.policy = rest.selector.policy;
+  t.selector.last_stamp = rest.selector.last_stamp;
+  t.points = rest.points;
+  t.statistics = rest.statistics;
+  t.pair_sequence = rest.pair_sequence;
+  return t;
+}
+
+SessionDelta decodeRecord(Reader& r, uint64_t& base_id, uint64_t& index, const std::string& what) {
+  SessionDelta d;
+  base_id = r.u64("base id");
+  index = r.u64("record index");
+  d.keyframe_count = r.u64("keyframe count");
+  d.keyframes.resize(r.count(4 + 117, "changed keyframes"));
+  for (auto& [id, k] : d.keyframes) {
+    id = r.i32("keyframe id");
+    readKeyframe(r, k);
+  }
+  d.rows.resize(r.count(4 + 8, "changed rows"));
+  for (auto& [id, row] : d.rows) {
+    id = r.i32("row id");
+    readRow(r, row);
+  }
+  d.rest = decodeContent(r, what);
+  return d;
+}
+
+}  // namespace
+
+void applyDelta(SessionState& state, const SessionDelta& delta) {
+  const auto fail = [](const std::string& why) {
+    throw StateFileError("journal record does not fit its state: " + why);
+  };
+  const uint64_t n = delta.keyframe_count;
+  const size_t before = std::min<size_t>(state.selector.keyframes.size(), n);
+  // Every new keyframe and row must be in the record; every id in range, ascending.
+  const auto check = [&](const auto& list, const char* what) {
+    uint64_t next_new = before;
+    int64_t last = -1;
+    for (const auto& [id, value] : list) {
+      if (id < 0 || static_cast<uint64_t>(id) >= n || id <= last)
+        fail(std::string(what) + " id " + std::to_string(id) + " out of range or order");
+      last = id;
+      if (static_cast<uint64_t>(id) >= before) {
+        if (static_cast<uint64_t>(id) != next_new) fail(std::string("new ") + what + " missing");
+        ++next_new;
+      }
+    }
+    if (next_new != n) fail(std::string("new ") + what + " missing");
+  };
+  check(delta.keyframes, "keyframe");
+  check(delta.rows, "row");
+  state.selector.keyframes.resize(n);
+  state.selector.rows.resize(n);
+  for (const auto& [id, k] : delta.keyframes) state.selector.keyframes[static_cast<size_t>(id)] = k;
+  for (const auto& [id, row] : delta.rows) state.selector.rows[static_cast<size_t>(id)] = row;
+  const SessionState& t = delta.rest;
+  state.producer = t.producer;
+  state.saved_at = t.saved_at;
+  state.selector.config = t.selector.config;
+  state.selector.policy = t.selector.policy;
+  state.selector.last_stamp = t.selector.last_stamp;
+  state.points = t.points;
+  state.statistics = t.statistics;
+  state.pair_sequence = t.pair_sequence;
+}
+
+void mergeDelta(SessionDelta& earlier, SessionDelta later) {
+  const auto merge = [&](auto& a, auto& b) {
+    // Both ascending by id: later's entries win; ids at or beyond the new count go.
+    std::decay_t<decltype(a)> out;
+    out.reserve(a.size() + b.size());
+    size_t p = 0, q = 0;
+    while (p < a.size() || q < b.size()) {
+      if (q == b.size() || (p < a.size() && a[p].first < b[q].first)) {
+        if (static_cast<uint64_t>(a[p].first) < later.keyframe_count) out.push_back(std::move(a[p]));
+        ++p;
+      } else {
+        if (p < a.size() && a[p].first == b[q].first) ++p;
+        out.push_back(std::move(b[q++]));
+      }
+    }
+    a = std::move(out);
+  };
+  merge(earlier.keyframes, later.keyframes);
+  merge(earlier.rows, later.rows);
+  earlier.keyframe_count = later.keyframe_count;
+  earlier.rest = std::move(later.rest);
+}
+
+void DeltaTracker::markSaved(const core::ViewSelector& selector) {
+  saved_ = selector.matrix().size();
+  row_mark_ = core::ErrorResistanceTable::lastVersionIssued();
+  keyframe_mark_ = core::ErrorResistanceMatrix::lastKeyframeVersionIssued();
+}
+
+SessionDelta DeltaTracker::capture(const core::ViewSelector& selector) {
+  const core::ErrorResistanceMatrix& m = selector.matrix();
+  const core::ErrorResistanceTable& table = m.table();
+  const size_t n = m.size();
+  const uint64_t row_mark = core::ErrorResistanceTable::lastVersionIssued();
+  const uint64_t keyframe_mark = core::ErrorResistanceMatrix::lastKeyframeVersionIssued();
+  SessionDelta d;
+  d.keyframe_count = n;
+  constexpr size_t kChunk = core::ErrorResistanceTable::kVersionChunk;
+  const size_t saved = std::min(n, saved_);  // new ones from here on, always
+  for (size_t c = 0; c * kChunk < n; ++c) {
+    const size_t end = std::min(n, (c + 1) * kChunk);
+    if (end <= saved && table.chunkVersion(c) <= row_mark_ &&
+        m.keyframeChunkVersion(c) <= keyframe_mark_)
+      continue;  // nothing in it changed
+    for (size_t i = c * kChunk; i < end; ++i) {
+      const auto id = static_cast<core::ViewId>(i);
+      if (i >= saved || m.keyframeVersion(id) > keyframe_mark_)
+        d.keyframes.emplace_back(id, m.keyframe(id));
+      if (i >= saved || table.rowVersion(id) > row_mark_) d.rows.emplace_back(id, table.row(id));
+    }
+  }
+  saved_ = n;
+  row_mark_ = row_mark;
+  keyframe_mark_ = keyframe_mark;
+  const core::PointSource& source = selector.pointSource();
+  d.rest.selector.config = selector.config();
+  d.rest.selector.policy = selector.policyState();
+  d.rest.selector.last_stamp = selector.lastStamp();
+  d.rest.points.name = source.name();
+  d.rest.points.params = source.params();
+  if (auto* map = dynamic_cast<const points::MapPointSource*>(&source)) d.rest.points.map = map->state();
+  if (auto* features = featuresOf(source)) d.rest.points.features = features->state();
+  return d;
+}
+
+std::vector<uint8_t> encodeJournalRecord(uint64_t base_id, uint64_t index,
+                                         const SessionDelta& delta) {
+  Writer w;
+  w.u64(base_id);
+  w.u64(index);
+  w.u64(delta.keyframe_count);
+  w.u64(delta.keyframes.size());
+  for (const auto& [id, k] : delta.keyframes) {
+    w.i32(id);
+    writeKeyframe(w, k);
+  }
+  w.u64(delta.rows.size());
+  for (const auto& [id, row] : delta.rows) {
+    w.i32(id);
+    writeRow(w, row);
+  }
+  encodeContent(w, trailerOf(delta.rest));
+  Writer h;
+  h.raw(kJournalMagic.data(), kJournalMagic.size());
+  h.u32(kJournalVersion);
+  h.u64(w.bytes.size());
+  h.u32(crc32(w.bytes.data(), w.bytes.size()));
+  h.u32(crc32(h.bytes.data(), h.bytes.size()));
+  h.raw(w.bytes.data(), w.bytes.size());
+  return std::move(h.bytes);
+}
+
+JournalReplay replayJournal(SessionState& state, const uint8_t* data, size_t size,
+                            const std::string& name) {
+  JournalReplay out;
+  out.total_bytes = size;
+  const std::string what = name.empty() ? "journal" : "journal '" + name + "'";
+  size_t pos = 0;
+  uint64_t expected = 0;  // the next record index of this base
+  while (pos < size) {
+    const auto stop = [&](const std::string& why) {
+      out.error = what + ": " + why + " at byte " + std::to_string(pos) + " (record " +
+                  std::to_string(out.records + out.stale) + "); the " + std::to_string(size - pos) +
+                  " bytes from there on are dropped";
+    };
+    if (size - pos < kRecordHeaderSize) {
+      stop("a torn record header");
+      break;
+    }
+    const uint8_t* h = data + pos;
+    Reader header(h, kRecordHeaderSize, what);
+    if (std::memcmp(header.take(4, "signature"), kJournalMagic.data(), 4) != 0) {
+      stop("no record signature");
+      break;
+    }
+    const uint32_t version = header.u32("version");
+    const uint64_t length = header.u64("record length");
+    const uint32_t payload_crc = header.u32("record checksum");
+    const uint32_t header_crc = header.u32("record header checksum");
+    if (header_crc != crc32(h, kRecordHeaderSize - 4)) {
+      stop("a record header whose checksum does not match");
+      break;
+    }
+    if (version != kJournalVersion) {
+      stop("a record of version " + std::to_string(version));
+      break;
+    }
+    if (length > size - pos - kRecordHeaderSize) {
+      stop("a torn record (" + std::to_string(length) + " bytes announced, " +
+           std::to_string(size - pos - kRecordHeaderSize) + " there)");
+      break;
+    }
+    const uint8_t* payload = h + kRecordHeaderSize;
+    if (payload_crc != crc32(payload, static_cast<size_t>(length))) {
+      stop("a record whose checksum does not match");
+      break;
+    }
+    try {
+      Reader r(payload, static_cast<size_t>(length), what);
+      uint64_t base_id = 0, index = 0;
+      SessionDelta delta = decodeRecord(r, base_id, index, what);
+      if (!state.base_id || base_id != *state.base_id) {
+        ++out.stale;  // of an earlier base: the base holds it already
+      } else {
+        if (index != expected)
+          throw StateFileError("record " + std::to_string(index) + " where " +
+                               std::to_string(expected) + " was due");
+        applyDelta(state, delta);
+        ++expected;
+        ++out.records;
+      }
+    } catch (const core::Error& e) {
+      stop(e.what());
+      break;
+    }
+    pos += kRecordHeaderSize + static_cast<size_t>(length);
+    out.good_bytes = pos;
+  }
+  return out;
+}
+
+std::string journalPath(const std::string& path) { return path + ".journal"; }
+
+namespace {
+
+std::vector<uint8_t> readWholeFile(const std::string& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw core::IoError("cannot open '" + path + "': " + std::strerror(errno));
+  std::vector<uint8_t> bytes;
+  uint8_t buffer[1 << 16];
+  while (true) {
+    const ssize_t n = ::read(fd, buffer, sizeof buffer);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) {
+      const int saved = errno;
+      ::close(fd);
+      throw core::IoError("cannot read '" + path + "': " + std::strerror(saved));
+    }
+    if (n == 0) break;
+    bytes.insert(bytes.end(), buffer, buffer + n);
+  }
+  ::close(fd);
+  return bytes;
+}
+
+}  // namespace
+
+SessionState readSession(const std::string& path, JournalReplay* replay) {
+  SessionState state = readStateFile(path);
+  const std::string journal = journalPath(path);
+  JournalReplay r;
+  if (::access(journal.c_str(), F_OK) == 0) {
+    const std::vector<uint8_t> bytes = readWholeFile(journal);
+    r = replayJournal(state, bytes.data(), bytes.size(), journal);
+  }
+  if (replay) *replay = r;
+  return state;
+}
+
+void appendToFile(const std::string& path, const std::vector<uint8_t>& bytes) {
+  const int fd = ::open(path.c_str(), O_WRONLY | O_APPEND | O_CREAT | O_CLOEXEC, 0644);
+  if (fd < 0) throw core::IoError("cannot open '" + path + "': " + std::strerror(errno));
+  size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) {
+      const int saved = errno;
+      ::close(fd);
+      throw core::IoError("cannot append to '" + path + "': " + std::strerror(saved));
+    }
+    done += static_cast<size_t>(n);
+  }
+  if (::fdatasync(fd) != 0) {
+    const int saved = errno;
+    ::close(fd);
+    throw core::IoError("cannot flush '" + path + "': " + std::strerror(saved));
+  }
+  ::close(fd);
+}
+
+void truncateFile(const std::string& path, size_t size) {
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC, 0644);
+  if (fd < 0) throw core::IoError("cannot open '" + path + "': " + std::strerror(errno));
+  if (::ftruncate(fd, static_cast<off_t>(size)) != 0 || ::fsync(fd) != 0) {
+    const int saved = errno;
+    ::close(fd);
+    throw core::IoError("cannot truncate '" + path + "': " + std::strerror(saved));
+  }
+  ::close(fd);
 }
 
 }  // namespace view_selection::io

@@ -56,10 +56,25 @@ KeyframeWorker::~KeyframeWorker() {
   if (verdicts_) verdicts_->stop();
   if (thread_.joinable()) thread_.join();
   if (!keeper_.enabled()) return;
+  std::optional<JournalSnapshot> record;
   std::optional<StateSnapshot> last;
   {
     std::lock_guard<std::timed_mutex> lock(state_mutex_);
-    if (changed_since_save_) last = captureStateLocked();
+    if (changed_since_save_) {
+      if (keeper_.wantsFull())
+        last = captureStateLocked();
+      else
+        record = captureDeltaLocked();
+    }
+  }
+  if (record) {
+    const SaveResult appended = keeper_.appendNow(std::move(*record));
+    if (appended.ok) {
+      ROS_INFO_STREAM("view_selection: session saved on shutdown: " << appended.message);
+      return;
+    }
+    std::lock_guard<std::timed_mutex> lock(state_mutex_);
+    last = captureStateLocked();  // the journal could not continue: a whole save
   }
   if (!last) return;
   const SaveResult saved = keeper_.saveNow(std::move(*last));
@@ -79,6 +94,7 @@ void KeyframeWorker::restoreLoaded() {
   if (!loaded) return;
   try {
     io::restoreSession(*selector_, *loaded);
+    saved_.markSaved(*selector_);  // what the file holds; a reconfigure below changes rows
     // The node's parameters win over the saved ones, as a live reconfigure would apply them
     // (compared as they act: the saved ones are the values in force, the gate's preset applied).
     core::ViewSelectorConfig wanted = config_.selector;
@@ -280,8 +296,21 @@ StateSnapshot KeyframeWorker::captureStateLocked() {
   s.state.statistics = statistics_.toSaved();
   s.state.saved_at = ros::WallTime::now().toSec();
   if (pairs_) s.state.pair_sequence = pairs_->sequence();
+  saved_.markSaved(*selector_);
   changed_since_save_ = false;
   return s;
+}
+
+JournalSnapshot KeyframeWorker::captureDeltaLocked() {
+  JournalSnapshot j;
+  j.follows = captures_;
+  j.sequence = ++captures_;
+  j.delta = saved_.capture(*selector_);
+  j.delta.rest.statistics = statistics_.toSaved();
+  j.delta.rest.saved_at = ros::WallTime::now().toSec();
+  if (pairs_) j.delta.rest.pair_sequence = pairs_->sequence();
+  changed_since_save_ = false;
+  return j;
 }
 
 void KeyframeWorker::setMapPoints(Eigen::Matrix3Xd points) {
@@ -574,7 +603,12 @@ void KeyframeWorker::process(const Queued& queued) {
     if (config_.autosave_keyframes > 0 && ++keyframes_since_save_ >= config_.autosave_keyframes &&
         keeper_.enabled()) {
       keyframes_since_save_ = 0;
-      keeper_.saveLater(captureStateLocked());  // copied here, written on the keeper's thread
+      // Only what changed since the last save, appended to the journal on the keeper's thread;
+      // a whole copy when the journal cannot continue (no base yet, a failed write).
+      if (keeper_.wantsFull())
+        keeper_.saveLater(captureStateLocked());
+      else
+        keeper_.appendLater(captureDeltaLocked());
     }
     return;
   }

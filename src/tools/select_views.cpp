@@ -474,7 +474,10 @@ void printSummary(const Options& o, const TumDataset& dataset, const ViewSelecto
 /// --state: the saved session's keyframes, re-selected (with the parameters given) and exported.
 int runFromState(const Options& o) {
   const auto t_start = std::chrono::steady_clock::now();
-  const SessionState state = readStateFile(o.state);
+  JournalReplay replay;
+  const SessionState state = readSession(o.state, &replay);  // with its journal, when there
+  if (!replay.error.empty())
+    std::fprintf(stderr, "select_views: %s; using the records before it\n", replay.error.c_str());
   const double read_seconds = seconds(t_start);
   std::unique_ptr<ViewSelector> selector = selectorFor(state);
   ViewSelectorConfig config = selector->config();

@@ -399,6 +399,118 @@ TEST(ErrorResistanceMatrix, SpatialIndexSkipsOnlyPairsTheFootprintGateRejects) {
   }
 }
 
+/// Keyframe q of a corridor walk along +z (1 m apart, walls at x = +-2, y = +-1.5), 64 points
+/// on the walls 4-10 m ahead; `far` of them (in place of near ones) `far_at` metres ahead.
+Keyframe corridorKeyframe(int q, std::mt19937& rng, int far = 0, double far_at = 0.0) {
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  Keyframe kf;
+  kf.stamp = q;
+  kf.intrinsics = vgaIntrinsics();
+  const Eigen::Vector3d eye(0.0, 0.0, 1.0 * q);
+  kf.pose = lookAt(eye, eye + Eigen::Vector3d(0.0, 0.0, 1.0));
+  kf.points.resize(3, 64);
+  for (int c = 0; c < 64; ++c) {
+    const double dz = c < far ? far_at : 4.0 + 6.0 * uni(rng);
+    const bool side = uni(rng) < 0.5;
+    const double s = uni(rng) < 0.5 ? -1.0 : 1.0;
+    kf.points.col(c) = side ? Eigen::Vector3d(2.0 * s, -1.5 + 3.0 * uni(rng), eye.z() + dz)
+                            : Eigen::Vector3d(-2.0 + 4.0 * uni(rng), 1.5 * s, eye.z() + dz);
+  }
+  return kf;
+}
+
+TEST(ErrorResistanceMatrix, AFarReachingKeyframeDoesNotWidenLaterSearches) {
+  // Keyframe 20 sees a few points (fewer than the co-visibility gate needs) 10 km away, keyframe
+  // 40 sees every point 10 km away (a real far reach). Later insertions still look at a bounded
+  // number of keyframes, and every entry equals the naive definition.
+  ErrorResistanceConfig config;  // matchable: footprint ratio 1.6, co-visibility 10 / 0.5
+  config.min_covisible_ratio = 0.2;
+  for (const bool reset_far : {false, true}) {
+    std::mt19937 rng(5);
+    ErrorResistanceMatrix matrix(config);
+    std::vector<Keyframe> keyframes;
+    std::vector<size_t> examined;
+    for (int q = 0; q < 400; ++q) {
+      const Keyframe kf = q == 20   ? corridorKeyframe(q, rng, 5, 1e4)
+                          : q == 40 ? corridorKeyframe(q, rng, 64, 1e4)
+                                    : corridorKeyframe(q, rng);
+      const size_t before = matrix.candidatesExamined();
+      matrix.addKeyframe(kf);
+      examined.push_back(matrix.candidatesExamined() - before);
+      keyframes.push_back(kf);
+      if (reset_far && q == 200) {
+        // The far points replaced by near ones: the large reach is gone.
+        Keyframe near = corridorKeyframe(40, rng);
+        matrix.setPoints(40, near.points);
+        keyframes[40].points = near.points;
+      }
+    }
+    // Bounded by the largest reach, an insertion would look at every keyframe twice (row and
+    // column: 2 q); here at the ones within a few reaches, whatever n is.
+    // (Below ~220 keyframes the grid compares every centre: fewer than the cells a query spans.)
+    for (int q = 300; q < 400; ++q)
+      ASSERT_LT(examined[static_cast<size_t>(q)], 250u) << "insertion " << q;
+    size_t late = 0;
+    for (int q = 380; q < 400; ++q) late += examined[static_cast<size_t>(q)];
+    EXPECT_LT(late / 20, 250u);
+    const size_t n = keyframes.size();
+    int finite = 0;
+    for (size_t a = 0; a < n; ++a)
+      for (size_t b = 0; b < n; ++b) {
+        if (a == b) continue;
+        const double expected = naiveEntry(keyframes[a], keyframes[b], config);
+        const double got = matrix.at(static_cast<ViewId>(a), static_cast<ViewId>(b));
+        if (std::isfinite(expected)) {
+          ++finite;
+          ASSERT_NEAR(got, expected, 1e-12 * expected) << a << "," << b;
+        } else {
+          ASSERT_EQ(got, kInfinity) << a << "," << b;
+        }
+      }
+    EXPECT_GT(finite, static_cast<int>(n));
+  }
+}
+
+TEST(CameraGrid, GrowsCoarserForARunOfLargeQueriesAndFinerAgainAfter) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> uni(-100.0, 100.0);
+  std::vector<Eigen::Vector3d> centres;
+  CameraGrid grid;
+  for (int q = 0; q < 2000; ++q) {
+    centres.emplace_back(uni(rng), uni(rng), 0.01 * uni(rng));
+    grid.insert(static_cast<ViewId>(q), centres.back());
+  }
+  std::vector<ViewId> got;
+  const auto check = [&](const Eigen::Vector3d& at, double radius) {
+    grid.query(at, radius, got);
+    std::vector<ViewId> expected;
+    for (size_t q = 0; q < centres.size(); ++q)
+      if ((centres[q] - at).norm() <= radius) expected.push_back(static_cast<ViewId>(q));
+    ASSERT_EQ(got, expected) << "radius " << radius;
+  };
+  check(Eigen::Vector3d::Zero(), 2.0);
+  const double fine = grid.cellSize();
+  // One outlier's large query: answered, no regrid; it looks at no more than every centre.
+  check(Eigen::Vector3d::Zero(), 500.0);
+  EXPECT_EQ(grid.cellSize(), fine);
+  EXPECT_LE(grid.lastExamined(), centres.size());
+  check(Eigen::Vector3d(1.0, 1.0, 0.0), 2.0);
+  EXPECT_LT(grid.lastExamined(), 40u);
+  // A run of large queries: coarser.
+  for (int q = 0; q < 4; ++q) check(Eigen::Vector3d(uni(rng), uni(rng), 0.0), 300.0);
+  EXPECT_GT(grid.cellSize(), 10.0 * fine);
+  // Then small ones again: after a run of them, as fine as before, and small queries look at
+  // a few centres, not at every one.
+  for (int q = 0; q < 40; ++q) check(Eigen::Vector3d(uni(rng), uni(rng), 0.0), 2.0);
+  EXPECT_EQ(grid.cellSize(), fine);
+  size_t most = 0;
+  for (int q = 0; q < 20; ++q) {
+    check(Eigen::Vector3d(uni(rng), uni(rng), 0.0), 2.0);
+    most = std::max(most, grid.lastExamined());
+  }
+  EXPECT_LT(most, 40u);
+}
+
 TEST(CameraGrid, QueryEqualsBruteForceAtEveryRadius) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> uni(-50.0, 50.0);

@@ -20,6 +20,7 @@
 #include <fstream>
 #include <map>
 #include <memory>
+#include <random>
 
 namespace view_selection {
 namespace {
@@ -313,6 +314,269 @@ TEST(StateFile, BadFilesAreKeptAsideNeverOverwritten) {
 TEST(StateFile, Crc32IsZlibs) {
   const std::string check = "123456789";
   EXPECT_EQ(crc32(reinterpret_cast<const uint8_t*>(check.data()), check.size()), 0xCBF43926u);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The journal: records of what changed since the last save, replayed over the base file.
+
+/// A state as bytes, with what differs between equal sessions (producer, time, base id) fixed.
+std::vector<uint8_t> canonical(SessionState state) {
+  state.producer = "test";
+  state.saved_at = 1.0;
+  state.base_id.reset();
+  return encodeState(state);
+}
+
+/// A journal of four records after a base of the first frames, with the states each record
+/// leads to (canonical); the second record also carries a loop closure (keyframes moved).
+struct Journal {
+  SessionState base;
+  std::vector<uint8_t> bytes;
+  std::vector<size_t> starts;                  // of each record
+  std::vector<std::vector<uint8_t>> expected;  // the state after each record
+  std::vector<SessionDelta> deltas;
+};
+
+Journal makeJournal(const std::string& source, uint64_t base_id) {
+  Journal j;
+  auto selector = makeSelector(source);
+  feed(*selector, source, 0, 3);
+  j.base = captureSession(*selector);
+  j.base.base_id = base_id;
+  DeltaTracker tracker;
+  tracker.markSaved(*selector);
+  const int cuts[] = {3, 5, 8, 10, 14};
+  for (int c = 0; c + 1 < 5; ++c) {
+    feed(*selector, source, cuts[c], cuts[c + 1]);
+    if (c == 1 && selector->matrix().size() >= 3) {
+      // A loop closure moves keyframes 0 and 1: their keyframes and rows change.
+      std::vector<std::pair<ViewId, CameraPose>> moved;
+      for (ViewId id : {0, 1}) {
+        CameraPose p = selector->matrix().keyframe(id).pose;
+        p.position += Eigen::Vector3d(0.02, -0.01, 0.0);
+        moved.emplace_back(id, p);
+      }
+      selector->correctPoses(moved);
+    }
+    SessionDelta d = tracker.capture(*selector);
+    d.rest.statistics.frames_offered = static_cast<uint64_t>(cuts[c + 1]);
+    d.rest.pair_sequence = 100 + static_cast<uint64_t>(c);
+    j.starts.push_back(j.bytes.size());
+    const std::vector<uint8_t> record = encodeJournalRecord(base_id, static_cast<uint64_t>(c), d);
+    j.bytes.insert(j.bytes.end(), record.begin(), record.end());
+    SessionState whole = captureSession(*selector);
+    whole.statistics = d.rest.statistics;
+    whole.pair_sequence = d.rest.pair_sequence;
+    j.expected.push_back(canonical(whole));
+    j.deltas.push_back(std::move(d));
+  }
+  return j;
+}
+
+class JournalReplaysExactly : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(JournalReplaysExactly, BasePlusJournalEqualsAWholeCapture) {
+  const Journal j = makeJournal(GetParam(), 42);
+  // Only what changed: the records together hold fewer keyframes than a whole capture each.
+  EXPECT_LT(j.deltas.back().keyframes.size(), j.base.selector.keyframes.size() + 8);
+  SessionState state = j.base;
+  const JournalReplay r = replayJournal(state, j.bytes.data(), j.bytes.size());
+  EXPECT_EQ(r.error, "");
+  EXPECT_EQ(r.records, 4u);
+  EXPECT_EQ(r.good_bytes, j.bytes.size());
+  EXPECT_EQ(canonical(state), j.expected.back());
+  EXPECT_EQ(state.pair_sequence, std::optional<uint64_t>(103));
+  // The replayed state continues in a selector, as the node does.
+  auto resumed = makeSelector(GetParam());
+  restoreSession(*resumed, state);
+  EXPECT_EQ(canonical(captureSession(*resumed)),
+            [&] {
+              SessionState plain = state;
+              plain.statistics = {};
+              plain.pair_sequence.reset();
+              return canonical(plain);
+            }());
+  // Two records merged (as the keeper merges records waiting) give the same state.
+  SessionState merged = j.base;
+  applyDelta(merged, j.deltas[0]);
+  SessionDelta both = j.deltas[1];
+  SessionDelta rest = j.deltas[2];
+  mergeDelta(both, rest);
+  applyDelta(merged, both);
+  applyDelta(merged, j.deltas[3]);
+  EXPECT_EQ(canonical(merged), j.expected.back());
+}
+
+INSTANTIATE_TEST_SUITE_P(EverySource, JournalReplaysExactly,
+                         ::testing::Values("depth", "features", "map"));
+
+TEST(StateJournal, ATornTailIsDroppedWhereverTheLastRecordIsCut) {
+  const Journal j = makeJournal("depth", 7);
+  const size_t last = j.starts.back();
+  ASSERT_GT(j.bytes.size() - last, 100u);
+  // Every byte of the header and of the record's first and last 512 bytes, every 7th between.
+  for (size_t cut = last + 1; cut < j.bytes.size();
+       cut += (cut < last + 512 || cut + 512 > j.bytes.size()) ? 1 : 7) {
+    SessionState state = j.base;
+    const JournalReplay r = replayJournal(state, j.bytes.data(), cut);
+    ASSERT_NE(r.error, "") << "cut at " << cut;
+    ASSERT_EQ(r.records, 3u) << "cut at " << cut;
+    ASSERT_EQ(r.good_bytes, last) << "cut at " << cut;
+    ASSERT_EQ(canonical(state), j.expected[2]) << "cut at " << cut;
+  }
+  // A changed byte anywhere in the last record: the same.
+  for (size_t at = last; at < j.bytes.size(); at += 97) {
+    std::vector<uint8_t> bad = j.bytes;
+    bad[at] ^= 0x10;
+    SessionState state = j.base;
+    const JournalReplay r = replayJournal(state, bad.data(), bad.size());
+    ASSERT_NE(r.error, "") << "byte " << at;
+    ASSERT_EQ(r.records, 3u) << "byte " << at;
+    ASSERT_EQ(canonical(state), j.expected[2]) << "byte " << at;
+  }
+  // Cut exactly between records: a clean end, no error.
+  SessionState state = j.base;
+  const JournalReplay r = replayJournal(state, j.bytes.data(), last);
+  EXPECT_EQ(r.error, "");
+  EXPECT_EQ(canonical(state), j.expected[2]);
+}
+
+TEST(StateJournal, RecordsOfAnotherBaseAreIgnored) {
+  const Journal j = makeJournal("depth", 7);
+  SessionState state = j.base;
+  state.base_id = 8;  // a newer base: it holds what the records add
+  const JournalReplay r = replayJournal(state, j.bytes.data(), j.bytes.size());
+  EXPECT_EQ(r.error, "");
+  EXPECT_EQ(r.records, 0u);
+  EXPECT_EQ(r.stale, 4u);
+  EXPECT_EQ(canonical(state), canonical(j.base));
+  state.base_id.reset();  // a file before the journal: records never apply
+  EXPECT_EQ(replayJournal(state, j.bytes.data(), j.bytes.size()).records, 0u);
+}
+
+/// Points handed in from outside, for long sessions without rendering.
+class GivenPoints : public core::PointSource {
+ public:
+  std::string name() const override { return "depth"; }  // the state of a source without any
+  core::PointSourceResult process(ViewId, const Frame&) override {
+    core::PointSourceResult r;
+    r.points = next;
+    return r;
+  }
+  void reset() override {}
+  Eigen::Matrix3Xd next;
+};
+
+TEST(StateJournal, ALongSessionReplaysExactlyAcrossVersionChunks) {
+  // 700 keyframes (three chunks of 256 versions), records every 9 keyframes, corrections that
+  // move keyframes of earlier chunks in between: base + journal equals a whole capture.
+  auto points = std::make_unique<GivenPoints>();
+  GivenPoints* given = points.get();
+  ViewSelectorConfig config;
+  config.keyframes.mode = KeyframeMode::kEveryFrame;
+  ViewSelector selector(config, std::move(points));
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> uni(-1.0, 1.0);
+  const auto add = [&](int q) {
+    Frame f;
+    f.stamp = 1.0 + q;
+    f.image_name = std::to_string(q);
+    f.intrinsics = test::vgaIntrinsics();
+    const Eigen::Vector3d eye(0.0, 0.0, 0.5 * q);
+    f.pose = lookAt(eye, eye + Eigen::Vector3d(0.0, 0.0, 1.0));
+    given->next.resize(3, 40);
+    for (int c = 0; c < 40; ++c)
+      given->next.col(c) = eye + Eigen::Vector3d(2.0 * uni(rng), 1.5 * uni(rng), 5.0 + uni(rng));
+    selector.addFrame(f);
+  };
+  for (int q = 0; q < 20; ++q) add(q);
+  SessionState state = captureSession(selector);
+  state.base_id = 5;
+  DeltaTracker tracker;
+  tracker.markSaved(selector);
+  std::vector<uint8_t> journal;
+  uint64_t index = 0;
+  for (int q = 20; q < 700; ++q) {
+    add(q);
+    if (q % 97 == 0) {
+      // A loop closure moves a keyframe of the first chunk and one of the last.
+      std::vector<std::pair<ViewId, CameraPose>> moved;
+      for (const ViewId id : {static_cast<ViewId>(q / 3), static_cast<ViewId>(q - 2)}) {
+        CameraPose p = selector.matrix().keyframe(id).pose;
+        p.position.x() += 0.01;
+        moved.emplace_back(id, p);
+      }
+      selector.correctPoses(moved);
+    }
+    if (q % 9 == 0) {
+      const std::vector<uint8_t> r = encodeJournalRecord(5, index++, tracker.capture(selector));
+      journal.insert(journal.end(), r.begin(), r.end());
+    }
+  }
+  const std::vector<uint8_t> r = encodeJournalRecord(5, index++, tracker.capture(selector));
+  journal.insert(journal.end(), r.begin(), r.end());
+  const JournalReplay replay = replayJournal(state, journal.data(), journal.size());
+  EXPECT_EQ(replay.error, "");
+  EXPECT_EQ(replay.records, index);
+  EXPECT_EQ(canonical(state), canonical(captureSession(selector)));
+  EXPECT_GT(selector.matrix().table().finiteCount(), 700u);
+}
+
+// Compaction as the node's state keeper does it: the new base written atomically with a new id,
+// then the journal emptied, then records of the new base appended. Every state the files can be
+// in when the process is killed reads back complete.
+TEST(StateJournal, AKillAtAnyStepOfACompactionLosesNothing) {
+  const fs::path dir = fs::temp_directory_path() / ("state_journal_test_" + std::to_string(getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string path = (dir / "state.vss").string();
+  const std::string journal = journalPath(path);
+  Journal j = makeJournal("depth", 1);
+  writeStateFile(path, j.base);
+  // Records appended one by one: after each, the session up to it.
+  for (size_t q = 0; q < j.starts.size(); ++q) {
+    const size_t end = q + 1 < j.starts.size() ? j.starts[q + 1] : j.bytes.size();
+    appendToFile(journal, std::vector<uint8_t>(j.bytes.begin() + static_cast<long>(j.starts[q]),
+                                               j.bytes.begin() + static_cast<long>(end)));
+    EXPECT_EQ(canonical(readSession(path)), j.expected[q]) << "after record " << q;
+  }
+  const std::vector<uint8_t> complete = j.expected.back();
+  // 1. The new base is being written: the old base and the whole journal are still there (the
+  //    atomic write leaves at most a temporary file beside them).
+  std::ofstream(path + ".tmp-partial", std::ios::binary) << "half a file";
+  EXPECT_EQ(canonical(readSession(path)), complete);
+  fs::remove(path + ".tmp-partial");
+  // 2. The new base is in place, the journal not yet emptied: its records name the old base.
+  SessionState compacted = readSession(path);
+  compacted.base_id = 2;
+  writeStateFile(path, compacted);
+  JournalReplay replay;
+  EXPECT_EQ(canonical(readSession(path, &replay)), complete);
+  EXPECT_EQ(replay.stale, 4u);
+  EXPECT_EQ(replay.error, "");
+  // 3. The journal emptied.
+  truncateFile(journal, 0);
+  EXPECT_EQ(canonical(readSession(path)), complete);
+  // 4. A record of the new base torn half way, then written whole.
+  auto selector = makeSelector("depth");
+  restoreSession(*selector, readSession(path));
+  DeltaTracker tracker;
+  tracker.markSaved(*selector);
+  feed(*selector, "depth", 14, 18);
+  const SessionDelta d = tracker.capture(*selector);
+  const std::vector<uint8_t> record = encodeJournalRecord(2, 0, d);
+  appendToFile(journal, std::vector<uint8_t>(record.begin(), record.begin() + record.size() / 2));
+  EXPECT_EQ(canonical(readSession(path, &replay)), complete);
+  EXPECT_NE(replay.error, "");
+  truncateFile(journal, replay.good_bytes);  // what the keeper does before appending again
+  appendToFile(journal, record);
+  SessionState after = captureSession(*selector);
+  after.statistics = d.rest.statistics;
+  after.pair_sequence = d.rest.pair_sequence;
+  EXPECT_EQ(canonical(readSession(path, &replay)), canonical(after));
+  EXPECT_EQ(replay.records, 1u);
+  EXPECT_EQ(replay.error, "");
+  fs::remove_all(dir);
 }
 
 }  // namespace

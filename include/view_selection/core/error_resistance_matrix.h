@@ -13,6 +13,7 @@
 #include <Eigen/Core>
 
 #include <cstdint>
+#include <map>
 #include <utility>
 #include <vector>
 
@@ -92,6 +93,16 @@ class ErrorResistanceMatrix {
 
   size_t size() const { return views_.size(); }
   const Keyframe& keyframe(ViewId id) const { return views_.at(static_cast<size_t>(id)).keyframe; }
+  /// Changes whenever keyframe `id` changes (View::version).
+  std::uint64_t keyframeVersion(ViewId id) const {
+    return views_[static_cast<size_t>(id)].version;
+  }
+  /// The largest keyframe version of views [c * kVersionChunk, (c + 1) * kVersionChunk) (as
+  /// ErrorResistanceTable::chunkVersion for rows), and the last version any view got.
+  std::uint64_t keyframeChunkVersion(size_t c) const {
+    return c < keyframe_chunk_version_.size() ? keyframe_chunk_version_[c] : 0;
+  }
+  static std::uint64_t lastKeyframeVersionIssued();
   double at(ViewId i, ViewId j) const { return table_.at(i, j); }
   const ErrorResistanceTable& table() const { return table_; }
   /// What the outputs show of each keyframe, by id (chunked: a copy shares it).
@@ -100,6 +111,9 @@ class ErrorResistanceMatrix {
   const ErrorResistanceConfig& config() const { return config_; }
   /// Pairs whose points were projected (not culled by a pair-level test) so far; for benchmarks.
   size_t pairsEvaluated() const { return pairs_evaluated_; }
+  /// Keyframes the candidate search compared with a distance bound so far (the camera grid's
+  /// and the farthest-reaching ones); for tests and benchmarks.
+  size_t candidatesExamined() const { return candidates_examined_; }
 
   /// A group of nearby points of X_i with a bounding sphere, for culling against a frustum.
   struct PointGroup {
@@ -115,11 +129,14 @@ class ErrorResistanceMatrix {
     Eigen::Matrix3d world_to_camera;              // R^T
     Eigen::Vector3d sphere_centre;                // of all of X_i, world
     double sphere_radius = -1.0;                  // < 0: no points
-    double reach = 0.0;                           // farthest point from the camera centre
+    double reach = 0.0;  // farthest point from the camera centre; in the matrix: countedReach
     double focal = 0.0;                           // sqrt(fx fy)
     Eigen::Matrix<double, 3, 5> frustum_normals;  // camera frame, inward unit normals
     std::vector<std::uint32_t> point_order;       // columns of keyframe.points, groups contiguous
     std::vector<PointGroup> groups;               // kd-tree leaves of at most kGroupSize points
+    /// Unique to this view as made: a keyframe changed (points, pose) gets a new one, so equal
+    /// versions mean an unchanged keyframe (the state journal keys on it).
+    std::uint64_t version = 0;
   };
   static constexpr std::uint32_t kGroupSize = 16;
   static View makeView(Keyframe keyframe);
@@ -139,6 +156,11 @@ class ErrorResistanceMatrix {
   void candidates(ViewId id, bool row, std::vector<ViewId>& out);
   /// Adds view `id` to the camera grid and the reach and focal-length bounds.
   void index(ViewId id);
+  /// The distance from O_i within which the points that can make an entry of row i finite
+  /// lie: the m-th farthest point of X_i, m the co-visibility gate's count (0: none can).
+  double countedReach(const View& v) const;
+  /// View `id`'s reach becomes `reach`; the largest reach follows (also down).
+  void setReach(ViewId id, double reach);
   /// The row of `id` from scratch, over its candidates.
   std::vector<TableEntry> computeRow(ViewId id);
 
@@ -149,8 +171,16 @@ class ErrorResistanceMatrix {
   ErrorResistanceTable table_;
   Scratch scratch_;
   size_t pairs_evaluated_ = 0;
+  size_t candidates_examined_ = 0;
   CameraGrid grid_;                 // camera centres, for candidates()
-  double max_reach_ = 0.0;          // of every view so far
+  /// Views past the grid's reach, looked at one by one in the column direction.
+  static constexpr size_t kFarViews = 32;
+  void updateGridReach();
+  /// View `id` was made or replaced: its chunk's keyframe version follows.
+  void placed(ViewId id);
+  std::vector<std::uint64_t> keyframe_chunk_version_;
+  double grid_reach_ = 0.0;         // the (kFarViews + 1)-th largest reach now
+  std::multimap<double, ViewId> reaches_;  // every view's counted reach
   double min_focal_ = 0.0, max_focal_ = 0.0;
   std::vector<ViewId> candidates_;  // reused
 };

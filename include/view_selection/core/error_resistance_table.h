@@ -82,6 +82,14 @@ class ErrorResistanceTable {
   /// Changes whenever row i changes, to a value no other row of any table ever had: equal
   /// versions mean equal rows, also across copies (SelectionCache keys on it). 0: never set.
   std::uint64_t rowVersion(ViewId i) const { return row_version_[static_cast<size_t>(i)]; }
+  /// The largest row version of rows [c * kVersionChunk, (c + 1) * kVersionChunk) (0: none set),
+  /// so that finding the rows changed since a moment costs O(n / kVersionChunk) plus theirs.
+  static constexpr size_t kVersionChunk = 256;
+  std::uint64_t chunkVersion(size_t c) const {
+    return c < chunk_version_.size() ? chunk_version_[c] : 0;
+  }
+  /// The last version any row of any table got: rows changed later get larger ones.
+  static std::uint64_t lastVersionIssued();
   /// Dense copy, +inf for absent entries.
   std::vector<std::vector<double>> dense() const;
 
@@ -104,6 +112,7 @@ class ErrorResistanceTable {
   ChunkedVector<SharedEntries> cols_;
   ChunkedVector<SharedEntries> top_;
   ChunkedVector<std::uint64_t> row_version_;
+  std::vector<std::uint64_t> chunk_version_;  // by kVersionChunk rows
   size_t finite_count_ = 0;
   SharingEpoch epoch_;  ///< which lists this table may change in place
 };

@@ -87,6 +87,9 @@ class ViewSelector {
   void reset();
   /// The whole state but the point source's (copies the keyframes; depth maps are shared).
   ViewSelectorState state() const;
+  /// The policy's and the last stamp's part of state(), without copying keyframes.
+  KeyframePolicy::State policyState() const { return policy_.state(); }
+  std::optional<double> lastStamp() const { return last_stamp_; }
   /// Continues from a saved state, with its config: keyframes and E as saved (no entry
   /// recomputed), the policy and the last stamp. The point source is the caller's to restore.
   /// Throws InvalidArgument / InvalidInput (nothing changes then).

@@ -50,7 +50,73 @@ struct SessionState {
   /// The node's pair stream (~pairs): the last sequence number it used; absent in files of
   /// select_views and of nodes before the stream.
   std::optional<uint64_t> pair_sequence;
+  /// The id of this file as a journal's base (section JRNL): records of a journal beside it
+  /// continue it only when they name this id. Absent in files before the journal.
+  std::optional<uint64_t> base_id;
 };
+
+/// What changed in a session since an earlier capture: a record of the state journal
+/// (`<state file>.journal`, docs/state_file.md). Keyframes and rows are those that are new or
+/// changed; the rest (`rest`: config, policy, last stamp, point source, statistics, pair
+/// sequence, producer, saved at; its keyframes and rows are empty) is whole.
+struct SessionDelta {
+  uint64_t keyframe_count = 0;  ///< the session's keyframes after it (fewer: truncated first)
+  std::vector<std::pair<core::ViewId, core::Keyframe>> keyframes;           ///< ascending id
+  std::vector<std::pair<core::ViewId, std::vector<core::TableEntry>>> rows;  ///< ascending id
+  SessionState rest;
+};
+
+/// Applies `delta` to `state`; afterwards `state` equals the session the delta was captured
+/// from. Throws StateFileError when it does not fit (a new keyframe or row missing, an id out of
+/// range); `state` is unchanged then.
+void applyDelta(SessionState& state, const SessionDelta& delta);
+/// `earlier` followed by `later`, as one delta.
+void mergeDelta(SessionDelta& earlier, SessionDelta later);
+
+/// Captures what changed in a selector since the last capture: rows and keyframes whose versions
+/// (ErrorResistanceTable::rowVersion, ErrorResistanceMatrix::keyframeVersion) were issued after
+/// it, found chunk by chunk (O(n / 256) plus the chunks that changed), and the new ones. Call it
+/// under the selector's lock.
+class DeltaTracker {
+ public:
+  /// Everything the selector holds now counts as saved.
+  void markSaved(const core::ViewSelector& selector);
+  /// What changed since markSaved() or the last capture (then counts as saved). The point
+  /// source's state is whole (empty for "depth").
+  SessionDelta capture(const core::ViewSelector& selector);
+
+ private:
+  size_t saved_ = 0;  // keyframes at the last capture
+  uint64_t row_mark_ = 0, keyframe_mark_ = 0;  // the last versions issued then
+};
+
+/// One record of a journal: follows the base with id `base_id`, `index` counting from 0 after
+/// it. Layout in docs/state_file.md (a length and CRC-32s, so a torn tail is found).
+std::vector<uint8_t> encodeJournalRecord(uint64_t base_id, uint64_t index,
+                                         const SessionDelta& delta);
+
+/// A journal read against its base.
+struct JournalReplay {
+  uint64_t records = 0;      ///< applied
+  uint64_t stale = 0;        ///< of another base (an older one, before a compaction): ignored
+  size_t good_bytes = 0;     ///< the prefix that holds complete records (append after it)
+  size_t total_bytes = 0;
+  std::string error;         ///< why the tail from good_bytes on was dropped; empty: none
+};
+/// Applies the records of `data` that follow `state.base_id` to `state`, in order, up to the
+/// first torn or corrupt record (reported in `error`, never thrown).
+JournalReplay replayJournal(SessionState& state, const uint8_t* data, size_t size,
+                            const std::string& name = "");
+/// `path` + ".journal".
+std::string journalPath(const std::string& path);
+/// The state file with its journal applied (readStateFile, then replayJournal when the journal
+/// exists). `replay` (optional) says what the journal gave.
+SessionState readSession(const std::string& path, JournalReplay* replay = nullptr);
+/// Appends `bytes` to the file (made when missing) and flushes it to disk (fdatasync). Throws
+/// core::IoError; the file may then end in a torn record, which readers drop.
+void appendToFile(const std::string& path, const std::vector<uint8_t>& bytes);
+/// Cuts the file to `size` bytes (made empty when missing) and flushes it. Throws core::IoError.
+void truncateFile(const std::string& path, size_t size);
 
 /// A state file that cannot be used: truncated, corrupted, foreign, or of a newer format. The
 /// message says which, and names the file when it came from one.

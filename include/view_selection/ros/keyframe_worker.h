@@ -157,6 +157,8 @@ class KeyframeWorker {
   size_t startSession(bool time_jump);
   /// Under state_mutex_: the session for the state file.
   StateSnapshot captureStateLocked();
+  /// What changed since the last capture, for the state journal (O(changed) but the version scan).
+  JournalSnapshot captureDeltaLocked();
   /// At construction: continues the session the keeper read, or starts empty.
   void restoreLoaded();
   void drop(const Queued& queued, const std::string& reason, const std::string& message);
@@ -180,6 +182,7 @@ class KeyframeWorker {
   uint64_t applied_generation_ = 0;  // the generation selector_ belongs to
   uint64_t captures_ = 0;            // state snapshots taken (their sequence)
   int keyframes_since_save_ = 0;     // towards ~autosave_keyframes
+  io::DeltaTracker saved_;           // what the last capture held (state lock)
   std::atomic<bool> changed_since_save_{false};  // anything a saved session would differ in
   std::atomic<bool> unshared_{false};  // keyframes inserted and not yet shared
   std::atomic<size_t> keyframe_count_{0};  // keyframes accepted in this generation

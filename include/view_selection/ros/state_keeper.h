@@ -7,6 +7,7 @@
 #include "view_selection/ros/input_statistics.h"
 #include "view_selection/ros/node_config.h"
 
+#include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <mutex>
@@ -21,6 +22,14 @@ namespace view_selection::ros_node {
 struct StateSnapshot {
   uint64_t sequence = 0;
   io::SessionState state;
+};
+
+/// What changed since the capture `follows` (a snapshot or a journal record), as one record of
+/// the state journal; `sequence` is its own capture's.
+struct JournalSnapshot {
+  uint64_t sequence = 0;
+  uint64_t follows = 0;
+  io::SessionDelta delta;
 };
 
 /// What a save did.
@@ -55,6 +64,17 @@ class StateKeeper {
   void saveLater(StateSnapshot snapshot);
   /// Writes now, after a write in progress (~save_state, shutdown).
   SaveResult saveNow(StateSnapshot snapshot);
+  /// Whether the next save must be a whole snapshot (saveLater/saveNow): no base file with a
+  /// journal id yet, or the journal's chain broke (a failed write, a snapshot written out of
+  /// order). Otherwise the worker hands over only what changed (appendLater).
+  bool wantsFull() const { return need_full_.load(); }
+  /// Queues a journal record for the keeper's thread, merged with one still waiting. Never
+  /// blocks on a write. The record is appended (O(its size)) when it follows what is on disk;
+  /// otherwise it is dropped and wantsFull() turns true.
+  void appendLater(JournalSnapshot record);
+  /// Appends now, after a write in progress (shutdown); not ok when it could not (then save a
+  /// whole snapshot).
+  SaveResult appendNow(JournalSnapshot record);
   /// A session a time jump ended: written to previousPath() by the keeper's thread (replacing
   /// the one kept there before), and on destruction when it is still waiting. Never blocks on a
   /// write.
@@ -66,6 +86,12 @@ class StateKeeper {
  private:
   void loop();
   SaveResult write(StateSnapshot& snapshot);
+  SaveResult append(JournalSnapshot& record);
+  /// Base + journal read back and written as a new base; the journal emptied. Under write_mutex_.
+  void compactLocked();
+  /// After a new base is on disk: the journal emptied (its records name the old base).
+  void startJournalLocked(uint64_t base_id, size_t base_bytes);
+  std::string journalPath() const { return io::journalPath(path_); }
   void writeAside(StateSnapshot& snapshot);
 
   std::string path_;
@@ -74,12 +100,17 @@ class StateKeeper {
   std::optional<io::SessionState> loaded_;
 
   std::mutex write_mutex_;  // one write at a time; guards written_
-  uint64_t written_ = 0;    // sequence of the last snapshot on disk
+  uint64_t written_ = 0;    // sequence of the last snapshot or record on disk
+  std::optional<uint64_t> base_id_;  // of the base file on disk that the journal follows
+  uint64_t journal_index_ = 0;       // of the next record
+  size_t journal_bytes_ = 0, base_bytes_ = 0;
+  std::atomic<bool> need_full_{true};
   ros::WallTime last_error_log_;
 
   std::mutex mutex_;
   std::condition_variable wake_;
   std::optional<StateSnapshot> waiting_;
+  std::optional<JournalSnapshot> waiting_record_;
   std::optional<StateSnapshot> aside_;  // saveAside() not yet written
   bool stopping_ = false;
   std::thread thread_;  // last

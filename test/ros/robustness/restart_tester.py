@@ -120,6 +120,10 @@ class Restart(unittest.TestCase):
                     break
                 self.feed(self.frames[kill_at:kill_at + 1], both)
                 kill_at += 1
+            if s.state_saved_keyframes >= 6:
+                # The first autosave writes the whole file, later ones append journal records.
+                self.assertGreater(os.path.getsize(state + '.journal'), 0,
+                                   'a later autosave appended nothing to the journal')
             # SIGKILL: no shutdown save, so frames after the last autosave are lost to the node.
             node.kill()
             rospy.loginfo('restart test: killed after frame %d with %d keyframes, %d saved, %d '
