@@ -255,6 +255,13 @@ view_selection::ViewSelection selectionHeader(const core::SelectionOutput& snaps
 
 }  // namespace
 
+view_selection::ViewPair pairToMsg(core::ViewId a, core::ViewId b) {
+  view_selection::ViewPair p;
+  p.first = a;
+  p.second = b;
+  return p;
+}
+
 view_selection::KeyframeInfo keyframeToMsg(const core::SelectionOutput& snapshot,
                                            core::ViewId view) {
   const core::KeyframeSummary& kf = snapshot.keyframes[static_cast<size_t>(view)];
@@ -309,12 +316,7 @@ view_selection::ViewSelection selectionToMsg(const core::SelectionOutput& snapsh
     m.completed.push_back(cv);
   }
   m.isolated.assign(selection.isolated.begin(), selection.isolated.end());
-  for (const auto& [a, b] : selection.pairs) {
-    view_selection::ViewPair p;
-    p.first = a;
-    p.second = b;
-    m.pairs.push_back(p);
-  }
+  for (const auto& [a, b] : selection.pairs) m.pairs.push_back(pairToMsg(a, b));
   return m;
 }
 

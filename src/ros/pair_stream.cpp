@@ -69,23 +69,17 @@ void PairStream::emitLocked(const core::Announcement& announced, bool full, bool
   msg->sequence = ++sequence_;
   msg->full = full;
   msg->flushed = flushed;
-  std::set<core::ViewId> named;
-  for (const core::Pair& p : announced.added) {
-    view_selection::ViewPair v;
-    v.first = p.first;
-    v.second = p.second;
-    msg->added.push_back(v);
-    named.insert(p.first);
-    named.insert(p.second);
-  }
-  for (const core::Pair& p : announced.removed) {
-    view_selection::ViewPair v;
-    v.first = p.first;
-    v.second = p.second;
-    msg->removed.push_back(v);
-    named.insert(p.first);
-    named.insert(p.second);
-  }
+  std::set<core::ViewId> named;  // the keyframes the pairs name
+  const auto add = [&named](const std::vector<core::Pair>& pairs,
+                            std::vector<view_selection::ViewPair>& out) {
+    for (const core::Pair& p : pairs) {
+      out.push_back(pairToMsg(p.first, p.second));
+      named.insert(p.first);
+      named.insert(p.second);
+    }
+  };
+  add(announced.added, msg->added);
+  add(announced.removed, msg->removed);
   for (std::size_t i = std::min(keyframes_listed_, n); i < n; ++i)
     named.insert(static_cast<core::ViewId>(i));
   keyframes_listed_ = std::max(keyframes_listed_, n);
@@ -108,12 +102,7 @@ view_selection::PairChanges PairStream::fullMessageLocked() const {
   if (n > 0) msg.header.stamp = ros::Time(output_.keyframes[n - 1].stamp);
   msg.sequence = sequence_;
   msg.full = true;
-  for (const core::Pair& p : announcer_.announced()) {
-    view_selection::ViewPair v;
-    v.first = p.first;
-    v.second = p.second;
-    msg.added.push_back(v);
-  }
+  for (const core::Pair& p : announcer_.announced()) msg.added.push_back(pairToMsg(p.first, p.second));
   for (std::size_t i = 0; i < n; ++i) msg.keyframes.push_back(keyframeToMsg(output_, static_cast<core::ViewId>(i)));
   msg.total_keyframes = static_cast<uint32_t>(n);
   msg.pending_pairs = static_cast<uint32_t>(announcer_.pending());

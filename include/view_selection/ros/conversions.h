@@ -76,6 +76,8 @@ view_selection::ViewSelection selectionUpdateToMsg(const core::SelectionOutput& 
                                                    const std::string& world_frame,
                                                    const std::vector<core::ViewId>& views);
 /// One keyframe's entry and one view's next view set (with its E values) as the messages hold them.
+/// The undirected pair {a, b} (a < b) as a message.
+view_selection::ViewPair pairToMsg(core::ViewId a, core::ViewId b);
 view_selection::KeyframeInfo keyframeToMsg(const core::SelectionOutput& snapshot,
                                            core::ViewId view);
 view_selection::NextViewSet nextViewSetToMsg(const core::SelectionOutput& snapshot,
