@@ -1,7 +1,9 @@
 // Seeds for fuzz_state_file: tiny real sessions, one per point source (64 x 48 frames of a
 // textured wall seen from a sideways walk), written as state files into the folder given; and,
 // with a second folder, seeds for fuzz_compressed: that wall and its depth as the compressed
-// transports carry them (JPEG, PNG, compressedDepth 16UC1 and 32FC1), in the target's layout.
+// transports carry them (JPEG, PNG, compressedDepth 16UC1 and 32FC1), in the target's layout;
+// and, with a third folder, seeds for fuzz_journal: each session's state file after its second
+// frame as the base, and the records of its third frame and of a reset to one keyframe after it.
 #include "view_selection/core/view_selector.h"
 #include "view_selection/io/state_file.h"
 #include "view_selection/points/image_conversion.h"
@@ -58,8 +60,8 @@ void writeCompressedSeeds(const std::string& dir, const cv::Mat& wall) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc != 2 && argc != 3) {
-    std::fprintf(stderr, "usage: fuzz_make_seeds STATE_DIR [COMPRESSED_DIR]\n");
+  if (argc < 2 || argc > 4) {
+    std::fprintf(stderr, "usage: fuzz_make_seeds STATE_DIR [COMPRESSED_DIR [JOURNAL_DIR]]\n");
     return 2;
   }
   cv::Mat wall(48, 200, CV_8UC3);
@@ -68,7 +70,7 @@ int main(int argc, char** argv) {
     cv::circle(wall, {static_cast<int>(rng() % 200), static_cast<int>(rng() % 48)},
                2 + static_cast<int>(rng() % 6), cv::Scalar(rng() % 255, rng() % 255, rng() % 255),
                cv::FILLED);
-  if (argc == 3) writeCompressedSeeds(argv[2], wall);
+  if (argc >= 3) writeCompressedSeeds(argv[2], wall);
   for (const char* source : {"depth", "features", "map", "auto"}) {
     core::ViewSelectorConfig config;
     config.keyframes.mode = core::KeyframeMode::kEveryFrame;
@@ -82,7 +84,21 @@ int main(int argc, char** argv) {
         map.col(i) = Eigen::Vector3d(-1.0 + 0.07 * i, 0.1 * (i % 5), 2.0);
       dynamic_cast<points::MapPointSource&>(selector.pointSource()).setMapPoints(map);
     }
+    // fuzz_journal's seed: u32 size of the base, the base, the records.
+    std::vector<uint8_t> journal_seed;
+    io::DeltaTracker tracker;
+    const uint64_t base_id = 0x5eed5eedu;
     for (int q = 0; q < 3; ++q) {
+      if (q == 2) {
+        io::SessionState base = io::captureSession(selector);
+        base.producer = "fuzz_make_seeds";
+        base.base_id = base_id;
+        const std::vector<uint8_t> bytes = io::encodeState(base);
+        const auto n = static_cast<uint32_t>(bytes.size());
+        for (int i = 0; i < 4; ++i) journal_seed.push_back(static_cast<uint8_t>(n >> (8 * i)));
+        journal_seed.insert(journal_seed.end(), bytes.begin(), bytes.end());
+        tracker.markSaved(selector);
+      }
       core::Frame f;
       f.stamp = 1.0 + q;
       f.image_name = "rgb/" + std::to_string(q) + ".png";
@@ -97,6 +113,20 @@ int main(int argc, char** argv) {
       } catch (const core::Error& e) {
         std::fprintf(stderr, "%s frame %d: %s\n", source, q, e.what());
       }
+    }
+    if (argc == 4 && !journal_seed.empty()) {
+      std::vector<uint8_t> record = io::encodeJournalRecord(base_id, 0, tracker.capture(selector));
+      journal_seed.insert(journal_seed.end(), record.begin(), record.end());
+      // A second record that truncates the session to its first keyframe.
+      io::SessionDelta cut = tracker.capture(selector);
+      cut.keyframe_count = std::min<uint64_t>(cut.keyframe_count, 1);
+      record = io::encodeJournalRecord(base_id, 1, cut);
+      journal_seed.insert(journal_seed.end(), record.begin(), record.end());
+      const std::string path = std::string(argv[3]) + "/" + source;
+      std::ofstream(path, std::ios::binary)
+          .write(reinterpret_cast<const char*>(journal_seed.data()),
+                 static_cast<std::streamsize>(journal_seed.size()));
+      std::printf("%s: %zu bytes\n", path.c_str(), journal_seed.size());
     }
     io::SessionState state = io::captureSession(selector);
     state.producer = "fuzz_make_seeds";

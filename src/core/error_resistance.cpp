@@ -5,6 +5,20 @@
 #include <algorithm>
 #include <cmath>
 
+// The evaluation loop is compiled twice, for AVX2 and for any x86-64, and the loader picks one
+// through an ifunc. ThreadSanitizer cannot have ifuncs: their resolvers run before its runtime
+// is set up, and every program then crashes at start. Under TSan the loop is compiled once.
+#if defined(__SANITIZE_THREAD__)
+#define VS_TARGET_CLONES
+#elif defined(__has_feature)
+#if __has_feature(thread_sanitizer)
+#define VS_TARGET_CLONES
+#endif
+#endif
+#ifndef VS_TARGET_CLONES
+#define VS_TARGET_CLONES __attribute__((target_clones("avx2", "default")))
+#endif
+
 namespace view_selection::core {
 
 PairErrorResistance::PairErrorResistance(const Eigen::Vector3d& origin_i,
@@ -61,7 +75,7 @@ inline double resistance(const PairConstants& c, double px, double py, double pz
   return valid & (r <= std::numeric_limits<double>::max()) ? r : kInf;
 }
 
-__attribute__((target_clones("avx2", "default"))) void evaluateAll(
+VS_TARGET_CLONES void evaluateAll(
     const PairConstants& c, const double* __restrict x, const double* __restrict y,
     const double* __restrict z, std::size_t count, double* __restrict out) {
   for (std::size_t q = 0; q < count; ++q) out[q] = resistance(c, x[q], y[q], z[q]);

@@ -125,7 +125,12 @@ void SyntheticSequence::writeTumFolder(const std::string& folder,
         }
       },
       static_cast<double>(n));
-  if (!error.empty()) throw core::IoError(error);
+  {
+    // The frames' names come back through `mutex` (each worker takes it after its frame), not
+    // only through the loop's end: ThreadSanitizer does not see how OpenCV's TBB back end joins.
+    const std::lock_guard<std::mutex> lock(mutex);
+    if (!error.empty()) throw core::IoError(error);
+  }
 
   // The lists last: a folder cut short by an error or a kill has no rgb.txt and reads as such.
   std::ofstream source(root / "SOURCE.md", std::ios::binary | std::ios::trunc);
