@@ -75,9 +75,9 @@ view_selection::ViewSelection selectionToMsg(const core::SelectionOutput& snapsh
 view_selection::ViewSelection selectionUpdateToMsg(const core::SelectionOutput& snapshot,
                                                    const std::string& world_frame,
                                                    const std::vector<core::ViewId>& views);
-/// One keyframe's entry and one view's next view set (with its E values) as the messages hold them.
 /// The undirected pair {a, b} (a < b) as a message.
 view_selection::ViewPair pairToMsg(core::ViewId a, core::ViewId b);
+/// One keyframe's entry and one view's next view set (with its E values) as the messages hold them.
 view_selection::KeyframeInfo keyframeToMsg(const core::SelectionOutput& snapshot,
                                            core::ViewId view);
 view_selection::NextViewSet nextViewSetToMsg(const core::SelectionOutput& snapshot,
