@@ -20,7 +20,7 @@ import rostest
 from view_selection.srv import GetNextViews, GetNextViewsRequest, GetSelection
 
 from vs_robust import (FramePublisher, NodeProcess, Statistics, call, check_statistics,
-                       find_tool, synthetic_frames, wait_until)
+                       find_tool, frame_drops, synthetic_frames, wait_until)
 
 PKG = 'view_selection'
 FRAMES = 300
@@ -73,11 +73,8 @@ class WorkerBehind(unittest.TestCase):
             # nothing more arrives.
             settled = {'counts': None, 'since': time.time()}
 
-            input_reasons = ('lost_before_node', 'unsynchronised', 'bad_map', 'bad_path')
-
             def handled(m):  # frames offered or dropped (not inputs that never became frames)
-                return m.frames_offered + sum(c for r, c in zip(m.drop_reasons, m.drop_counts)
-                                              if r not in input_reasons)
+                return m.frames_offered + frame_drops(m)
 
             def caught_up():
                 m = statistics.get()
