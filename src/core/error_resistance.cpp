@@ -1,5 +1,7 @@
 #include "view_selection/core/error_resistance.h"
 
+#include "view_selection/core/sanitizers.h"
+
 #include <limits>
 
 #include <algorithm>
@@ -8,14 +10,9 @@
 // The evaluation loop is compiled twice, for AVX2 and for any x86-64, and the loader picks one
 // through an ifunc. ThreadSanitizer cannot have ifuncs: their resolvers run before its runtime
 // is set up, and every program then crashes at start. Under TSan the loop is compiled once.
-#if defined(__SANITIZE_THREAD__)
+#if VS_THREAD_SANITIZER
 #define VS_TARGET_CLONES
-#elif defined(__has_feature)
-#if __has_feature(thread_sanitizer)
-#define VS_TARGET_CLONES
-#endif
-#endif
-#ifndef VS_TARGET_CLONES
+#else
 #define VS_TARGET_CLONES __attribute__((target_clones("avx2", "default")))
 #endif
 

@@ -2,6 +2,7 @@
 
 #include "view_selection/core/exceptions.h"
 #include "view_selection/core/parameters.h"
+#include "view_selection/core/sanitizers.h"
 #include "view_selection/points/image_conversion.h"
 #include "view_selection/points/map_point_source.h"
 #include "view_selection/points/point_source_factory.h"
@@ -11,14 +12,7 @@
 
 #include <sstream>
 
-#if defined(__SANITIZE_THREAD__)
-#define VS_THREAD_SANITIZER 1
-#elif defined(__has_feature)
-#if __has_feature(thread_sanitizer)
-#define VS_THREAD_SANITIZER 1
-#endif
-#endif
-#ifdef VS_THREAD_SANITIZER
+#if VS_THREAD_SANITIZER
 #include <sanitizer/tsan_interface.h>
 #endif
 
@@ -379,7 +373,7 @@ namespace {
 /// pthread_mutex_clocklock, which TSan (gcc 12, clang 14) does not intercept, so the lock would
 /// be invisible to it and every access made under it reported as a race.
 bool tryLockFor(std::unique_lock<std::timed_mutex>& lock, double seconds) {
-#ifdef VS_THREAD_SANITIZER
+#if VS_THREAD_SANITIZER
   __tsan_mutex_pre_lock(lock.mutex(), __tsan_mutex_try_lock);
   const bool locked = lock.try_lock_for(std::chrono::duration<double>(seconds));
   __tsan_mutex_post_lock(lock.mutex(),
