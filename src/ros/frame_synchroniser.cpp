@@ -64,6 +64,7 @@ SynchronisedFrames FrameSynchroniser::addImage(const sensor_msgs::ImageConstPtr&
 SynchronisedFrames FrameSynchroniser::addCameraInfo(const sensor_msgs::CameraInfoConstPtr& info,
                                                     double now) {
   newTimelineIfJump(infos_, info->header.stamp);
+  info_arrived_ = now;
   insertByStamp(infos_, Partner<sensor_msgs::CameraInfoConstPtr>{info, ++arrivals_});
   SynchronisedFrames out;
   release(now, out);
@@ -74,6 +75,7 @@ SynchronisedFrames FrameSynchroniser::addDepth(const sensor_msgs::ImageConstPtr&
                                                double now) {
   if (!config_.use_depth) return {};
   newTimelineIfJump(depths_, depth->header.stamp);
+  depth_arrived_ = now;
   insertByStamp(depths_, Partner<sensor_msgs::ImageConstPtr>{depth, ++arrivals_});
   SynchronisedFrames out;
   release(now, out);
@@ -92,6 +94,7 @@ void FrameSynchroniser::clear() {
   depths_.clear();
   last_released_ = ros::Time();
   newest_image_ = ros::Time();
+  info_arrived_ = depth_arrived_ = 0.0;
 }
 
 namespace {
@@ -138,10 +141,21 @@ void FrameSynchroniser::release(double now, SynchronisedFrames& out) {
   while (!waiting_.empty()) {
     const Waiting& head = waiting_.front();
     const ros::Time stamp = head.image->header.stamp;
-    const bool ready = decided(infos_, stamp, head.order) &&
-                       (!config_.use_depth || decided(depths_, stamp, head.order));
-    if (!ready && now - head.arrived < config_.timeout && waiting_.size() <= config_.max_waiting)
-      break;
+    const bool info_decided = decided(infos_, stamp, head.order);
+    const bool depth_decided = !config_.use_depth || decided(depths_, stamp, head.order);
+    const bool ready = info_decided && depth_decided;
+    // The wait counts from the image's arrival, or from the last message of the input it lacks
+    // when that came later: such a message is stamped before the image (else it would decide
+    // it), so that input lags behind and is still coming. The quietest lacking input counts.
+    double since = head.arrived;
+    if (!ready) {
+      double lacking = info_decided ? depth_arrived_
+                                    : (depth_decided ? info_arrived_
+                                                     : std::min(info_arrived_, depth_arrived_));
+      since = std::max(since, lacking);
+    }
+    const bool too_many = waiting_.size() > config_.max_waiting;
+    if (!ready && now - since < config_.timeout && !too_many) break;
     double info_offset = 0.0, depth_offset = 0.0;
     const sensor_msgs::CameraInfoConstPtr info = nearest(infos_, stamp, &info_offset);
     const sensor_msgs::ImageConstPtr depth =
@@ -164,9 +178,14 @@ void FrameSynchroniser::release(double now, SynchronisedFrames& out) {
       out.drops.push_back({stamp, "no partner for the image within " + seconds(config_.max_spread) +
                                       " (~max_stamp_spread): " + missing +
                                       (ready ? std::string()
-                                             : " (after waiting " + seconds(now - head.arrived) +
-                                                   ", or " + std::to_string(config_.max_waiting) +
-                                                   " images waiting: ~queue_size)"),
+                                       : too_many
+                                           ? " (" + std::to_string(waiting_.size()) +
+                                                 " images were waiting, more than ~queue_size " +
+                                                 std::to_string(config_.max_waiting) + ")"
+                                           : " (after waiting " + seconds(now - head.arrived) +
+                                                 ", " + seconds(now - since) +
+                                                 " of them without a message of the missing "
+                                                 "input: ~sync_timeout)"),
                            head.generation});
     }
     last_released_ = std::max(last_released_, stamp);

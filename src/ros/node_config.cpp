@@ -34,8 +34,8 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
                   "admits odometry at 10 Hz or faster on any clock, with 20 ms of jitter [s]");
   v.section("Input");
   core::visitInteger(v, "queue_size", queue_size, 1, 10000,
-                     "images waiting for their camera_info and depth; beyond, the oldest is "
-                     "matched with what has arrived");
+                     "images waiting for their camera_info and depth (1 s at 30 Hz); beyond, "
+                     "the oldest is matched with what has arrived");
   core::visitInteger(v, "subscriber_queue_size", subscriber_queue_size, 1, 100000,
                      "roscpp queue of each input (image, camera_info, depth): what arrives while "
                      "the input thread is busy waits here; a full queue loses the oldest "
@@ -46,7 +46,9 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
                   "any [s]");
   core::visitReal(v, "sync_timeout", sync_timeout, 0.0, 60.0,
                   "an image waits for a camera_info and a depth at or after its stamp (then the "
-                  "nearest is known) at most this long, then takes the nearest so far [s, wall]");
+                  "nearest is known) until the input it lacks has been silent this long (an "
+                  "input still delivering older messages lags and may yet bring it), then takes "
+                  "the nearest so far [s, wall]");
   core::visitInteger(
       v, "max_pending_frames", max_pending_frames, 1, 100000,
       "frames waiting for the worker; beyond, the oldest is dropped (worker_behind)");

@@ -5,8 +5,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
+#include <vector>
 
 namespace view_selection::ros_node {
 namespace {
@@ -119,6 +121,87 @@ TEST(FrameSynchroniser, ASlowerDepthStreamServesEveryImage) {
   append(all, sync.poll(10.0));
   EXPECT_EQ(all.frames.size(), 60u);
   EXPECT_TRUE(all.drops.empty());
+}
+
+// One TCP connection of a loaded publisher falls behind (rosbag play of a bz2 bag into several
+// nodes on two cores): the depth stream falls back to 1.5 s behind the colour stream, but it
+// keeps arriving. The images wait for it: the timeout counts from the last depth, not from the
+// image (which dropped the images from 1 s of lag on).
+TEST(FrameSynchroniser, ALaggingDepthStreamThatKeepsComingLosesNoImage) {
+  const double lag = 1.5, period = 1.0 / 30.0;
+  const int n = 120;
+  FrameSynchroniser sync({true, 0.03, 1.0, 60, 100});
+  SynchronisedFrames all;
+  // Events in wall-time order: colour and camera_info at their stamps, depth `lag` later.
+  struct Event {
+    double wall;
+    int kind;  // 0 depth, 1 camera_info, 2 image
+    double stamp;
+  };
+  std::vector<Event> events;
+  for (int q = 0; q < n; ++q) {
+    const double t = q * period;
+    events.push_back({t, 1, t});
+    events.push_back({t, 2, t});
+    events.push_back({t - 0.015 + std::min(lag, 0.025 * q), 0, t - 0.015});
+  }
+  std::stable_sort(events.begin(), events.end(),
+                   [](const Event& a, const Event& b) { return a.wall < b.wall; });
+  size_t most_waiting = 0;
+  for (const Event& e : events) {
+    append(all, sync.poll(e.wall));
+    if (e.kind == 0) append(all, sync.addDepth(image(e.stamp), e.wall));
+    if (e.kind == 1) append(all, sync.addCameraInfo(info(e.stamp), e.wall));
+    if (e.kind == 2) append(all, sync.addImage(image(e.stamp), e.wall));
+    most_waiting = std::max(most_waiting, sync.waiting());
+  }
+  EXPECT_GE(most_waiting, 45u);  // 1.5 s of images waited, longer than the 1 s timeout
+  append(all, sync.poll(events.back().wall + 0.99));  // the last image: no later depth comes
+  EXPECT_EQ(sync.waiting(), 1u);
+  append(all, sync.poll(events.back().wall + 1.001));
+  EXPECT_EQ(sync.waiting(), 0u);
+  ASSERT_EQ(all.frames.size(), static_cast<size_t>(n));
+  EXPECT_TRUE(all.drops.empty()) << all.drops[0].message;
+  for (int q = 0; q < n; ++q)
+    EXPECT_EQ(all.frames[q].depth->header.stamp, at(q * period - 0.015)) << q;
+
+  // The same lag with room for fewer images than it holds back: the oldest go, saying why.
+  FrameSynchroniser small({true, 0.03, 1.0, 30, 100});
+  SynchronisedFrames some;
+  for (const Event& e : events) {
+    append(some, small.poll(e.wall));
+    if (e.kind == 0) append(some, small.addDepth(image(e.stamp), e.wall));
+    if (e.kind == 1) append(some, small.addCameraInfo(info(e.stamp), e.wall));
+    if (e.kind == 2) append(some, small.addImage(image(e.stamp), e.wall));
+  }
+  ASSERT_FALSE(some.drops.empty());
+  EXPECT_NE(some.drops[0].message.find("more than ~queue_size 30"), std::string::npos)
+      << some.drops[0].message;
+}
+
+// A depth stream that stops: each image gives up `timeout` after the last depth came (and never
+// before its own arrival plus the timeout), saying that no depth came for that long.
+TEST(FrameSynchroniser, AnInputThatStopsTimesOutFromItsLastMessage) {
+  FrameSynchroniser sync({true, 0.03, 1.0, 100, 100});
+  SynchronisedFrames all;
+  for (int q = 0; q < 10; ++q) {
+    const double t = q / 30.0;
+    append(all, sync.addCameraInfo(info(t), t));
+    if (q < 5) append(all, sync.addDepth(image(t - 0.2), t));  // 0.2 s behind, then silent
+    append(all, sync.addImage(image(t), t));
+  }
+  EXPECT_EQ(sync.waiting(), 10u);
+  append(all, sync.poll(4 / 30.0 + 0.99));  // the last depth came at 4/30 s
+  EXPECT_EQ(sync.waiting(), 10u);
+  append(all, sync.poll(4 / 30.0 + 1.001));  // images 0-4 waited 1 s since it
+  EXPECT_EQ(sync.waiting(), 5u);
+  append(all, sync.poll(9 / 30.0 + 1.001));  // image 9 arrived at 9/30 s
+  EXPECT_EQ(sync.waiting(), 0u);
+  ASSERT_EQ(all.drops.size(), 10u);
+  EXPECT_TRUE(all.frames.empty());
+  EXPECT_NE(all.drops[0].message.find("without a message of the missing input: ~sync_timeout"),
+            std::string::npos)
+      << all.drops[0].message;
 }
 
 TEST(FrameSynchroniser, ImagesWithoutPartnersAreDroppedWhenTooManyWaitOrAfterTheTimeout) {

@@ -5,8 +5,10 @@
 // on a 15 ms offset); here every image becomes a frame or a drop with its reason.
 //
 // An image waits until each partner input has a message at its stamp, or one after its stamp
-// that arrived after the image (then the nearest is known: stamps of one input increase), or at
-// most `timeout` (the last image of a bag has no later partner), or until more than
+// that arrived after the image (then the nearest is known: stamps of one input increase), or
+// until a partner input it still lacks has been silent for `timeout` (the last image of a bag has
+// no later partner; an input that is still delivering older messages lags behind, as one TCP
+// connection of a loaded publisher does, and may yet bring the partner), or until more than
 // `max_waiting` images wait. A partner may serve two images
 // (a depth stream slower than the colour stream). No ROS master needed: times come from the
 // caller, which makes it testable on its own.
@@ -35,7 +37,7 @@ namespace view_selection::ros_node {
 struct SynchroniserConfig {
   bool use_depth = true;
   double max_spread = 0.03;   ///< [s] largest |partner stamp - image stamp|; 0: any
-  double timeout = 1.0;       ///< [s, caller's clock] longest wait of an image for its partners
+  double timeout = 1.0;       ///< [s, caller's clock] longest silence of an input an image lacks
   size_t max_waiting = 10;    ///< images waiting; beyond, the oldest is matched at once
   size_t max_partners = 100;  ///< camera_info and depth messages kept, per input
   double time_jump = 1.0;     ///< [s] a stamp this much before its input's newest: a new timeline; 0: never
@@ -109,6 +111,8 @@ class FrameSynchroniser {
   std::deque<Waiting> waiting_;
   std::deque<Partner<sensor_msgs::CameraInfoConstPtr>> infos_;  // ascending stamp
   std::deque<Partner<sensor_msgs::ImageConstPtr>> depths_;      // ascending stamp
+  double info_arrived_ = 0.0;   ///< caller's clock at the last camera_info (0: none yet)
+  double depth_arrived_ = 0.0;  ///< likewise, depth
   ros::Time last_released_;
   ros::Time newest_image_;  ///< of this timeline; zero: none yet
   uint64_t arrivals_ = 0;

@@ -31,7 +31,7 @@ PKG = 'view_selection'
 PARAMS = {
     'pose_source': 'topic', 'world_frame': '/world', 'keyframe_policy': 'motion',
     'min_translation': 0.05, 'min_rotation_deg': 5.0, 'k': 5, 'point_source': 'depth',
-    'pose_timeout': 2.0, 'queue_size': 30, 'max_pending_frames': 1000, 'publish_period': 0.02,
+    'pose_timeout': 2.0, 'max_pending_frames': 1000, 'publish_period': 0.02,
 }
 
 
