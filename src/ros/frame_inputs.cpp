@@ -25,6 +25,7 @@ SynchroniserConfig synchroniserConfig(const NodeConfig& c) {
   s.use_depth = c.use_depth;
   s.max_spread = c.max_stamp_spread;
   s.timeout = c.sync_timeout;
+  s.unmatched_timeout = c.sync_unmatched_timeout;
   s.max_waiting = static_cast<size_t>(c.queue_size);
   s.max_partners = static_cast<size_t>(std::max(c.queue_size, c.subscriber_queue_size));
   s.time_jump = c.time_jump_threshold;

@@ -155,7 +155,6 @@ void FrameSynchroniser::release(double now, SynchronisedFrames& out) {
       since = std::max(since, lacking);
     }
     const bool too_many = waiting_.size() > config_.max_waiting;
-    if (!ready && now - since < config_.timeout && !too_many) break;
     double info_offset = 0.0, depth_offset = 0.0;
     const sensor_msgs::CameraInfoConstPtr info = nearest(infos_, stamp, &info_offset);
     const sensor_msgs::ImageConstPtr depth =
@@ -163,6 +162,14 @@ void FrameSynchroniser::release(double now, SynchronisedFrames& out) {
     const auto tooFar = [&](double offset) {
       return config_.max_spread > 0.0 && std::abs(offset) > config_.max_spread;
     };
+    // With partners near enough already, waiting only looks for nearer ones (a bag's last image
+    // waits for a later depth that never comes): `timeout`. Without, the image is lost unless
+    // its partner still comes (a stalled connection): the longer `unmatched_timeout`.
+    const bool matched = info && !tooFar(info_offset) &&
+                         (!config_.use_depth || (depth && !tooFar(depth_offset)));
+    const double limit =
+        matched ? config_.timeout : std::max(config_.timeout, config_.unmatched_timeout);
+    if (!ready && now - since < limit && !too_many) break;
     std::string missing;
     if (!info)
       missing = "no camera_info has arrived";
@@ -185,7 +192,7 @@ void FrameSynchroniser::release(double now, SynchronisedFrames& out) {
                                            : " (after waiting " + seconds(now - head.arrived) +
                                                  ", " + seconds(now - since) +
                                                  " of them without a message of the missing "
-                                                 "input: ~sync_timeout)"),
+                                                 "input: ~sync_unmatched_timeout)"),
                            head.generation});
     }
     last_released_ = std::max(last_released_, stamp);

@@ -34,7 +34,7 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
                   "admits odometry at 10 Hz or faster on any clock, with 20 ms of jitter [s]");
   v.section("Input");
   core::visitInteger(v, "queue_size", queue_size, 1, 10000,
-                     "images waiting for their camera_info and depth (1 s at 30 Hz); beyond, "
+                     "images waiting for their camera_info and depth (3 s at 30 Hz); beyond, "
                      "the oldest is matched with what has arrived");
   core::visitInteger(v, "subscriber_queue_size", subscriber_queue_size, 1, 100000,
                      "roscpp queue of each input (image, camera_info, depth): what arrives while "
@@ -49,6 +49,10 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
                   "nearest is known) until the input it lacks has been silent this long (an "
                   "input still delivering older messages lags and may yet bring it), then takes "
                   "the nearest so far [s, wall]");
+  core::visitReal(v, "sync_unmatched_timeout", sync_unmatched_timeout, 0.0, 60.0,
+                  "as ~sync_timeout, for an image whose camera_info or depth within "
+                  "~max_stamp_spread has not come yet: a stalled connection may still bring it; "
+                  "then the image is dropped (unsynchronised); at least ~sync_timeout [s, wall]");
   core::visitInteger(
       v, "max_pending_frames", max_pending_frames, 1, 100000,
       "frames waiting for the worker; beyond, the oldest is dropped (worker_behind)");

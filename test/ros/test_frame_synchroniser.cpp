@@ -179,10 +179,11 @@ TEST(FrameSynchroniser, ALaggingDepthStreamThatKeepsComingLosesNoImage) {
       << some.drops[0].message;
 }
 
-// A depth stream that stops: each image gives up `timeout` after the last depth came (and never
-// before its own arrival plus the timeout), saying that no depth came for that long.
+// A depth stream that stops: each image without a depth near enough gives up `unmatched_timeout`
+// after the last depth came (and never before its own arrival plus that), saying that no depth
+// came for that long.
 TEST(FrameSynchroniser, AnInputThatStopsTimesOutFromItsLastMessage) {
-  FrameSynchroniser sync({true, 0.03, 1.0, 100, 100});
+  FrameSynchroniser sync({true, 0.03, 1.0, 100, 100, 1.0, 3.0});
   SynchronisedFrames all;
   for (int q = 0; q < 10; ++q) {
     const double t = q / 30.0;
@@ -191,17 +192,72 @@ TEST(FrameSynchroniser, AnInputThatStopsTimesOutFromItsLastMessage) {
     append(all, sync.addImage(image(t), t));
   }
   EXPECT_EQ(sync.waiting(), 10u);
-  append(all, sync.poll(4 / 30.0 + 0.99));  // the last depth came at 4/30 s
+  append(all, sync.poll(4 / 30.0 + 2.99));  // the last depth came at 4/30 s
   EXPECT_EQ(sync.waiting(), 10u);
-  append(all, sync.poll(4 / 30.0 + 1.001));  // images 0-4 waited 1 s since it
+  append(all, sync.poll(4 / 30.0 + 3.001));  // images 0-4 waited 3 s since it
   EXPECT_EQ(sync.waiting(), 5u);
-  append(all, sync.poll(9 / 30.0 + 1.001));  // image 9 arrived at 9/30 s
+  append(all, sync.poll(9 / 30.0 + 3.001));  // image 9 arrived at 9/30 s
   EXPECT_EQ(sync.waiting(), 0u);
   ASSERT_EQ(all.drops.size(), 10u);
   EXPECT_TRUE(all.frames.empty());
-  EXPECT_NE(all.drops[0].message.find("without a message of the missing input: ~sync_timeout"),
+  EXPECT_NE(all.drops[0].message.find("without a message of the missing input: "
+                                      "~sync_unmatched_timeout"),
             std::string::npos)
       << all.drops[0].message;
+}
+
+// Stop 26's CI: one node's depth connection stalled for over a second (no depth at all) while
+// its colour kept coming, then caught up. An image without a depth near enough waits
+// `unmatched_timeout` for it; the bag's last image, whose depth (15 ms before it) is there, is
+// released after `timeout`, not later.
+TEST(FrameSynchroniser, AStalledDepthConnectionIsWaitedForAndTheLastImageIsNotHeldLonger) {
+  FrameSynchroniser sync({true, 0.03, 1.0, 90, 100, 1.0, 3.0});
+  const double period = 1.0 / 30.0;
+  const int n = 120;
+  SynchronisedFrames all;
+  struct Event {
+    double wall;
+    int kind;  // 0 depth, 1 camera_info, 2 image
+    double stamp;
+  };
+  std::vector<Event> events;
+  for (int q = 0; q < n; ++q) {
+    const double t = q * period;
+    events.push_back({t - 0.015, 0, t - 0.015});
+    events.push_back({t, 1, t});
+    events.push_back({t, 2, t});
+  }
+  // Depth 30-74 is held back until 2.6 s (a 1.6 s stall), then arrives in a burst.
+  for (Event& e : events)
+    if (e.kind == 0 && e.wall >= 30 * period - 0.02 && e.wall < 2.6) e.wall = 2.6;
+  std::stable_sort(events.begin(), events.end(),
+                   [](const Event& a, const Event& b) { return a.wall < b.wall; });
+  for (const Event& e : events) {
+    append(all, sync.poll(e.wall));
+    if (e.kind == 0) append(all, sync.addDepth(image(e.stamp), e.wall));
+    if (e.kind == 1) append(all, sync.addCameraInfo(info(e.stamp), e.wall));
+    if (e.kind == 2) append(all, sync.addImage(image(e.stamp), e.wall));
+  }
+  const double last = events.back().wall;
+  append(all, sync.poll(last + 0.99));
+  EXPECT_EQ(sync.waiting(), 1u);
+  append(all, sync.poll(last + 1.001));  // its depth is 15 ms from it: `timeout`, not 3 s
+  EXPECT_EQ(sync.waiting(), 0u);
+  ASSERT_EQ(all.frames.size(), static_cast<size_t>(n));
+  EXPECT_TRUE(all.drops.empty()) << all.drops[0].message;
+  for (int q = 0; q < n; ++q)
+    EXPECT_EQ(all.frames[q].depth->header.stamp, at(q * period - 0.015)) << q;
+
+  // With one timeout for both (the rule before), the stall drops the images it held back.
+  FrameSynchroniser one({true, 0.03, 1.0, 90, 100, 1.0, 1.0});
+  SynchronisedFrames some;
+  for (const Event& e : events) {
+    append(some, one.poll(e.wall));
+    if (e.kind == 0) append(some, one.addDepth(image(e.stamp), e.wall));
+    if (e.kind == 1) append(some, one.addCameraInfo(info(e.stamp), e.wall));
+    if (e.kind == 2) append(some, one.addImage(image(e.stamp), e.wall));
+  }
+  EXPECT_GT(some.drops.size(), 10u);
 }
 
 TEST(FrameSynchroniser, ImagesWithoutPartnersAreDroppedWhenTooManyWaitOrAfterTheTimeout) {
@@ -213,7 +269,9 @@ TEST(FrameSynchroniser, ImagesWithoutPartnersAreDroppedWhenTooManyWaitOrAfterThe
   EXPECT_NE(all.drops[0].message.find("no camera_info has arrived"), std::string::npos);
   append(all, sync.poll(0.5));
   EXPECT_EQ(sync.waiting(), 3u);
-  append(all, sync.poll(1.0));
+  append(all, sync.poll(1.0));  // without a partner near enough: up to unmatched_timeout
+  EXPECT_EQ(sync.waiting(), 3u);
+  append(all, sync.poll(3.0));
   EXPECT_EQ(sync.waiting(), 0u);
   EXPECT_EQ(all.drops.size(), 5u);
   EXPECT_TRUE(all.frames.empty());

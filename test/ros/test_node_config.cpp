@@ -36,7 +36,9 @@ TEST(NodeConfig, DefaultsAreTheCoresAndTheDocumentedOnes) {
   EXPECT_EQ(c.camera_frame, "");
   EXPECT_EQ(c.pose_source, PoseSource::kTf);
   EXPECT_DOUBLE_EQ(c.pose_timeout, 0.5);
-  EXPECT_EQ(c.queue_size, 30);  // 1 s at 30 Hz, as ~sync_timeout (stop 26)
+  EXPECT_EQ(c.queue_size, 90);  // 3 s at 30 Hz, as ~sync_unmatched_timeout (stop 26)
+  EXPECT_DOUBLE_EQ(c.sync_timeout, 1.0);
+  EXPECT_DOUBLE_EQ(c.sync_unmatched_timeout, 3.0);
   EXPECT_TRUE(c.use_depth);
   EXPECT_EQ(c.point_source, "depth");
   EXPECT_DOUBLE_EQ(c.publish_period, 0.5);

@@ -6,10 +6,11 @@
 //
 // An image waits until each partner input has a message at its stamp, or one after its stamp
 // that arrived after the image (then the nearest is known: stamps of one input increase), or
-// until a partner input it still lacks has been silent for `timeout` (the last image of a bag has
-// no later partner; an input that is still delivering older messages lags behind, as one TCP
-// connection of a loaded publisher does, and may yet bring the partner), or until more than
-// `max_waiting` images wait. A partner may serve two images
+// until a partner input it still lacks has been silent for `timeout` when its partners so far are
+// near enough (the last image of a bag has no later partner), or for `unmatched_timeout` when
+// they are not (one TCP connection of a loaded publisher can stall for a second and more, and
+// then still bring the partner), or until more than `max_waiting` images wait. An input that is
+// still delivering older messages lags behind: its silence starts at its last message. A partner may serve two images
 // (a depth stream slower than the colour stream). No ROS master needed: times come from the
 // caller, which makes it testable on its own.
 //
@@ -37,10 +38,11 @@ namespace view_selection::ros_node {
 struct SynchroniserConfig {
   bool use_depth = true;
   double max_spread = 0.03;   ///< [s] largest |partner stamp - image stamp|; 0: any
-  double timeout = 1.0;       ///< [s, caller's clock] longest silence of an input an image lacks
+  double timeout = 1.0;       ///< [s, caller's clock] longest silence of an input an image lacks, its partners near enough
   size_t max_waiting = 10;    ///< images waiting; beyond, the oldest is matched at once
   size_t max_partners = 100;  ///< camera_info and depth messages kept, per input
   double time_jump = 1.0;     ///< [s] a stamp this much before its input's newest: a new timeline; 0: never
+  double unmatched_timeout = 3.0;  ///< [s, caller's clock] likewise, while no partner is near enough
 };
 
 /// What one call decided: frames for the worker, and images dropped with the reason's words.

@@ -35,10 +35,11 @@ struct NodeConfig {
   /// [s] topic sources: the poses on either side of a frame must each be this close (odometry
   /// at 10 Hz or faster, on any clock; docs/node.md has the measured interpolation error).
   double pose_max_time_difference = 0.12;
-  int queue_size = 30;                     ///< images waiting for their camera_info and depth
+  int queue_size = 90;                     ///< images waiting for their camera_info and depth
   int subscriber_queue_size = 100;         ///< roscpp queue of each of image, camera_info, depth
   double max_stamp_spread = 0.03;  ///< [s] largest |camera_info or depth stamp - image stamp|
   double sync_timeout = 1.0;       ///< [s, wall] longest silence of an input an image lacks
+  double sync_unmatched_timeout = 3.0;  ///< [s, wall] likewise, while no partner is near enough
   int max_pending_frames = 30;     ///< frames waiting for the worker before the oldest is dropped
   /// [s] image stamps that go back by more than this start a new session (a bag played again or
   /// looped, a restarted SLAM system); 0: never (every such frame is an out_of_order_stamp drop).

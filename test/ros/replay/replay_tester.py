@@ -10,6 +10,7 @@ generate_sequence; when that tool is not built either, the test is skipped with 
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -75,6 +76,74 @@ def stamp_ns(seconds):
 def msg_stamp_ns(t):
     return t.secs * 1000000000 + t.nsecs
 
+
+
+def play_bag(bag, rate, wanted, frames, timeout, play_timeout):
+    """Plays `bag` at `rate` into the nodes of `wanted` (node -> topics) and returns once each node
+    counted `frames` images and depth images (~statistics), or after `play_timeout` s.
+
+    The player starts paused and is unpaused when its own bus information lists each node on each
+    of its topics (a fixed delay lost the first frame on a loaded machine). It is kept alive
+    (--keep-alive) until the nodes have everything: a player that exits right after its last
+    message can take the last image, still queued for a lagging connection, with it (stop 26: 119
+    of 120 images at four nodes)."""
+    from view_selection.msg import InputStatistics
+    player_name = '/replay_player'
+    play = ['rosbag', 'play', '--clock', '-q', '--pause', '--keep-alive', '-r', str(rate), bag,
+            '__name:=' + player_name.lstrip('/')]
+    player = subprocess.Popen(play, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                              universal_newlines=True)
+    try:
+        master = rosgraph.Master(rospy.get_name())
+        want = {(node, topic) for node, topics in wanted.items() for topic in topics}
+        deadline = time.time() + timeout
+        missing = want
+        while time.time() < deadline and missing:
+            try:
+                api = master.lookupNode(player_name)
+                info = ServerProxy(api).getBusInfo(rospy.get_name())[2]
+                # [id, destination (the subscriber's name), direction, transport, topic, ...]
+                have = {(c[1], c[4]) for c in info if c[2] == 'o' and (len(c) < 6 or c[5])}
+                missing = {w for w in want if w not in have}
+            except Exception:  # the player is not registered yet
+                pass
+            if missing:
+                time.sleep(0.1)
+        if missing:
+            raise AssertionError('the player did not connect to %s within %.0f s' % (sorted(missing), timeout))
+        # Counts are per session: a play after a time jump counts from zero, another play adds.
+        base = {node: rospy.wait_for_message(node + '/statistics', InputStatistics, timeout=timeout)
+                for node in wanted}
+
+        def arrived(node, s):
+            b = base[node] if s.time_jumps == base[node].time_jumps else None
+            counts = [s.images_arrived - (b.images_arrived if b else 0)]
+            if rospy.get_param(node + '/use_depth', True):
+                counts.append(s.depths_arrived - (b.depths_arrived if b else 0))
+            return min(counts)
+        call(player_name + '/pause_playback', SetBool, SetBoolRequest(data=False), timeout)
+        deadline = time.time() + play_timeout
+        pending = set(wanted)
+        while pending and time.time() < deadline:
+            if player.poll() is not None:
+                raise AssertionError('rosbag play failed (exit %d): %s' % (player.returncode, player.stdout.read()))
+            for node in sorted(pending):
+                try:
+                    s = rospy.wait_for_message(node + '/statistics', InputStatistics, timeout=5.0)
+                except rospy.ROSException:
+                    continue
+                if arrived(node, s) >= frames:
+                    pending.discard(node)
+            time.sleep(0.2)
+        # Nodes still short of frames: the tests' counts say which and how many.
+    finally:
+        if player.poll() is None:
+            player.send_signal(signal.SIGINT)
+            try:
+                player.wait(10)
+            except subprocess.TimeoutExpired:
+                player.kill()
+                player.wait(10)
 
 
 def wait_for_subscribers(wanted, timeout):
@@ -166,48 +235,11 @@ class Replay(unittest.TestCase):
 
     @classmethod
     def play(cls):
-        """Plays the bag once every node is connected to every topic of the player: started
-        paused, unpaused when the player's own bus information lists each node on each topic (a
-        fixed delay lost the first frame on a loaded machine)."""
-        player_name = '/replay_player'
-        play = ['rosbag', 'play', '--clock', '-q', '--pause', '-r', str(cls.rate), cls.bag,
-                '__name:=' + player_name.lstrip('/')]
-        player = subprocess.Popen(play, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                  universal_newlines=True)
-        try:
-            topics = ['/camera/rgb/image_color', '/camera/rgb/camera_info', '/camera/depth/image']
-            wanted = {(node, topic) for node in cls.nodes for topic in topics + [
-                '/tf' if rospy.get_param(node + '/pose_source', 'tf') == 'tf' else '/camera/pose']}
-            master = rosgraph.Master(rospy.get_name())
-            deadline = time.time() + cls.timeout
-            missing = wanted
-            while time.time() < deadline and missing:
-                try:
-                    api = master.lookupNode(player_name)
-                    info = ServerProxy(api).getBusInfo(rospy.get_name())[2]
-                    # [id, destination (the subscriber's name), direction, transport, topic, ...]
-                    have = {(c[1], c[4]) for c in info if c[2] == 'o' and (len(c) < 6 or c[5])}
-                    missing = {w for w in wanted if w not in have}
-                except Exception:  # the player is not registered yet
-                    pass
-                if missing:
-                    time.sleep(0.1)
-            if missing:
-                raise AssertionError('the player did not connect to %s within %.0f s' %
-                                     (sorted(missing), cls.timeout))
-            call(player_name + '/pause_playback', SetBool, SetBoolRequest(data=False), cls.timeout)
-            play_timeout = 30.0 + 2.0 * (cls.frames / 30.0) / cls.rate
-            try:
-                player.wait(timeout=play_timeout)
-            except subprocess.TimeoutExpired:
-                raise AssertionError('rosbag play did not finish within %.0f s' % play_timeout)
-            if player.returncode != 0:
-                raise AssertionError('rosbag play failed (exit %d): %s' % (player.returncode,
-                                                                           player.stdout.read()))
-        finally:
-            if player.poll() is None:
-                player.kill()
-                player.wait(10)
+        """Plays the bag once every node is connected to every topic of the player (play_bag)."""
+        topics = ['/camera/rgb/image_color', '/camera/rgb/camera_info', '/camera/depth/image']
+        wanted = {node: topics + ['/tf' if rospy.get_param(node + '/pose_source', 'tf') == 'tf' else '/camera/pose']
+                  for node in cls.nodes}
+        play_bag(cls.bag, cls.rate, wanted, cls.frames, cls.timeout, 30.0 + 2.0 * (cls.frames / 30.0) / cls.rate)
 
     @classmethod
     def count_frames(cls, bag):

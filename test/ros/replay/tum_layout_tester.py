@@ -29,7 +29,7 @@ import rospy
 import rostest
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from replay_tester import find_tool, msg_stamp_ns, run, wait_for_subscribers  # noqa: E402
+from replay_tester import find_tool, msg_stamp_ns, play_bag, run  # noqa: E402
 
 from view_selection.msg import InputStatistics  # noqa: E402
 from view_selection.srv import GetSelection  # noqa: E402
@@ -114,9 +114,8 @@ class TumLayout(unittest.TestCase):
                 rospy.wait_for_service(node + '/get_selection', timeout=cls.timeout)
             except rospy.ROSException:
                 raise AssertionError('%s/get_selection was not advertised within %.0f s' % (node, cls.timeout))
-        cls.wait_for_subscribers()
-        play = ['rosbag', 'play', '--clock', '-q', '-r', str(cls.rate), '-d', '3', cls.bag]
-        run(play, 120.0 + 10.0 * cls.max_frames / 30.0 / cls.rate, 'rosbag play')
+        play_bag(cls.bag, cls.rate, cls.wanted_topics(), cls.max_frames, cls.timeout,
+                 120.0 + 10.0 * cls.max_frames / 30.0 / cls.rate)
         cls.wait_until_processed()
 
     @classmethod
@@ -127,14 +126,14 @@ class TumLayout(unittest.TestCase):
             shutil.rmtree(cls.tmp, ignore_errors=True)
 
     @classmethod
-    def wait_for_subscribers(cls):
+    def wanted_topics(cls):
         wanted = {}
         for node in cls.nodes:
             topics = ['/camera/rgb/image_color', '/camera/rgb/camera_info', '/camera/depth/image', '/tf']
             if rospy.get_param(node + '/pose_source', 'tf') != 'tf':
                 topics.append(cls.pose_topic(node))
             wanted[node] = topics
-        wait_for_subscribers(wanted, cls.timeout)
+        return wanted
 
     @staticmethod
     def pose_topic(node):
