@@ -32,6 +32,37 @@ void append(SynchronisedFrames& all, SynchronisedFrames more) {
   for (auto& d : more.drops) all.drops.push_back(std::move(d));
 }
 
+/// A message as it reaches the node: at `wall` [s], stamped `stamp` [s].
+struct Arrival {
+  enum Kind { kDepth, kInfo, kImage };
+  double wall;
+  Kind kind;
+  double stamp;
+};
+
+/// Feeds `arrivals` in wall-time order, polling before each (as the node's timer does). Returns
+/// what was decided; `*most_waiting`: the most images that waited at once.
+SynchronisedFrames feed(FrameSynchroniser& sync, std::vector<Arrival> arrivals,
+                        size_t* most_waiting = nullptr) {
+  std::stable_sort(arrivals.begin(), arrivals.end(),
+                   [](const Arrival& a, const Arrival& b) { return a.wall < b.wall; });
+  SynchronisedFrames all;
+  for (const Arrival& a : arrivals) {
+    append(all, sync.poll(a.wall));
+    if (a.kind == Arrival::kDepth) append(all, sync.addDepth(image(a.stamp), a.wall));
+    if (a.kind == Arrival::kInfo) append(all, sync.addCameraInfo(info(a.stamp), a.wall));
+    if (a.kind == Arrival::kImage) append(all, sync.addImage(image(a.stamp), a.wall));
+    if (most_waiting) *most_waiting = std::max(*most_waiting, sync.waiting());
+  }
+  return all;
+}
+
+double lastArrival(const std::vector<Arrival>& arrivals) {
+  double last = 0.0;
+  for (const Arrival& a : arrivals) last = std::max(last, a.wall);
+  return last;
+}
+
 TEST(FrameSynchroniser, EqualStampsGiveOneFrameAsSoonAsAllArrived) {
   FrameSynchroniser sync({true, 0.03, 1.0, 10, 100});
   EXPECT_TRUE(sync.addImage(image(0.0), 0.0).frames.empty());
@@ -130,35 +161,22 @@ TEST(FrameSynchroniser, ASlowerDepthStreamServesEveryImage) {
 TEST(FrameSynchroniser, ALaggingDepthStreamThatKeepsComingLosesNoImage) {
   const double lag = 1.5, period = 1.0 / 30.0;
   const int n = 120;
-  FrameSynchroniser sync({true, 0.03, 1.0, 60, 100});
-  SynchronisedFrames all;
-  // Events in wall-time order: colour and camera_info at their stamps, depth `lag` later.
-  struct Event {
-    double wall;
-    int kind;  // 0 depth, 1 camera_info, 2 image
-    double stamp;
-  };
-  std::vector<Event> events;
+  // Colour and camera_info at their stamps, depth falling back to `lag` later.
+  std::vector<Arrival> arrivals;
   for (int q = 0; q < n; ++q) {
     const double t = q * period;
-    events.push_back({t, 1, t});
-    events.push_back({t, 2, t});
-    events.push_back({t - 0.015 + std::min(lag, 0.025 * q), 0, t - 0.015});
+    arrivals.push_back({t, Arrival::kInfo, t});
+    arrivals.push_back({t, Arrival::kImage, t});
+    arrivals.push_back({t - 0.015 + std::min(lag, 0.025 * q), Arrival::kDepth, t - 0.015});
   }
-  std::stable_sort(events.begin(), events.end(),
-                   [](const Event& a, const Event& b) { return a.wall < b.wall; });
+  FrameSynchroniser sync({true, 0.03, 1.0, 60, 100});
   size_t most_waiting = 0;
-  for (const Event& e : events) {
-    append(all, sync.poll(e.wall));
-    if (e.kind == 0) append(all, sync.addDepth(image(e.stamp), e.wall));
-    if (e.kind == 1) append(all, sync.addCameraInfo(info(e.stamp), e.wall));
-    if (e.kind == 2) append(all, sync.addImage(image(e.stamp), e.wall));
-    most_waiting = std::max(most_waiting, sync.waiting());
-  }
+  SynchronisedFrames all = feed(sync, arrivals, &most_waiting);
   EXPECT_GE(most_waiting, 45u);  // 1.5 s of images waited, longer than the 1 s timeout
-  append(all, sync.poll(events.back().wall + 0.99));  // the last image: no later depth comes
+  const double last = lastArrival(arrivals);
+  append(all, sync.poll(last + 0.99));  // the last image: no later depth comes
   EXPECT_EQ(sync.waiting(), 1u);
-  append(all, sync.poll(events.back().wall + 1.001));
+  append(all, sync.poll(last + 1.001));
   EXPECT_EQ(sync.waiting(), 0u);
   ASSERT_EQ(all.frames.size(), static_cast<size_t>(n));
   EXPECT_TRUE(all.drops.empty()) << all.drops[0].message;
@@ -167,13 +185,7 @@ TEST(FrameSynchroniser, ALaggingDepthStreamThatKeepsComingLosesNoImage) {
 
   // The same lag with room for fewer images than it holds back: the oldest go, saying why.
   FrameSynchroniser small({true, 0.03, 1.0, 30, 100});
-  SynchronisedFrames some;
-  for (const Event& e : events) {
-    append(some, small.poll(e.wall));
-    if (e.kind == 0) append(some, small.addDepth(image(e.stamp), e.wall));
-    if (e.kind == 1) append(some, small.addCameraInfo(info(e.stamp), e.wall));
-    if (e.kind == 2) append(some, small.addImage(image(e.stamp), e.wall));
-  }
+  const SynchronisedFrames some = feed(small, arrivals);
   ASSERT_FALSE(some.drops.empty());
   EXPECT_NE(some.drops[0].message.find("more than ~queue_size 30"), std::string::npos)
       << some.drops[0].message;
@@ -211,34 +223,21 @@ TEST(FrameSynchroniser, AnInputThatStopsTimesOutFromItsLastMessage) {
 // `unmatched_timeout` for it; the bag's last image, whose depth (15 ms before it) is there, is
 // released after `timeout`, not later.
 TEST(FrameSynchroniser, AStalledDepthConnectionIsWaitedForAndTheLastImageIsNotHeldLonger) {
-  FrameSynchroniser sync({true, 0.03, 1.0, 90, 100, 1.0, 3.0});
   const double period = 1.0 / 30.0;
   const int n = 120;
-  SynchronisedFrames all;
-  struct Event {
-    double wall;
-    int kind;  // 0 depth, 1 camera_info, 2 image
-    double stamp;
-  };
-  std::vector<Event> events;
+  std::vector<Arrival> arrivals;
   for (int q = 0; q < n; ++q) {
     const double t = q * period;
-    events.push_back({t - 0.015, 0, t - 0.015});
-    events.push_back({t, 1, t});
-    events.push_back({t, 2, t});
+    arrivals.push_back({t - 0.015, Arrival::kDepth, t - 0.015});
+    arrivals.push_back({t, Arrival::kInfo, t});
+    arrivals.push_back({t, Arrival::kImage, t});
   }
-  // Depth 30-74 is held back until 2.6 s (a 1.6 s stall), then arrives in a burst.
-  for (Event& e : events)
-    if (e.kind == 0 && e.wall >= 30 * period - 0.02 && e.wall < 2.6) e.wall = 2.6;
-  std::stable_sort(events.begin(), events.end(),
-                   [](const Event& a, const Event& b) { return a.wall < b.wall; });
-  for (const Event& e : events) {
-    append(all, sync.poll(e.wall));
-    if (e.kind == 0) append(all, sync.addDepth(image(e.stamp), e.wall));
-    if (e.kind == 1) append(all, sync.addCameraInfo(info(e.stamp), e.wall));
-    if (e.kind == 2) append(all, sync.addImage(image(e.stamp), e.wall));
-  }
-  const double last = events.back().wall;
+  // Depth 30-78 is held back until 2.6 s (a 1.6 s stall), then arrives in a burst.
+  for (Arrival& a : arrivals)
+    if (a.kind == Arrival::kDepth && a.wall >= 30 * period - 0.02 && a.wall < 2.6) a.wall = 2.6;
+  FrameSynchroniser sync({true, 0.03, 1.0, 90, 100, 1.0, 3.0});
+  SynchronisedFrames all = feed(sync, arrivals);
+  const double last = lastArrival(arrivals);
   append(all, sync.poll(last + 0.99));
   EXPECT_EQ(sync.waiting(), 1u);
   append(all, sync.poll(last + 1.001));  // its depth is 15 ms from it: `timeout`, not 3 s
@@ -250,14 +249,7 @@ TEST(FrameSynchroniser, AStalledDepthConnectionIsWaitedForAndTheLastImageIsNotHe
 
   // With one timeout for both (the rule before), the stall drops the images it held back.
   FrameSynchroniser one({true, 0.03, 1.0, 90, 100, 1.0, 1.0});
-  SynchronisedFrames some;
-  for (const Event& e : events) {
-    append(some, one.poll(e.wall));
-    if (e.kind == 0) append(some, one.addDepth(image(e.stamp), e.wall));
-    if (e.kind == 1) append(some, one.addCameraInfo(info(e.stamp), e.wall));
-    if (e.kind == 2) append(some, one.addImage(image(e.stamp), e.wall));
-  }
-  EXPECT_GT(some.drops.size(), 10u);
+  EXPECT_GT(feed(one, arrivals).drops.size(), 10u);
 }
 
 TEST(FrameSynchroniser, ImagesWithoutPartnersAreDroppedWhenTooManyWaitOrAfterTheTimeout) {
