@@ -16,6 +16,8 @@ PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__
 # Beside the checkout, as scripts/build puts it (scripts/build_dir.bash says why).
 DEFAULT_BUILD_DIR = os.path.join(os.path.dirname(PACKAGE_DIR), "build_" + os.path.basename(PACKAGE_DIR))
 SHARED_DATA = os.path.join(os.path.dirname(PACKAGE_DIR), "shared", "data")
+# The topics of a TUM RGB-D bag (and of tum_to_bag --layout tum)
+TUM_IMAGE, TUM_DEPTH, TUM_INFO = "/camera/rgb/image_color", "/camera/depth/image", "/camera/rgb/camera_info"
 
 
 class SessionError(Exception):
@@ -160,6 +162,19 @@ class Ros:
             return None
         stats["drops"] = dict(zip(stats.get("drop_reasons") or [], stats.get("drop_counts") or []))
         return stats
+
+    def bag_counts(self, bag):
+        """{topic: messages} of a bag (rosbag info --yaml)."""
+        import yaml
+        done = self.call(["rosbag", "info", "--yaml", "--key", "topics", bag], 120)
+        try:
+            topics = yaml.safe_load(done.stdout) or []
+        except yaml.YAMLError:
+            topics = []
+        counts = {t["topic"]: int(t["messages"]) for t in topics if isinstance(t, dict) and "topic" in t}
+        if not counts:
+            raise SessionError("%s: no topics (rosbag info: %s)" % (bag, done.stdout.strip()[:400]))
+        return counts
 
     def stop(self):
         stop_process(self.master, 10)

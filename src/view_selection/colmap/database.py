@@ -238,6 +238,22 @@ class Database:
         """{(image_id1, image_id2): inlier matches} of every pair with a two-view geometry."""
         return {ids_of_pair(pid): rows for pid, rows in self.con.execute("SELECT pair_id, rows FROM two_view_geometries")}
 
+    def keep_pairs(self, pairs):
+        """Deletes the matches and two-view geometries of every pair not in `pairs` ((id, id)
+        or (name, name)); returns how many pairs are kept."""
+        ids = self.image_ids()
+        keep = {pair_id(*(ids[x] if isinstance(x, str) else x for x in p)) for p in pairs}
+        for table in ("matches", "two_view_geometries"):
+            gone = [(r,) for (r,) in self.con.execute("SELECT pair_id FROM %s" % table) if r not in keep]
+            self.con.executemany("DELETE FROM %s WHERE pair_id = ?" % table, gone)
+        return len(keep)
+
+    def matched_names(self):
+        """[(name, name)] of the pairs with raw matches (a matcher's choice of pairs)."""
+        names = {iid: name for name, iid in self.image_ids().items()}
+        return [(names[a], names[b]) for a, b in (ids_of_pair(pid) for (pid,) in
+                                                  self.con.execute("SELECT pair_id FROM matches"))]
+
     def delete_matches(self):
         """Every raw match and two-view geometry (features and images stay)."""
         self.con.execute("DELETE FROM matches")
