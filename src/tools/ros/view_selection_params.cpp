@@ -2,7 +2,7 @@
 // select_views) with its default, written from the structs that hold the defaults. It writes
 // config/view_selection.yaml, docs/parameters.md and the parameter overview in docs/node.md; a
 // test fails when those files differ from what it writes, so the defaults live in one place.
-#include "../../tools/command_line.h"
+#include "../command_line.h"
 
 #include "view_selection/ros/parameter_docs.h"
 

@@ -3,7 +3,7 @@
 // benchmark's bags. --layout simple (the default): one pose per frame at the image stamp, the
 // TUM stamps as they are; --layout tum: as the benchmark's own bags are recorded
 // (tum_benchmark_layout.h). Frame ids carry the leading '/' that the TUM bags write.
-#include "../../tools/command_line.h"
+#include "../command_line.h"
 #include "bag_messages.h"
 #include "tum_benchmark_layout.h"
 
