@@ -1,5 +1,5 @@
 // One fuzz target = one function of (bytes, size). Built with VIEW_SELECTION_LIBFUZZER
-// (scripts/fuzz, clang -fsanitize=fuzzer) it is libFuzzer's entry point; otherwise it registers
+// (dev/fuzz, clang -fsanitize=fuzzer) it is libFuzzer's entry point; otherwise it registers
 // itself so that test_fuzz_inputs replays the committed corpus and every regression input in the
 // normal suite. A target catches the errors its input may cause on purpose (core::Error: a clear
 // message); anything else (a crash, another exception, a broken invariant) is a finding.

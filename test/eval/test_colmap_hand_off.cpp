@@ -42,11 +42,11 @@ TEST(ColmapHandOff, SelectionFolderToSparseModel) {
                 dir / "hand_off.log"),
             0)
       << "see " << (dir / "hand_off.log");
-  std::ifstream in(dir / "model" / "summary.json");
+  std::ifstream in(dir / "model" / "report.json");
   const nlohmann::json summary = nlohmann::json::parse(in);
   EXPECT_EQ(summary["keyframes"], 15);
-  EXPECT_GT(summary["pairs"].get<int>(), 0);
-  EXPECT_LE(summary["pairs_matched"].get<int>(), summary["pairs"].get<int>());  // only the selected pairs
+  EXPECT_GT(summary["final_pairs"].get<int>(), 0);
+  EXPECT_LE(summary["pairs_matched"].get<int>(), summary["final_pairs"].get<int>());  // only the selected pairs
   EXPECT_GE(summary["registered"].get<int>(), 12) << "see " << (dir / "model" / "colmap.log");
   EXPECT_LT(summary["reprojection_error"].get<double>(), 2.0);
   fs::remove_all(dir);

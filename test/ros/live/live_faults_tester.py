@@ -3,6 +3,7 @@
 on a full disk, without COLMAP and with a COLMAP that fails; the node asked to write images where
 it cannot; and the pair stream's sequence across a node restart on ~state_file. Every case gets a
 clear error, and the view selection node keeps running and answering."""
+import json
 import os
 import shutil
 import stat
@@ -95,8 +96,9 @@ class LiveFaults(unittest.TestCase):
         self.assert_node_serves()
 
     def test_colmap_failing(self):
-        """A COLMAP whose matching fails: the bridge stays up, says why, and ~finish fails with
-        the reason; the node is untouched."""
+        """A COLMAP whose matching fails: the bridge stays up and says why; ~finish still writes
+        the model (without matches: no points) and names every pair it skipped and the reason,
+        in its answer, report.json and ledger.txt; the node is untouched."""
         fake = os.path.join(self.tmp, 'failing_colmap')
         with open(fake, 'w') as f:
             f.write('#!/bin/sh\n[ "$1" = matches_importer ] && { echo "simulated failure" >&2; exit 3; }\n'
@@ -111,9 +113,18 @@ class LiveFaults(unittest.TestCase):
                        == images, 30, 'the node writes images into the project')
             self.publish(40)  # new keyframes: their images go into the project
             answer = call(bridge.name + '/finish', Trigger, None, 300.0)
-            self.assertFalse(answer.success, answer.message)
+            self.assertIn('skipped', answer.message)
             self.assertIn('matches_importer', answer.message)
             self.assertIn('failed (exit 3)', answer.message)
+            project = os.path.join(self.tmp, 'failing')
+            with open(os.path.join(project, 'report.json')) as f:
+                report = json.load(f)
+            self.assertGreater(len(report['skipped']['pairs']), 0)
+            self.assertEqual(report['pairs_matched'], 0)
+            self.assertTrue(all('failed (exit 3)' in s['error'] for s in report['skipped']['pairs']), report['skipped'])
+            with open(os.path.join(project, 'ledger.txt')) as f:
+                ledger = f.read()
+            self.assertNotIn(' matched ', ledger)
             self.assertTrue(bridge.alive(), 'the bridge died when COLMAP failed')
             self.assert_node_serves()
         finally:

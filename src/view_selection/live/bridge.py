@@ -1,0 +1,336 @@
+"""colmap_bridge's ROS node: a COLMAP 3.8 project kept current while the recording runs.
+
+It follows a view_selection node's pair stream (~pairs, ~get_pairs), asks the node to write the
+keyframe images into the project (~write_keyframe_images), extracts and matches as keyframes and
+pairs come (live/work.py over colmap/project.py), and builds the model on ~finish, once no
+keyframe came for ~finish_after_idle, and at shutdown within ~shutdown_budget seconds (roslaunch
+sends SIGINT, then SIGTERM 15 s later and SIGKILL 2 s after that: the finish must be done by then).
+
+Threads: rospy's for ~pairs and ~finish; one worker (`loop`) for the batches. `lock` guards the
+stream's state; `work` serialises COLMAP's work on the project (a batch, or the finish).
+"""
+import os
+import threading
+import time
+
+import rospy
+from std_srvs.srv import Trigger, TriggerResponse
+
+from view_selection.msg import PairChanges
+from view_selection.srv import GetPairs, GetSelection, WriteKeyframeImages
+
+from ..colmap.database import DatabaseError
+from ..colmap.project import ColmapProject, ProjectError, write_json_atomically
+from ..keyframes import Keyframe
+from .stream import PairStream
+from .work import LiveWork
+
+PARAMETERS = """Parameters (private, ~name):
+  project            the COLMAP project folder (required)
+  node               the view_selection node (default: /view_selection, or the one node that serves
+                     get_pairs when there is no /view_selection)
+  colmap             the colmap executable (colmap)
+  threads            COLMAP threads (-1: all cores)
+  nice               niceness of the bridge and its COLMAP children (10: the node keeps priority)
+  batch_period       [s] between two batches when there is nothing to do (1.0)
+  poll_period        [s] between two ~get_pairs polls (2.0)
+  max_backlog        pairs kept waiting; more wait for the finish, counted (2000)
+  max_batch_pairs    pairs per matching run while the recording goes on (24)
+  max_attempts       tries of an image or pair that fails before it is skipped (3)
+  finish_after_idle  [s] build the model once no keyframe came for this long (0: off)
+  shutdown_budget    [s] the finish at shutdown must be done within this (12; roslaunch waits 15)
+  model              known_poses (the keyframes at the node's poses) or mapper (COLMAP's own)
+  node_timeout       [s] how long the finish waits for the node's ~get_selection (10)
+  continuity_pairs   also match each keyframe with the one before it (true)
+"""
+
+
+def _param(name, default):
+    return rospy.get_param("~" + name, default)
+
+
+class Bridge:
+    def __init__(self):
+        self.project_dir = _param("project", "")
+        if not self.project_dir:
+            raise ProjectError("~project is not set: give the COLMAP project folder, e.g. _project:=/tmp/live")
+        self.node = _param("node", "").rstrip("/")
+        self.batch_period = float(_param("batch_period", 1.0))
+        self.poll_period = float(_param("poll_period", 2.0))
+        self.finish_after_idle = float(_param("finish_after_idle", 0.0))
+        self.shutdown_budget = float(_param("shutdown_budget", 12.0))
+        self.model = _param("model", "known_poses")
+        if self.model not in ("known_poses", "mapper"):
+            raise ProjectError("~model is '%s': known_poses or mapper" % self.model)
+        self.node_timeout = float(_param("node_timeout", 10.0))
+        niceness = int(_param("nice", 10))
+        if niceness > 0:
+            os.nice(niceness)  # COLMAP, started from here, inherits it: the node keeps priority
+        self.project = ColmapProject(self.project_dir, _param("colmap", "colmap"), _param("threads", -1))
+        self.project.open()
+        self.work_state = LiveWork(self.project, continuity=bool(_param("continuity_pairs", True)),
+                                   max_backlog=_param("max_backlog", 2000),
+                                   max_batch_pairs=_param("max_batch_pairs", 24),
+                                   max_attempts=_param("max_attempts", 3), log=self._log)
+
+        self.lock = threading.Lock()        # the stream's state
+        self.wake = threading.Condition(self.lock)
+        self.work = threading.Lock()        # COLMAP's work on the project: one step at a time
+        self.stream = PairStream()
+        self.finished_at_change = None
+        self.finishing = False
+        self.stopping = False
+        self.last_report = None
+        self.sub = None
+
+        self.finish_service = rospy.Service("~finish", Trigger, self.on_finish)
+        self.thread = threading.Thread(target=self.loop, name="colmap_bridge", daemon=True)
+        self.thread.start()
+        rospy.loginfo("colmap_bridge: project %s, pairs from %s, model %s%s", self.project.root,
+                      self.node or "the view_selection node (looking for it)", self.model,
+                      ", finish after %.1f s without keyframes" % self.finish_after_idle
+                      if self.finish_after_idle > 0 else "")
+
+    @staticmethod
+    def _log(level, text):
+        if level == "error":
+            rospy.logerr_throttle(5.0, "colmap_bridge: %s" % text)
+        elif level == "warn":
+            rospy.logwarn_throttle(10.0, "colmap_bridge: %s" % text)
+        else:
+            rospy.loginfo("colmap_bridge: %s", text)
+
+    # -- the node ---------------------------------------------------------------------------
+    def find_node(self):
+        """~node, or /view_selection, or the one node serving view_selection/GetPairs."""
+        if self.node:
+            return self.node
+        try:
+            import rosservice
+            services = rosservice.get_service_list()
+        except Exception as e:  # the master's errors come in several types
+            rospy.logwarn_throttle(10.0, "colmap_bridge: cannot list services: %s" % e)
+            return None
+        if "/view_selection/get_pairs" in services:
+            found = ["/view_selection"]
+        else:
+            found = sorted(s[:-len("/get_pairs")] for s in services if s.endswith("/get_pairs")
+                           and rosservice.get_service_type(s) == "view_selection/GetPairs")
+        if len(found) == 1:
+            self.node = found[0]
+            rospy.loginfo("colmap_bridge: following the node %s", self.node)
+            return self.node
+        rospy.logwarn_throttle(10.0, "colmap_bridge: %s; set ~node" % (
+            "no view_selection node is up yet" if not found else "several view_selection nodes (%s)" % ", ".join(found)))
+        return None
+
+    def on_pairs(self, msg):
+        with self.lock:
+            self.stream.receive(msg)
+            self.wake.notify_all()
+
+    def sync(self):
+        """Catches up through ~get_pairs (a late start, a missed message, a node restart) and
+        makes sure the node writes the keyframe images into the project."""
+        if not self.find_node():
+            return False
+        if self.sub is None:
+            self.sub = rospy.Subscriber(self.node + "/pairs", PairChanges, self.on_pairs, queue_size=1000)
+        name = self.node + "/get_pairs"
+        with self.lock:
+            since = self.stream.sequence
+        try:
+            rospy.wait_for_service(name, timeout=1.0)
+            res = rospy.ServiceProxy(name, GetPairs)(since=since)
+        except (rospy.ROSException, rospy.ServiceException) as e:
+            rospy.logwarn_throttle(10.0, "colmap_bridge: %s is not answering (%s); waiting" % (name, e))
+            return False
+        with self.lock:
+            if self.stream.sequence == since:  # else ~pairs moved on meanwhile: ask again later
+                self.stream.catch_up(res.sequence, res.changes)
+            else:
+                self.stream.need_sync = True
+        if not res.keyframe_image_dir or os.path.realpath(res.keyframe_image_dir) != os.path.realpath(self.project.images):
+            try:
+                w = rospy.ServiceProxy(self.node + "/write_keyframe_images", WriteKeyframeImages)(
+                    directory=self.project.images)
+                (rospy.loginfo if w.success else rospy.logerr)("colmap_bridge: %s", w.message)
+            except (rospy.ROSException, rospy.ServiceException) as e:
+                rospy.logerr_throttle(10.0, "colmap_bridge: cannot ask the node to write images: %s" % e)
+        return True
+
+    # -- the work --------------------------------------------------------------------------
+    def loop(self):
+        last_poll = 0.0
+        while not self.stopping and not rospy.is_shutdown():
+            with self.lock:
+                need_sync = self.stream.need_sync
+            if need_sync or time.monotonic() - last_poll > self.poll_period:
+                last_poll = time.monotonic()
+                self.sync()
+            # Due: no keyframe for ~finish_after_idle, and the node announced every pair it
+            # selected (it does once no frame came for its ~pair_flush_idle), or three times as
+            # long without keyframes (a node that never flushes).
+            with self.lock:
+                s = self.stream
+                idle = time.monotonic() - (s.last_keyframe_time or time.monotonic())
+                due = (self.finish_after_idle > 0 and s.keyframes and idle >= self.finish_after_idle
+                       and (s.pending_pairs == 0 or idle >= 3 * self.finish_after_idle)
+                       and self.finished_at_change != s.last_change_time)
+            more = False
+            if due:
+                self.finish("no keyframe for %.1f s" % idle)
+            else:
+                more = self.batch()
+            with self.lock:
+                if not self.stopping and not more:
+                    self.wake.wait(self.batch_period)
+
+    def batch(self):
+        """Features of new keyframes, then matches of announced pairs not matched yet; True when
+        pairs are left for the next batch."""
+        with self.lock:
+            keyframes = self.stream.ordered_keyframes()
+            pairs = self.stream.announced_names()
+        if not keyframes:
+            return False
+        with self.work:
+            if self.stopping:
+                return False
+            try:
+                self.work_state.extract(keyframes)
+                return self.work_state.match(keyframes, pairs)
+            except (ProjectError, DatabaseError, OSError) as e:
+                self.work_state.error("project %s: %s" % (self.project.root, e))
+                return False
+
+    def final_state(self, ask_node=True):
+        """The node's final keyframes (poses as the node has them now) and pairs, or ours."""
+        name = (self.node or "/view_selection") + "/get_selection"
+        why = "not asked at shutdown"
+        if ask_node and self.node:
+            try:
+                rospy.wait_for_service(name, timeout=self.node_timeout)
+                s = rospy.ServiceProxy(name, GetSelection)().selection
+                keyframes = [Keyframe.from_msg(k) for k in s.keyframes]
+                names = {k.id: k.name for k in keyframes}
+                pairs = [(names[p.first], names[p.second]) for p in s.pairs if p.first in names and p.second in names]
+                return keyframes, pairs, "the node's final selection"
+            except (rospy.ROSException, rospy.ServiceException) as e:
+                why = "%s did not answer: %s" % (name, e)
+        with self.lock:
+            return (self.stream.ordered_keyframes(), self.stream.announced_names(),
+                    "the pairs announced so far (%s)" % why)
+
+    def finish(self, why, shutting_down=False):
+        with self.lock:
+            if self.finishing:
+                return False, "a finish is running"
+            self.finishing = True
+            change = self.stream.last_change_time
+            last_keyframe = self.stream.last_keyframe_time
+        try:
+            start = time.monotonic()
+            if not shutting_down:
+                self.sync()
+            keyframes, pairs, source = self.final_state(ask_node=not shutting_down)
+            if len(keyframes) < 2:
+                return False, "%d keyframes: a model needs at least 2" % len(keyframes)
+            rospy.loginfo("colmap_bridge: finishing (%s): %d keyframes, %d pairs from %s", why, len(keyframes),
+                          len(pairs), source)
+            with self.work:  # after the batch that may be running
+                self.project.cancelled = False
+                if shutting_down:
+                    self.project.deadline = start + self.shutdown_budget
+                try:
+                    report = self.work_state.build_model(keyframes, pairs, self.model)
+                finally:
+                    self.project.deadline = None
+            done = time.monotonic()
+            report.update({
+                "project": self.project.root, "node": self.node, "why": why, "pairs_source": source,
+                "seconds": dict(self.project.seconds, finish=done - start),
+                "seconds_from_last_keyframe": (done - last_keyframe) if last_keyframe else None,
+                "stream_messages": self.stream.messages, "sequence": self.stream.sequence,
+                "backlog_max": self.work_state.backlog_max, "deferred_to_finish": self.work_state.deferred,
+                "errors": self.work_state.errors[-5:], "finished_at": time.time()})
+            write_json_atomically(os.path.join(self.project.root, "report.json"), report)
+            self.last_report = report
+            with self.lock:
+                self.finished_at_change = change
+            msg = ("model in %s: %s of %d keyframes, %s points, %d pairs matched (%d wasted), %.1f s after the "
+                   "last keyframe" % (report["model_path"], report.get("registered", 0), len(keyframes),
+                                      report.get("points", 0), report["pairs_matched"], report["pairs_wasted"],
+                                      report["seconds_from_last_keyframe"] or 0.0))
+            skipped = report["skipped"]
+            if report.get("model_error"):
+                msg += "; " + report["model_error"]
+            if skipped["images"] or skipped["pairs"]:
+                msg += "; skipped: %d images, %d pairs (%s)" % (
+                    len(skipped["images"]), len(skipped["pairs"]),
+                    (skipped["images"] or skipped["pairs"])[0]["error"])
+                rospy.logwarn("colmap_bridge: %s", msg)
+            else:
+                rospy.loginfo("colmap_bridge: %s", msg)
+            return True, msg
+        except (ProjectError, DatabaseError, OSError) as e:
+            self.work_state.error(str(e))
+            return False, str(e)
+        finally:
+            with self.lock:
+                self.finishing = False
+
+    def on_finish(self, _req):
+        ok, msg = self.finish("~finish called")
+        return TriggerResponse(success=ok, message=msg)
+
+    def shutdown(self):
+        """rospy's shutdown hook (SIGINT from roslaunch or Ctrl-C): the batch running now is
+        cancelled at once, and the model is finished within ~shutdown_budget from what the
+        stream announced (the node may be gone already)."""
+        start = time.monotonic()
+        with self.lock:
+            self.stopping = True
+            self.wake.notify_all()
+            finishing = self.finishing
+        if not finishing:
+            self.project.cancel()  # a batch; a finish that is running is left to complete
+        self.thread.join(timeout=self.shutdown_budget)
+        with self.lock:
+            unfinished = bool(self.stream.keyframes) and self.finished_at_change != self.stream.last_change_time
+        if unfinished:
+            self.shutdown_budget -= time.monotonic() - start
+            ok, msg = self.finish("shutdown", shutting_down=True)
+            if not ok:
+                rospy.logerr("colmap_bridge: no model at shutdown: %s", msg)
+
+
+def main(argv):
+    """scripts/colmap_bridge: parse, build, spin."""
+    args = rospy.myargv(argv)
+    if any(a in ("-h", "--help") for a in args[1:]):
+        import sys
+        sys.stdout.write(USAGE)
+        return 0
+    rospy.init_node("colmap_bridge")
+    try:
+        bridge = Bridge()
+    except (ProjectError, DatabaseError) as e:
+        rospy.logfatal("colmap_bridge: %s", e)
+        return 1
+    rospy.on_shutdown(bridge.shutdown)
+    rospy.spin()
+    return 0
+
+
+USAGE = """usage: rosrun view_selection colmap_bridge _project:=DIR [_name:=value ...]
+
+Keeps a COLMAP 3.8 project current while a view_selection node runs: the keyframe images
+(DIR/images), features and matches of the pairs the node announces (DIR/database.db), and at the
+end the model (DIR/sparse/0, DIR/report.json). Services: ~finish (std_srvs/Trigger) builds the
+model now. docs/live.md says more.
+
+  rosrun view_selection colmap_bridge _project:=/tmp/kitchen_live
+  roslaunch view_selection tum_replay.launch bag:=kitchen.bag colmap_project:=/tmp/kitchen_live
+
+""" + PARAMETERS

@@ -1,0 +1,107 @@
+"""From a view selection to a sparse COLMAP model, in one command.
+
+Takes a folder written by the node's ~export or by select_views (selection.json and pairs.txt)
+and runs COLMAP 3.8 (CPU) on exactly the selected pairs:
+
+  1. feature_extractor on the keyframe images only, a PINHOLE camera with the known intrinsics
+     from selection.json;
+  2. matches_importer with pairs.txt (--match_type pairs): only the selected pairs are matched;
+  3. mapper, started from the selection's initial pair (s, C_s[0]) when --init-pair is on;
+  4. the model's statistics: registered images, points, track length, reprojection error.
+
+With --model known_poses it builds instead the model a user with SLAM poses asks for, exactly
+as colmap_bridge does online (the same code): the project laid out as the bridge keeps it
+(OUT/images with the keyframe images, linked where the file system allows, OUT/database.db,
+OUT/sparse/0, OUT/report.json), the keyframes at their selection.json poses and 3D points from
+point_triangulator with the cameras held fixed. On the same frames, offline and online give the
+same model.
+
+The images are found through selection.json's params: "image_path" relative to the export
+folder (the node with ~save_keyframe_images writes them there), or to params "dataset" (a
+select_views folder). --image-path overrides both. Output: OUT/database.db, OUT/sparse/0/,
+OUT/report.json.
+
+  rosrun view_selection colmap_from_selection /tmp/my_selection
+  rosrun view_selection colmap_from_selection /tmp/my_selection --out /tmp/my_model --threads 2
+"""
+import argparse
+import os
+import shutil
+import sys
+import time
+
+from ..colmap.project import ColmapProject, ProjectError, write_json_atomically
+from ..export_folder import ExportError, ExportFolder
+from ..live.work import LiveWork
+
+
+def log(msg):
+    print("[colmap_from_selection %s] %s" % (time.strftime("%H:%M:%S"), msg), file=sys.stderr, flush=True)
+
+
+def parse_args(argv):
+    p = argparse.ArgumentParser(prog="colmap_from_selection", description=__doc__.split("\n")[0], epilog=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("export", help="folder with selection.json and pairs.txt (~export or select_views --out)")
+    p.add_argument("--out", help="output folder (default EXPORT/colmap)")
+    p.add_argument("--image-path", help="folder the image names are relative to (default: from selection.json)")
+    p.add_argument("--init-pair", choices=["on", "off"], default="off",
+                   help="start the mapper from the selection's initial pair (default off: measured "
+                        "no better than COLMAP's own choice, docs/results.md)")
+    p.add_argument("--threads", type=int, default=-1, help="COLMAP threads (default -1: all cores)")
+    p.add_argument("--seed", type=int, default=0, help="mapper random seed (default 0)")
+    p.add_argument("--colmap", default="colmap", help="the colmap executable")
+    p.add_argument("--model", choices=["mapper", "known_poses"], default="mapper",
+                   help="mapper (default): COLMAP's mapper from scratch; known_poses: the keyframes at "
+                        "their poses, points from point_triangulator (colmap_bridge's model)")
+    p.add_argument("--no-continuity", action="store_true",
+                   help="known_poses: match only the selection's pairs, not also each keyframe with the "
+                        "one before it (colmap_bridge's ~continuity_pairs)")
+    return p.parse_args(argv)
+
+
+def link_images(export, images, project):
+    """The project's images/ as the node writes it: linked, not copied, where possible."""
+    for k in export.keyframes:
+        target = os.path.join(project.images, k.name)
+        os.makedirs(os.path.dirname(target), exist_ok=True)
+        try:
+            os.link(os.path.join(images, k.name), target)
+        except OSError:
+            shutil.copyfile(os.path.join(images, k.name), target)
+
+
+def main(argv=None):
+    args = parse_args(sys.argv[1:] if argv is None else argv)
+    try:
+        export = ExportFolder(args.export)
+        if len(export.keyframes) < 2:
+            raise ExportError("the selection has %d keyframes; a model needs at least 2" % len(export.keyframes))
+        images = export.image_root(args.image_path)
+        out = os.path.abspath(args.out or os.path.join(export.folder, "colmap"))
+        if os.path.exists(out):
+            shutil.rmtree(out)
+        project = ColmapProject(out, args.colmap, args.threads)
+        os.makedirs(project.images)
+        link_images(export, images, project)
+        project.open()
+        known = args.model == "known_poses"
+        work = LiveWork(project, continuity=known and not args.no_continuity, max_batch_pairs=len(export.pairs) + 1,
+                        log=lambda level, text: log(text))
+        log("%s model of %d keyframes, %d pairs" % ("known-pose" if known else "mapper", len(export.keyframes),
+                                                    len(export.pairs)))
+        if not known:
+            project.init_pair = export.initial_pair() if args.init_pair == "on" else None
+        report = work.build_model(export.keyframes, export.pairs, args.model, seed=args.seed)
+        report.update({"export": export.folder, "images": images, "seconds": project.seconds,
+                       "init_pair": args.init_pair})
+        write_json_atomically(os.path.join(out, "report.json"), report)
+        print("colmap_from_selection: %d of %d keyframes %s, %d points, reprojection error %.3f px in %s (%d of %d "
+              "pairs verified); %s" % (report.get("registered", 0), len(export.keyframes),
+                                       "at their poses" if known else "registered", report.get("points", 0),
+                                       report.get("reprojection_error", 0.0), report["model_path"],
+                                       report["pairs_verified"], len(export.pairs), os.path.join(out, "report.json")))
+        return 0
+    except (ExportError, ProjectError, OSError) as e:
+        print("colmap_from_selection: error: %s" % e, file=sys.stderr)
+        return 1

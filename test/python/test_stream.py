@@ -1,0 +1,85 @@
+"""The pair stream's consumer: in-order application, gaps, catch-up, restarts of the node."""
+from types import SimpleNamespace as NS
+
+from view_selection.live.stream import PairStream
+
+
+def keyframe(i):
+    pose = NS(position=NS(x=float(i), y=0.0, z=0.0), orientation=NS(w=1.0, x=0.0, y=0.0, z=0.0))
+    return NS(id=i, image_name="%d.png" % i, stamp=NS(to_sec=lambda i=i: 100.0 + i), pose=pose,
+              intrinsics=[500.0, 500.0, 320.0, 240.0], width=640, height=480)
+
+
+def msg(seq, added=(), removed=(), keyframes=(), full=False, total=None, pending=0):
+    return NS(sequence=seq, full=full, added=[NS(first=a, second=b) for a, b in added],
+              removed=[NS(first=a, second=b) for a, b in removed], keyframes=[keyframe(i) for i in keyframes],
+              total_keyframes=total if total is not None else len(keyframes), pending_pairs=pending)
+
+
+def test_messages_in_sequence_are_applied():
+    s = PairStream()
+    assert s.receive(msg(1, added=[(0, 1)], keyframes=[0, 1]))
+    assert s.receive(msg(2, added=[(1, 2), (0, 2)], keyframes=[2], total=3))
+    assert s.receive(msg(3, removed=[(0, 2)], total=3, pending=4))
+    assert s.sequence == 3 and s.announced == {(0, 1), (1, 2)} and s.pending_pairs == 4
+    assert sorted(s.announced_names()) == [("0.png", "1.png"), ("1.png", "2.png")]
+    assert [k.id for k in s.ordered_keyframes()] == [0, 1, 2]
+
+
+def test_a_gap_asks_for_a_catch_up_and_applies_nothing():
+    s = PairStream()
+    s.catch_up(0, [])
+    assert not s.need_sync
+    s.receive(msg(1, added=[(0, 1)], keyframes=[0, 1]))
+    assert not s.receive(msg(3, added=[(5, 6)], keyframes=[5, 6]))  # 2 was missed
+    assert s.need_sync and s.sequence == 1 and s.announced == {(0, 1)}
+
+
+def test_a_duplicate_is_harmless():
+    s = PairStream()
+    s.catch_up(0, [])
+    s.receive(msg(1, added=[(0, 1)], keyframes=[0, 1]))
+    assert not s.receive(msg(1, added=[(0, 1)], keyframes=[0, 1]))
+    assert not s.need_sync
+
+
+def test_catch_up_applies_the_missed_messages_in_order():
+    s = PairStream()
+    s.receive(msg(1, added=[(0, 1)], keyframes=[0, 1]))
+    s.receive(msg(3, added=[(2, 3)], keyframes=[2, 3]))
+    s.catch_up(3, [msg(2, added=[(1, 2)], keyframes=[2], total=3),
+                   msg(3, added=[(2, 3)], removed=[(0, 1)], keyframes=[3], total=4)])
+    assert s.sequence == 3 and not s.need_sync
+    assert s.announced == {(1, 2), (2, 3)}
+
+
+def test_a_full_message_replaces_the_announced_set():
+    s = PairStream()
+    s.receive(msg(1, added=[(0, 1), (1, 2)], keyframes=[0, 1, 2]))
+    s.catch_up(9, [msg(9, added=[(1, 2)], full=True, total=3)])
+    assert s.sequence == 9 and s.announced == {(1, 2)} and len(s.keyframes) == 3
+
+
+def test_a_node_restarted_without_state_starts_the_consumer_over():
+    s = PairStream()
+    s.receive(msg(1, added=[(0, 1)], keyframes=[0, 1]))
+    s.receive(msg(2, added=[(1, 2)], keyframes=[2], total=3))
+    # a new session: sequence 1 again, with fewer keyframes than the consumer holds
+    s.catch_up(1, [msg(1, added=[(0, 1)], keyframes=[0, 1], full=True, total=2)])
+    assert s.sequence == 1 and s.announced == {(0, 1)} and sorted(s.keyframes) == [0, 1]
+
+
+def test_a_gap_inside_the_answer_asks_again():
+    s = PairStream()
+    s.receive(msg(1, added=[(0, 1)], keyframes=[0, 1]))
+    s.catch_up(4, [msg(3, added=[(1, 2)], keyframes=[2], total=3)])
+    assert s.need_sync and s.sequence == 1
+
+
+def test_new_keyframes_are_timed_by_the_clock():
+    now = [10.0]
+    s = PairStream(clock=lambda: now[0])
+    s.receive(msg(1, keyframes=[0]))
+    now[0] = 12.0
+    s.receive(msg(2, keyframes=[0], total=1))  # the same keyframe again (a pose update)
+    assert s.last_keyframe_time == 10.0 and s.last_change_time == 12.0

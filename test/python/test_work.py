@@ -1,0 +1,119 @@
+"""The bridge's work on its project, with a project that fails the way COLMAP does: a run over a
+list fails as a whole when one item in it is bad. The real COLMAP is in the rostests."""
+import math
+
+from view_selection.colmap.project import ProjectError
+from view_selection.keyframes import Keyframe
+from view_selection.live.work import LiveWork
+
+
+class FailingProject:
+    def __init__(self, bad_images=(), bad_pairs=(), fail_everything=False, unreadable=()):
+        self.bad_images, self.bad_pairs, self.unreadable = set(bad_images), set(bad_pairs), set(unreadable)
+        self.fail_everything = fail_everything
+        self.features, self.geometries = set(), set()
+        self.runs = []
+        self.ledgered = []
+        self.cancelled = False
+
+    def register(self, keyframes):
+        pass
+
+    def has_image(self, name):
+        return True
+
+    def extracted(self):
+        return set(self.features)
+
+    def matched(self):
+        return set(self.geometries)
+
+    def extract(self, keyframes):
+        names = [k.name for k in keyframes]
+        self.runs.append(("extract", names))
+        if self.fail_everything or self.bad_images & set(names):
+            raise ProjectError("'colmap feature_extractor' failed (exit 1)")
+        self.features |= set(names) - self.unreadable  # COLMAP skips what it cannot read
+
+    def match(self, pairs):
+        self.runs.append(("match", list(pairs)))
+        if self.fail_everything or self.bad_pairs & set(pairs):
+            raise ProjectError("'colmap matches_importer' failed (exit 3)")
+        self.geometries |= set(pairs)
+
+    def ledger(self, what, items):
+        self.ledgered += [(what, i) for i in items]
+
+
+def keyframes(n):
+    return [Keyframe(i, "%03d.png" % i, i, (i, 0, 0), (1, 0, 0, 0), (500, 500, 320, 240), 640, 480) for i in range(n)]
+
+
+def chain(kfs):
+    return [(a.name, b.name) for a, b in zip(kfs, kfs[1:])]
+
+
+def test_one_bad_pair_costs_its_neighbours_nothing():
+    kfs = keyframes(25)
+    pairs = chain(kfs)
+    bad = pairs[13]
+    project = FailingProject(bad_pairs=[bad])
+    project.features = {k.name for k in kfs}
+    work = LiveWork(project, continuity=False, max_batch_pairs=24, max_attempts=3)
+    assert not work.match(kfs, pairs)
+    assert project.matched() == set(pairs) - {bad}
+    assert len(project.runs) <= 2 * math.ceil(math.log2(24)) + 1
+    assert work.pairs.suspect(bad) and not work.pairs.given_up(bad)
+
+
+def test_colmap_failing_on_everything_is_found_in_log_n_runs():
+    kfs = keyframes(33)
+    project = FailingProject(fail_everything=True)
+    project.features = {k.name for k in kfs}
+    work = LiveWork(project, continuity=False, max_batch_pairs=32)
+    work.match(kfs, chain(kfs))
+    assert len(project.runs) <= 2 * math.ceil(math.log2(32)) + 2  # the budget, not one run per pair
+    assert all(work.pairs.suspect(p) for p in chain(kfs))
+
+
+def test_a_pair_that_keeps_failing_is_given_up_and_ledgered():
+    kfs = keyframes(4)
+    pairs = chain(kfs)
+    project = FailingProject(bad_pairs=[pairs[0]])
+    project.features = {k.name for k in kfs}
+    now = [0.0]
+    work = LiveWork(project, continuity=False, max_attempts=3)
+    work.pairs.clock = lambda: now[0]
+    for _ in range(10):
+        work.match(kfs, pairs)
+        now[0] += 1000.0  # past every backoff
+    assert work.pairs.given_up(pairs[0])
+    assert project.ledgered == [("skipped-pair", "%s %s" % pairs[0])]
+    assert sum(1 for kind, items in project.runs if items == [pairs[0]]) == 3  # then never again
+    assert work.skipped()["pairs"][0]["item"] == "%s %s" % pairs[0]
+    assert "exit 3" in work.skipped()["pairs"][0]["error"]
+
+
+def test_an_unreadable_image_is_retried_with_a_wait_not_every_batch():
+    kfs = keyframes(5)
+    project = FailingProject(unreadable=["002.png"])
+    now = [0.0]
+    work = LiveWork(project, continuity=False)
+    work.images.clock = lambda: now[0]
+    work.extract(kfs)
+    assert project.extracted() == {k.name for k in kfs} - {"002.png"}
+    runs = len(project.runs)
+    for _ in range(5):  # batches one second apart: the image waits
+        now[0] += 1.0
+        work.extract(kfs)
+    assert len(project.runs) == runs + 1  # one retry after the first wait (2 s)
+
+
+def test_one_bad_image_does_not_stop_the_others_or_the_matching():
+    kfs = keyframes(6)
+    project = FailingProject(bad_images=["003.png"])
+    work = LiveWork(project, continuity=True)
+    work.extract(kfs)
+    assert project.extracted() == {k.name for k in kfs} - {"003.png"}
+    work.match(kfs, [])
+    assert project.matched() == {p for p in chain(kfs) if "003.png" not in p}
