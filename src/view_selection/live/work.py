@@ -13,8 +13,12 @@ from .attempts import Attempts
 
 class LiveWork:
     def __init__(self, project: ColmapProject, continuity=True, max_backlog=2000, max_batch_pairs=24,
-                 max_attempts=3, log=None):
+                 max_attempts=3, log=None, backend=None):
+        """backend: what extracts and matches (register, extract, match, extracted, matched,
+        has_image): the project itself (COLMAP's commands) or matching.backend's pose-guided
+        one."""
         self.project = project
+        self.backend = backend or project
         self.continuity = continuity
         self.max_backlog, self.max_batch_pairs = int(max_backlog), max(1, int(max_batch_pairs))
         self.images = Attempts(max_attempts)
@@ -59,9 +63,11 @@ class LiveWork:
             half = len(failed) // 2
             return (self._attempt(failed[:half], run, done, attempts, kind, ledger_kind, budget) +
                     self._attempt(failed[half:], run, done, attempts, kind, ledger_kind, budget))
-        reason = error or ("COLMAP extracted no features (an image it cannot read?)" if kind == "image"
-                           else "COLMAP wrote no two-view geometry for it")
+        default = error or ("no features were extracted (an image that cannot be read?)" if kind == "image"
+                            else "no two-view geometry was written for it")
+        errors = getattr(self.backend, "errors", None) or {}
         for i in failed:
+            reason = errors.get(i, default)
             if attempts.failed(i, reason):
                 label = i if isinstance(i, str) else "%s %s" % i
                 self.project.ledger(ledger_kind, [label])
@@ -72,14 +78,14 @@ class LiveWork:
     def extract(self, keyframes):
         """Features of the keyframes whose images are there, that have none and are due.
         Returns how many were tried."""
-        self.project.register(keyframes)
-        done = self.project.extracted()
-        todo = [k for k in keyframes if k.name not in done and self.project.has_image(k.name) and self.images.due(k.name)]
+        self.backend.register(keyframes)
+        done = self.backend.extracted()
+        todo = [k for k in keyframes if k.name not in done and self.backend.has_image(k.name) and self.images.due(k.name)]
         if not todo:
             return 0
         by_name = {k.name: k for k in todo}
-        self._attempt([k.name for k in todo], lambda names: self.project.extract([by_name[n] for n in names]),
-                      self.project.extracted, self.images, "image", "skipped-image")
+        self._attempt([k.name for k in todo], lambda names: self.backend.extract([by_name[n] for n in names]),
+                      self.backend.extracted, self.images, "image", "skipped-image")
         return len(todo)
 
     # -- matches -----------------------------------------------------------------------------
@@ -94,8 +100,8 @@ class LiveWork:
         """Matches at most `limit` (~max_batch_pairs) of the wanted pairs not matched yet whose
         images have features and that are due; True when more are waiting."""
         limit = self.max_batch_pairs if limit is None else limit
-        backlog = sorted(self.wanted_pairs(keyframes, pairs) - self.project.matched())
-        have = self.project.extracted()
+        backlog = sorted(self.wanted_pairs(keyframes, pairs) - self.backend.matched())
+        have = self.backend.extracted()
         backlog = [p for p in backlog if p[0] in have and p[1] in have and not self.pairs.given_up(p)]
         self.backlog_max = max(self.backlog_max, len(backlog))
         if len(backlog) > self.max_backlog:
@@ -106,7 +112,7 @@ class LiveWork:
         due = [p for p in backlog if self.pairs.due(p)]
         if not due:
             return False
-        self._attempt(due[:limit], self.project.match, self.project.matched, self.pairs, "pair", "skipped-pair")
+        self._attempt(due[:limit], self.backend.match, self.backend.matched, self.pairs, "pair", "skipped-pair")
         return len(due) > limit
 
     def skipped(self, all_failed=False):
