@@ -48,6 +48,8 @@ PARAMETERS = """Parameters (private, ~name):
                      feature_extractor and matches_importer for everything) (guided)
   max_features       SIFT features per keyframe, the strongest (2048; guided)
   guided_window_deg  how far the poses may be off and still guide a pair [deg of view] (1.5; guided)
+  triangulation      live (the points triangulated as pairs verify; the finish writes them) or
+                     colmap (COLMAP's point_triangulator over the whole model at the finish) (live)
   node_timeout       [s] how long the finish waits for the node's ~get_selection (10)
   continuity_pairs   also match each keyframe with the one before it (true)
 """
@@ -87,7 +89,8 @@ class Bridge:
         self.work_state = LiveWork(self.project, continuity=bool(_param("continuity_pairs", True)),
                                    max_backlog=_param("max_backlog", 2000),
                                    max_batch_pairs=_param("max_batch_pairs", 24),
-                                   max_attempts=_param("max_attempts", 3), log=self._log, backend=self.backend)
+                                   max_attempts=_param("max_attempts", 3), log=self._log, backend=self.backend,
+                                   triangulation=_param("triangulation", "live"))
 
         self.lock = threading.Lock()        # the stream's state
         self.wake = threading.Condition(self.lock)
@@ -215,8 +218,12 @@ class Bridge:
                 return False
             try:
                 self.work_state.extract(keyframes)
-                return self.work_state.match(keyframes, pairs)
-            except (ProjectError, DatabaseError, OSError) as e:
+                more = self.work_state.match(keyframes, pairs)
+                if self.work_state.model is not None:
+                    with self.work_state.clock.measure("triangulation", 1):
+                        self.work_state.feed_model(keyframes)
+                return more
+            except (ProjectError, DatabaseError, OSError, ValueError) as e:
                 self.work_state.error("project %s: %s" % (self.project.root, e))
                 return False
 
@@ -270,8 +277,11 @@ class Bridge:
                 "stream_messages": self.stream.messages, "sequence": self.stream.sequence,
                 "backlog_max": self.work_state.backlog_max, "deferred_to_finish": self.work_state.deferred,
                 "errors": self.work_state.errors[-5:], "finished_at": time.time(), "matcher": self.matcher})
+            stages = self.work_state.clock.summary()
             if self.backend:
-                report.update(matching=self.backend.path_counts(), stages=self.backend.clock.summary())
+                report["matching"] = self.backend.path_counts()
+                stages.update(self.backend.clock.summary())
+            report["stages"] = stages
             write_json_atomically(os.path.join(self.project.root, "report.json"), report)
             self.last_report = report
             with self.lock:

@@ -59,6 +59,10 @@ def parse_args(argv):
                    help="guided (default with known_poses): OpenCV SIFT and matches guided by the selection's "
                         "poses, COLMAP's matcher for pairs whose poses disagree with the images (colmap_bridge's "
                         "~matcher); colmap (default with mapper): COLMAP's feature_extractor and matches_importer")
+    p.add_argument("--triangulation", choices=["live", "colmap"], default="live",
+                   help="known_poses: live (default; colmap_bridge's ~triangulation): the points triangulated and "
+                        "filtered by the package, as the bridge does while pairs verify; colmap: COLMAP's "
+                        "point_triangulator over the whole model")
     p.add_argument("--no-continuity", action="store_true",
                    help="known_poses: match only the selection's pairs, not also each keyframe with the "
                         "one before it (colmap_bridge's ~continuity_pairs)")
@@ -97,7 +101,8 @@ def main(argv=None):
         matcher = args.matcher or ("guided" if known else "colmap")
         backend = PoseGuidedBackend(project) if matcher == "guided" else None
         work = LiveWork(project, continuity=known and not args.no_continuity, max_batch_pairs=len(export.pairs) + 1,
-                        log=lambda level, text: log(text), backend=backend)
+                        log=lambda level, text: log(text), backend=backend,
+                        triangulation=args.triangulation if known else "colmap")
         log("%s model of %d keyframes, %d pairs" % ("known-pose" if known else "mapper", len(export.keyframes),
                                                     len(export.pairs)))
         if not known:
@@ -105,8 +110,11 @@ def main(argv=None):
         report = work.build_model(export.keyframes, export.pairs, args.model, seed=args.seed)
         report.update({"export": export.folder, "images": images, "seconds": project.seconds,
                        "init_pair": args.init_pair, "matcher": matcher})
+        stages = work.clock.summary()
         if backend:
-            report.update(matching=backend.path_counts(), stages=backend.clock.summary())
+            report["matching"] = backend.path_counts()
+            stages.update(backend.clock.summary())
+        report["stages"] = stages
         write_json_atomically(os.path.join(out, "report.json"), report)
         print("colmap_from_selection: %d of %d keyframes %s, %d points, reprojection error %.3f px in %s (%d of %d "
               "pairs verified); %s" % (report.get("registered", 0), len(export.keyframes),
