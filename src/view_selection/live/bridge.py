@@ -22,7 +22,7 @@ from view_selection.msg import PairChanges
 from view_selection.srv import GetPairs, GetSelection, WriteKeyframeImages
 
 from ..colmap.database import DatabaseError
-from ..colmap.project import ColmapProject, ProjectError, write_json_atomically
+from ..colmap.project import ColmapProject, ProjectError, Timeouts, write_json_atomically
 from ..keyframes import Keyframe
 from ..features.sift import SiftExtractor
 from ..matching.backend import PoseGuidedBackend
@@ -55,6 +55,9 @@ PARAMETERS = """Parameters (private, ~name):
                      colmap (COLMAP's point_triangulator over the whole model at the finish) (live)
   node_timeout       [s] how long the finish waits for the node's ~get_selection (10)
   continuity_pairs   also match each keyframe with the one before it (true)
+  colmap_timeout     [s] a COLMAP command may take this long, plus colmap_timeout_per_image for
+                     each image and colmap_timeout_per_pair for each pair it works on; then it
+                     is killed, and what it worked on is retried (120, 10, 5)
 """
 
 
@@ -83,7 +86,10 @@ class Bridge:
         self.matcher = _param("matcher", "guided")
         if self.matcher not in ("guided", "colmap"):
             raise ProjectError("~matcher is '%s': guided or colmap" % self.matcher)
-        self.project = ColmapProject(self.project_dir, _param("colmap", "colmap"), _param("threads", -1))
+        timeouts = Timeouts(float(_param("colmap_timeout", 120.0)), float(_param("colmap_timeout_per_image", 10.0)),
+                            float(_param("colmap_timeout_per_pair", 5.0)))
+        self.project = ColmapProject(self.project_dir, _param("colmap", "colmap"), _param("threads", -1),
+                                     timeouts=timeouts)
         self.project.open()
         self.backend = None
         if self.matcher == "guided":
