@@ -10,6 +10,7 @@ Threads: rospy's for ~pairs and ~finish; one worker (`loop`) for the batches. `l
 stream's state; `work` serialises COLMAP's work on the project (a batch, or the finish).
 """
 import os
+import sqlite3
 import threading
 import time
 
@@ -235,7 +236,7 @@ class Bridge:
                     with self.work_state.clock.measure("triangulation", 1):
                         self.work_state.feed_model(keyframes)
                 return more
-            except (ProjectError, DatabaseError, OSError, ValueError) as e:
+            except (ProjectError, DatabaseError, sqlite3.Error, OSError, ValueError) as e:
                 self.work_state.error("project %s: %s" % (self.project.root, e))
                 return False
 
@@ -317,8 +318,8 @@ class Bridge:
             else:
                 rospy.loginfo("colmap_bridge: %s", msg)
             return True, msg
-        except (ProjectError, DatabaseError, OSError) as e:
-            self.work_state.error(str(e))
+        except (ProjectError, DatabaseError, sqlite3.Error, OSError, ValueError) as e:
+            self.work_state.error("project %s: %s" % (self.project.root, e))
             return False, str(e)
         finally:
             with self.lock:

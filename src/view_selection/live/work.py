@@ -207,10 +207,10 @@ class LiveWork:
                "pairs_verified": project.verified_count(), "model": model, "skipped": self.skipped(all_failed=True)}
         if model == "mapper":
             path = project.mapper_model(seed)
-            made = colmap_model.read_model(path).image_by_name()
+            mapped = colmap_model.read_model(path).image_by_name()
             by_name = {k.name: k for k in keyframes}
-            common = [n for n in made if n in by_name]
-            out["ate_rmse"] = ate_rmse([geometry.centre_of(made[n].qvec, made[n].tvec) for n in common],
+            common = [n for n in mapped if n in by_name]
+            out["ate_rmse"] = ate_rmse([geometry.centre_of(mapped[n].qvec, mapped[n].tvec) for n in common],
                                        [by_name[n].position for n in common])
             out["ate_images"] = len(common)
         else:
