@@ -15,7 +15,7 @@
 #include "view_selection/core/view_selector.h"
 #include "view_selection/io/state_file.h"
 #include "view_selection/io/tum_frames.h"
-#include "view_selection/points/image_conversion.h"
+#include "view_selection/images/image_conversion.h"
 #include "view_selection/points/point_source_factory.h"
 #include "view_selection/sim/synthetic_sequence.h"
 
@@ -58,7 +58,7 @@ const core::ViewSelector& session(int keyframes) {
       frame.image_name = std::to_string(q) + ".png";
       frame.intrinsics = c.intrinsics;
       frame.pose = f.pose;
-      frame.depth = points::depthImageOf(points::depthToMetres(f.depth, 1.0 / 5000.0));
+      frame.depth = images::depthImageOf(images::depthToMetres(f.depth, 1.0 / 5000.0));
       s->addFrame(frame);
     }
   }

@@ -6,7 +6,7 @@
 // frame as the base, and the records of its third frame and of a reset to one keyframe after it.
 #include "view_selection/core/view_selector.h"
 #include "view_selection/io/state_file.h"
-#include "view_selection/points/image_conversion.h"
+#include "view_selection/images/image_conversion.h"
 #include "view_selection/points/point_source_factory.h"
 #include "view_selection/ros/compressed_images.h"
 
@@ -105,9 +105,9 @@ int main(int argc, char** argv) {
       f.intrinsics = {60.0, 60.0, 32.0, 24.0, 64, 48};
       f.pose.position = Eigen::Vector3d(0.05 * q, 0.0, 0.0);
       const cv::Mat image = wall(cv::Rect(10 * q, 0, 64, 48)).clone();
-      f.image = points::colourImageOf(image);
+      f.image = images::colourImageOf(image);
       cv::Mat depth(48, 64, CV_32FC1, cv::Scalar(2.0f));
-      if (std::string(source) != "auto" || q != 1) f.depth = points::depthImageOf(depth);
+      if (std::string(source) != "auto" || q != 1) f.depth = images::depthImageOf(depth);
       try {
         selector.addFrame(f);
       } catch (const core::Error& e) {

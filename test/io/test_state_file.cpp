@@ -5,7 +5,7 @@
 
 #include "view_selection/core/exceptions.h"
 #include "view_selection/core/view_selector.h"
-#include "view_selection/points/image_conversion.h"
+#include "view_selection/images/image_conversion.h"
 #include "view_selection/points/point_source_factory.h"
 
 #include "support/layers.h"

@@ -5,11 +5,13 @@
 
 namespace view_selection {
 namespace core {}
+namespace images {}
 namespace points {}
 namespace io {}
 namespace sim {}
 namespace eval {}
 using namespace core;
+using namespace images;
 using namespace points;
 using namespace io;
 using namespace sim;
