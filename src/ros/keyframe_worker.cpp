@@ -64,7 +64,7 @@ KeyframeWorker::~KeyframeWorker() {
 }
 
 void KeyframeWorker::restoreLoaded() {
-  const std::optional<io::SessionState> loaded =
+  const std::optional<session::SessionState> loaded =
       handoff_.continueLoaded(*selector_, config_.selector);
   if (!loaded) return;
   last_stamp_ = loaded->selector.last_stamp;
@@ -193,7 +193,7 @@ StateSnapshot KeyframeWorker::captureState() {
 
 void KeyframeWorker::setMapPoints(Eigen::Matrix3Xd points) {
   std::lock_guard<std::timed_mutex> lock(state_mutex_);
-  auto* map = dynamic_cast<points::MapPointSource*>(&selector_->pointSource());
+  points::MapPointSource* map = points::mapSourceOf(selector_->pointSource());
   if (!map) return;
   map->setMapPoints(std::move(points));
   const std::vector<core::ViewId> rows = selector_->applyPointUpdates();
