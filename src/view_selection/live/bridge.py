@@ -14,6 +14,8 @@ import threading
 import time
 
 import rospy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from std_msgs.msg import Header
 from std_srvs.srv import Trigger, TriggerResponse
 
 from view_selection.msg import PairChanges
@@ -22,6 +24,9 @@ from view_selection.srv import GetPairs, GetSelection, WriteKeyframeImages
 from ..colmap.database import DatabaseError
 from ..colmap.project import ColmapProject, ProjectError, write_json_atomically
 from ..keyframes import Keyframe
+from ..features.sift import SiftExtractor
+from ..matching.backend import PoseGuidedBackend
+from ..matching.guided import GuidedOptions
 from .stream import PairStream
 from .work import LiveWork
 
@@ -37,9 +42,17 @@ PARAMETERS = """Parameters (private, ~name):
   max_backlog        pairs kept waiting; more wait for the finish, counted (2000)
   max_batch_pairs    pairs per matching run while the recording goes on (24)
   max_attempts       tries of an image or pair that fails before it is skipped (3)
-  finish_after_idle  [s] build the model once no keyframe came for this long (0: off)
+  finish_after_idle  [s] build the model once no keyframe came for this long, again after more
+                     (1.0; 0: off, only on ~finish and at shutdown; with the mapper model, 0)
   shutdown_budget    [s] the finish at shutdown must be done within this (12; roslaunch waits 15)
   model              known_poses (the keyframes at the node's poses) or mapper (COLMAP's own)
+  matcher            guided (OpenCV SIFT here, matches guided by the node's poses; COLMAP's matcher
+                     for the pairs whose poses disagree with the images) or colmap (COLMAP's
+                     feature_extractor and matches_importer for everything) (guided)
+  max_features       SIFT features per keyframe, the strongest (2048; guided)
+  guided_window_deg  how far the poses may be off and still guide a pair [deg of view] (1.5; guided)
+  triangulation      live (the points triangulated as pairs verify; the finish writes them) or
+                     colmap (COLMAP's point_triangulator over the whole model at the finish) (live)
   node_timeout       [s] how long the finish waits for the node's ~get_selection (10)
   continuity_pairs   also match each keyframe with the one before it (true)
 """
@@ -57,7 +70,8 @@ class Bridge:
         self.node = _param("node", "").rstrip("/")
         self.batch_period = float(_param("batch_period", 1.0))
         self.poll_period = float(_param("poll_period", 2.0))
-        self.finish_after_idle = float(_param("finish_after_idle", 0.0))
+        self.finish_after_idle = float(_param("finish_after_idle", 1.0 if _param("model", "known_poses") == "known_poses"
+                                              else 0.0))
         self.shutdown_budget = float(_param("shutdown_budget", 12.0))
         self.model = _param("model", "known_poses")
         if self.model not in ("known_poses", "mapper"):
@@ -66,12 +80,21 @@ class Bridge:
         niceness = int(_param("nice", 10))
         if niceness > 0:
             os.nice(niceness)  # COLMAP, started from here, inherits it: the node keeps priority
+        self.matcher = _param("matcher", "guided")
+        if self.matcher not in ("guided", "colmap"):
+            raise ProjectError("~matcher is '%s': guided or colmap" % self.matcher)
         self.project = ColmapProject(self.project_dir, _param("colmap", "colmap"), _param("threads", -1))
         self.project.open()
+        self.backend = None
+        if self.matcher == "guided":
+            self.backend = PoseGuidedBackend(
+                self.project, SiftExtractor(max_features=int(_param("max_features", 2048))),
+                GuidedOptions(window_deg=float(_param("guided_window_deg", 1.5))))
         self.work_state = LiveWork(self.project, continuity=bool(_param("continuity_pairs", True)),
                                    max_backlog=_param("max_backlog", 2000),
                                    max_batch_pairs=_param("max_batch_pairs", 24),
-                                   max_attempts=_param("max_attempts", 3), log=self._log)
+                                   max_attempts=_param("max_attempts", 3), log=self._log, backend=self.backend,
+                                   triangulation=_param("triangulation", "live"))
 
         self.lock = threading.Lock()        # the stream's state
         self.wake = threading.Condition(self.lock)
@@ -83,11 +106,13 @@ class Bridge:
         self.last_report = None
         self.sub = None
 
+        self.diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
+        self.diagnostics_timer = rospy.Timer(rospy.Duration(1.0), self.publish_diagnostics)
         self.finish_service = rospy.Service("~finish", Trigger, self.on_finish)
         self.thread = threading.Thread(target=self.loop, name="colmap_bridge", daemon=True)
         self.thread.start()
-        rospy.loginfo("colmap_bridge: project %s, pairs from %s, model %s%s", self.project.root,
-                      self.node or "the view_selection node (looking for it)", self.model,
+        rospy.loginfo("colmap_bridge: project %s, pairs from %s, model %s, matcher %s%s", self.project.root,
+                      self.node or "the view_selection node (looking for it)", self.model, self.matcher,
                       ", finish after %.1f s without keyframes" % self.finish_after_idle
                       if self.finish_after_idle > 0 else "")
 
@@ -199,8 +224,12 @@ class Bridge:
                 return False
             try:
                 self.work_state.extract(keyframes)
-                return self.work_state.match(keyframes, pairs)
-            except (ProjectError, DatabaseError, OSError) as e:
+                more = self.work_state.match(keyframes, pairs)
+                if self.work_state.model is not None:
+                    with self.work_state.clock.measure("triangulation", 1):
+                        self.work_state.feed_model(keyframes)
+                return more
+            except (ProjectError, DatabaseError, OSError, ValueError) as e:
                 self.work_state.error("project %s: %s" % (self.project.root, e))
                 return False
 
@@ -230,10 +259,12 @@ class Bridge:
             change = self.stream.last_change_time
             last_keyframe = self.stream.last_keyframe_time
         try:
-            start = time.monotonic()
+            start, cpu_start = time.monotonic(), time.process_time()
             if not shutting_down:
                 self.sync()
+            synced = time.monotonic()
             keyframes, pairs, source = self.final_state(ask_node=not shutting_down)
+            asked = time.monotonic()
             if len(keyframes) < 2:
                 return False, "%d keyframes: a model needs at least 2" % len(keyframes)
             rospy.loginfo("colmap_bridge: finishing (%s): %d keyframes, %d pairs from %s", why, len(keyframes),
@@ -247,13 +278,20 @@ class Bridge:
                 finally:
                     self.project.deadline = None
             done = time.monotonic()
+            report["finish_phases"].update(sync=round(synced - start, 3), selection=round(asked - synced, 3),
+                                           cpu=round(time.process_time() - cpu_start, 3))
             report.update({
                 "project": self.project.root, "node": self.node, "why": why, "pairs_source": source,
                 "seconds": dict(self.project.seconds, finish=done - start),
                 "seconds_from_last_keyframe": (done - last_keyframe) if last_keyframe else None,
                 "stream_messages": self.stream.messages, "sequence": self.stream.sequence,
                 "backlog_max": self.work_state.backlog_max, "deferred_to_finish": self.work_state.deferred,
-                "errors": self.work_state.errors[-5:], "finished_at": time.time()})
+                "errors": self.work_state.errors[-5:], "finished_at": time.time(), "matcher": self.matcher})
+            stages = self.work_state.clock.summary()
+            if self.backend:
+                report["matching"] = self.backend.path_counts()
+                stages.update(self.backend.clock.summary())
+            report["stages"] = stages
             write_json_atomically(os.path.join(self.project.root, "report.json"), report)
             self.last_report = report
             with self.lock:
@@ -279,6 +317,39 @@ class Bridge:
         finally:
             with self.lock:
                 self.finishing = False
+
+    def publish_diagnostics(self, _event=None):
+        """/diagnostics once a second: what the project holds, the backlog, the CPU per stage,
+        what was skipped (WARN) and the last error within a minute (ERROR)."""
+        w = self.work_state
+        with self.lock:
+            announced, keyframes = len(self.stream.announced), len(self.stream.keyframes)
+            sequence = self.stream.sequence
+        status = DiagnosticStatus(name="colmap_bridge: %s" % self.project.root, hardware_id=self.node or "")
+        skipped = w.skipped()
+        recent = [e for e in w.errors if time.time() - e["at"] < 60.0]
+        if recent:
+            status.level, status.message = DiagnosticStatus.ERROR, recent[-1]["error"][:200]
+        elif skipped["images"] or skipped["pairs"]:
+            status.level, status.message = DiagnosticStatus.WARN, "%d images, %d pairs skipped" % (
+                len(skipped["images"]), len(skipped["pairs"]))
+        else:
+            status.level, status.message = DiagnosticStatus.OK, "backlog %d pairs" % w.status.get("backlog_pairs", 0)
+        values = {"keyframes": keyframes, "pairs announced": announced, "stream sequence": sequence,
+                  "matcher": self.matcher}
+        values.update({k.replace("_", " "): v for k, v in w.status.items()})
+        stages = w.clock.summary()
+        if self.backend:
+            stages.update(self.backend.clock.summary())
+            values.update({"pairs guided": self.backend.path_counts()["guided"],
+                           "pairs fallback": self.backend.path_counts()["fallback"]})
+        for stage, figures in stages.items():
+            values["%s cpu [s]" % stage] = figures["cpu_seconds"]
+        if self.last_report:
+            values["last model"] = "%s points, %.1f s after the last keyframe" % (
+                self.last_report.get("points"), self.last_report.get("seconds_from_last_keyframe") or 0.0)
+        status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+        self.diagnostics.publish(DiagnosticArray(header=Header(stamp=rospy.Time.now()), status=[status]))
 
     def on_finish(self, _req):
         ok, msg = self.finish("~finish called")
@@ -313,6 +384,8 @@ def main(argv):
         sys.stdout.write(USAGE)
         return 0
     rospy.init_node("colmap_bridge")
+    import cv2
+    cv2.setNumThreads(1)  # the budget: the node keeps the cores (docs/live.md)
     try:
         bridge = Bridge()
     except (ProjectError, DatabaseError) as e:
