@@ -10,6 +10,7 @@ Threads: rospy's for ~pairs and ~finish; one worker (`loop`) for the batches. `l
 stream's state; `work` serialises COLMAP's work on the project (a batch, or the finish).
 """
 import os
+import sqlite3
 import threading
 import time
 
@@ -22,7 +23,7 @@ from view_selection.msg import PairChanges
 from view_selection.srv import GetPairs, GetSelection, WriteKeyframeImages
 
 from ..colmap.database import DatabaseError
-from ..colmap.project import ColmapProject, ProjectError, write_json_atomically
+from ..colmap.project import ColmapProject, ProjectError, Timeouts, write_json_atomically
 from ..keyframes import Keyframe
 from ..features.sift import SiftExtractor
 from ..matching.backend import PoseGuidedBackend
@@ -55,6 +56,9 @@ PARAMETERS = """Parameters (private, ~name):
                      colmap (COLMAP's point_triangulator over the whole model at the finish) (live)
   node_timeout       [s] how long the finish waits for the node's ~get_selection (10)
   continuity_pairs   also match each keyframe with the one before it (true)
+  colmap_timeout     [s] a COLMAP command may take this long, plus colmap_timeout_per_image for
+                     each image and colmap_timeout_per_pair for each pair it works on; then it
+                     is killed, and what it worked on is retried (120, 10, 5)
 """
 
 
@@ -83,7 +87,10 @@ class Bridge:
         self.matcher = _param("matcher", "guided")
         if self.matcher not in ("guided", "colmap"):
             raise ProjectError("~matcher is '%s': guided or colmap" % self.matcher)
-        self.project = ColmapProject(self.project_dir, _param("colmap", "colmap"), _param("threads", -1))
+        timeouts = Timeouts(float(_param("colmap_timeout", 120.0)), float(_param("colmap_timeout_per_image", 10.0)),
+                            float(_param("colmap_timeout_per_pair", 5.0)))
+        self.project = ColmapProject(self.project_dir, _param("colmap", "colmap"), _param("threads", -1),
+                                     timeouts=timeouts)
         self.project.open()
         self.backend = None
         if self.matcher == "guided":
@@ -229,7 +236,7 @@ class Bridge:
                     with self.work_state.clock.measure("triangulation", 1):
                         self.work_state.feed_model(keyframes)
                 return more
-            except (ProjectError, DatabaseError, OSError, ValueError) as e:
+            except (ProjectError, DatabaseError, sqlite3.Error, OSError, ValueError) as e:
                 self.work_state.error("project %s: %s" % (self.project.root, e))
                 return False
 
@@ -311,8 +318,8 @@ class Bridge:
             else:
                 rospy.loginfo("colmap_bridge: %s", msg)
             return True, msg
-        except (ProjectError, DatabaseError, OSError) as e:
-            self.work_state.error(str(e))
+        except (ProjectError, DatabaseError, sqlite3.Error, OSError, ValueError) as e:
+            self.work_state.error("project %s: %s" % (self.project.root, e))
             return False, str(e)
         finally:
             with self.lock:

@@ -97,6 +97,8 @@ class LiveWork:
         by_name = {k.name: k for k in todo}
         self._attempt([k.name for k in todo], lambda names: self.backend.extract([by_name[n] for n in names]),
                       self.backend.extracted, self.images, "image", "skipped-image")
+        for warning in getattr(self.backend, "warnings", None) or []:
+            self.log("warn", warning)
         return len(todo)
 
     # -- matches -----------------------------------------------------------------------------
@@ -194,18 +196,21 @@ class LiveWork:
         missing = [k.name for k in keyframes if not project.has_image(k.name)]
         extracted = project.extracted()
         matched = project.matched()
+        with project.db() as d:
+            featureless = sorted(d.images_without_keypoints())
         wanted = set(final) | set(extra)
         out = {"keyframes": len(keyframes), "images_missing": missing,
                "images_without_features": [k.name for k in keyframes if k.name not in extracted and k.name not in missing],
+               "images_with_no_features": featureless,
                "final_pairs": len(final), "continuity_pairs": len(extra), "pairs_matched": len(matched),
                "final_pairs_matched": len(set(final) & matched), "pairs_wasted": len(matched - wanted),
                "pairs_verified": project.verified_count(), "model": model, "skipped": self.skipped(all_failed=True)}
         if model == "mapper":
             path = project.mapper_model(seed)
-            made = colmap_model.read_model(path).image_by_name()
+            mapped = colmap_model.read_model(path).image_by_name()
             by_name = {k.name: k for k in keyframes}
-            common = [n for n in made if n in by_name]
-            out["ate_rmse"] = ate_rmse([geometry.centre_of(made[n].qvec, made[n].tvec) for n in common],
+            common = [n for n in mapped if n in by_name]
+            out["ate_rmse"] = ate_rmse([geometry.centre_of(mapped[n].qvec, mapped[n].tvec) for n in common],
                                        [by_name[n].position for n in common])
             out["ate_images"] = len(common)
         else:

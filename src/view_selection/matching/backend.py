@@ -63,6 +63,7 @@ class PoseGuidedBackend:
         self.cache = collections.OrderedDict()  # name -> Features (the last few used)
         self.cache_images = int(cache_images)
         self.errors = {}              # item -> why it failed in the last run
+        self.warnings = []            # what the last run did that a user should know
         self.paths = {}               # pair -> PairResult.summary()
         self.clock = StageClock()
 
@@ -86,7 +87,7 @@ class PoseGuidedBackend:
         """Features of the keyframes (their images are there): read, extracted and written in
         one transaction; an image that cannot be read is left out, with its reason in errors."""
         self.register(keyframes)
-        self.errors = {}
+        self.errors, self.warnings = {}, []
         made = {}
         with self.clock.measure("extraction", len(keyframes)):
             for k in keyframes:
@@ -96,6 +97,10 @@ class PoseGuidedBackend:
                     made[k.name] = self.extractor.extract_file(os.path.join(self.project.images, k.name))
                 except (ValueError, OSError) as e:
                     self.errors[k.name] = str(e)
+                    continue
+                if not len(made[k.name]):
+                    self.warnings.append("no features in %s (a blank image?): it stays in the model without points"
+                                         % k.name)
             with self.project.db() as d:
                 ids = d.image_ids()
                 for name, features in made.items():
