@@ -209,6 +209,45 @@ class Statistics:
         self.subscriber.unregister()
 
 
+class Diagnostics:
+    """The latest /diagnostics status of a node, as {key: value} (the updater publishes it once
+    a second)."""
+
+    def __init__(self, node):
+        from diagnostic_msgs.msg import DiagnosticArray
+        self.node = node.rstrip('/')
+        self.lock = threading.Lock()
+        self.last = None
+        self.subscriber = rospy.Subscriber('/diagnostics', DiagnosticArray, self._on, queue_size=100)
+
+    def _on(self, msg):
+        prefix = self.node.lstrip('/') + ':'
+        for status in msg.status:
+            if status.name.startswith(prefix):
+                with self.lock:
+                    self.last = {kv.key: kv.value for kv in status.values}
+
+    def get(self):
+        with self.lock:
+            return self.last
+
+    def wait(self, predicate, timeout, what):
+        """The first status for which predicate(status) holds."""
+        found = []
+
+        def check():
+            d = self.get()
+            if d is not None and predicate(d):
+                found.append(d)
+                return True
+            return False
+        wait_until(check, timeout, '%s %s' % (self.node, what))
+        return found[0]
+
+    def close(self):
+        self.subscriber.unregister()
+
+
 # ---------------------------------------------------------------------------------------------
 # Frames
 
