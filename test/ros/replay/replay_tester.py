@@ -9,7 +9,6 @@ generate_sequence; when that tool is not built either, the test is skipped with 
 """
 import json
 import os
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -23,7 +22,7 @@ from view_selection.srv import Export, ExportRequest, GetSelection
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
 from vs_robust import call, find_tool  # noqa: E402,F401  a service call with a timeout
-from vs_replay import msg_stamp_ns, play_bag, run, stamp_ns, wait_for_subscribers  # noqa: E402,F401
+from vs_replay import msg_stamp_ns, play_bag, remove_output, run, stamp_ns, wait_for_subscribers  # noqa: E402,F401
 
 PKG = 'view_selection'
 
@@ -56,10 +55,7 @@ class Replay(unittest.TestCase):
 
     @classmethod
     def tearDownClass(cls):
-        if os.environ.get('VIEW_SELECTION_KEEP_TEST_OUTPUT'):
-            rospy.loginfo('replay test output kept in %s', cls.tmp)
-        else:
-            shutil.rmtree(cls.tmp, ignore_errors=True)
+        remove_output(cls.tmp, 'replay test')
 
     # ------------------------------------------------------------------------------------------
     @classmethod

@@ -1,6 +1,8 @@
 """Bag replays for the rostests: run a tool, play a bag into nodes once they listen, wait for the
 subscriptions, wait until the nodes have handled what arrived, stamps in nanoseconds. Shared by
 the replay, TUM-layout, compressed, corrections, SLAM, time-jump and restart testers."""
+import os
+import shutil
 import signal
 import subprocess
 import time
@@ -136,3 +138,86 @@ def wait_until_processed(nodes, timeout):
             elif done and time.time() - since > 1.0:
                 break
             time.sleep(0.2)
+
+
+def wait_for_services(nodes, timeout, service='get_selection'):
+    """Waits until each node advertises `service`; AssertionError naming the first that does not."""
+    for node in nodes:
+        try:
+            rospy.wait_for_service(node + '/' + service, timeout=timeout)
+        except rospy.ROSException:
+            raise AssertionError('%s/%s was not advertised within %.0f s' % (node, service, timeout))
+
+
+def remove_output(folder, what):
+    """Removes a test's folder, or keeps it (and says where) with VIEW_SELECTION_KEEP_TEST_OUTPUT."""
+    if os.environ.get('VIEW_SELECTION_KEEP_TEST_OUTPUT'):
+        rospy.loginfo('%s output kept in %s', what, folder)
+    else:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def bag_test_setup(cls, name, max_frames, skip_note=None):
+    """The parameters of a bag-replay tester (~nodes, ~rate, ~max_frames, ~timeout, ~dataset) as
+    attributes of `cls`, its own temporary folder, and tum_to_bag and select_views. Without the
+    TUM folder, `cls.skip_reason` says so (and note_without_real_data records it under
+    `skip_note`) and None is returned."""
+    import tempfile
+    from vs_robust import find_tool, note_without_real_data
+    cls.nodes = rospy.get_param('~nodes').split()
+    cls.rate = float(rospy.get_param('~rate', 1.0))
+    cls.max_frames = int(rospy.get_param('~max_frames', max_frames))
+    cls.timeout = float(rospy.get_param('~timeout', 60.0))
+    cls.dataset = rospy.get_param('~dataset', '')
+    cls.tmp = tempfile.mkdtemp(prefix='view_selection_%s_' % name)
+    cls.skip_reason = None
+    if not os.path.isfile(os.path.join(cls.dataset, 'groundtruth.txt')):
+        if skip_note:
+            note_without_real_data(skip_note, cls.dataset)
+        cls.skip_reason = 'no TUM folder at %s (the kitchen in ../shared/data)' % cls.dataset
+        return None
+    tools = find_tool('tum_to_bag'), find_tool('select_views')
+    if not all(tools):
+        raise AssertionError('tum_to_bag or select_views is not built (build the package first)')
+    return tools
+
+
+def tum_rows(folder, name):
+    """The rows of a TUM list (rgb.txt, depth.txt, groundtruth.txt) of `folder`, split, without
+    comments and empty lines."""
+    with open(os.path.join(folder, name)) as f:
+        return [line.split() for line in f if line.strip() and not line.startswith('#')]
+
+
+def skip_without_data(test, what):
+    """setUp of a bag-replay tester: skips (saying why) when setUpClass found no data."""
+    if test.skip_reason:
+        rospy.logwarn('%s skipped: %s', what, test.skip_reason)
+        test.skipTest(test.skip_reason)
+
+
+def assert_every_frame_offered(test, node, frames, timeout):
+    """Every one of `frames` colour and depth images arrived at `node` and became a frame offered
+    to the keyframe policy, none dropped; returns the node's ~statistics."""
+    from view_selection.msg import InputStatistics
+    stats = rospy.wait_for_message(node + '/statistics', InputStatistics, timeout=timeout)
+    reasons = dict(zip(stats.drop_reasons, stats.drop_counts))
+    test.assertEqual(stats.frames_dropped, 0, '%s dropped frames: %s (last: %s)' % (node, reasons, stats.last_error))
+    test.assertEqual(stats.images_arrived, frames, node + ': images arrived')
+    test.assertEqual(stats.depths_arrived, frames, node + ': depth images arrived')
+    test.assertEqual(stats.frames_received, frames, node + ': frames synchronised')
+    test.assertEqual(stats.frames_offered, frames, node + ': frames offered to the policy')
+    return stats
+
+
+def wait_for_statistics(node, predicate, timeout, what):
+    """The first ~statistics of `node` (each read as it comes) for which predicate holds;
+    AssertionError naming `what` and the last statistics after `timeout` s."""
+    from view_selection.msg import InputStatistics
+    deadline, s = time.time() + timeout, None
+    while time.time() < deadline:
+        s = rospy.wait_for_message(node + '/statistics', InputStatistics, timeout=timeout)
+        if predicate(s):
+            return s
+        time.sleep(0.2)
+    raise AssertionError('%s: not within %.0f s (last statistics: %s)' % (what, timeout, s))
