@@ -76,6 +76,8 @@ TEST(Layers, EachLayerIncludesOnlyTheLayersBelowIt) {
       {"eval", R"((view_selection/(sim|refine|odometry|ros)/)|)" + kRosHeaders},
       // refine: a known-pose COLMAP model bundle-adjusted (Ceres), for the tools
       {"refine", R"((opencv2|view_selection/(sim|odometry|ros)/)|)" + kRosHeaders},
+      // odometry: OpenCV's RGB-D odometry as a drifting SLAM stand-in, on the core's types
+      {"odometry", R"((ceres|nlohmann|yaml-cpp|view_selection/(points|io|sim|eval|refine|ros)/)|)" + kRosHeaders},
   };
   for (const auto& [layer, forbidden] : rules) {
     int files = 0;
