@@ -4,6 +4,7 @@
 #include "view_selection/eval/trajectory_alignment.h"
 
 #include <ceres/ceres.h>
+#include <ceres/product_manifold.h>
 #include <ceres/rotation.h>
 
 #include <algorithm>
@@ -12,6 +13,7 @@
 #include <map>
 #include <memory>
 #include <sstream>
+#include <cstdio>
 #include <thread>
 
 namespace view_selection::refine {
@@ -36,10 +38,11 @@ Eigen::Vector4d pinhole(const io::ColmapCamera& c) {
 struct ReprojectionError {
   ReprojectionError(const Eigen::Vector2d& observed, const Eigen::Vector4d& k) : xy(observed), k(k) {}
 
+  /// pose: Eigen's quaternion (x, y, z, w) then the translation, world to camera.
   template <typename T>
-  bool operator()(const T* q, const T* t, const T* x, T* residual) const {
-    const Eigen::Map<const Eigen::Quaternion<T>> rotation(q);
-    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> translation(t), point(x);
+  bool operator()(const T* pose, const T* x, T* residual) const {
+    const Eigen::Map<const Eigen::Quaternion<T>> rotation(pose);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> translation(pose + 4), point(x);
     const Eigen::Matrix<T, 3, 1> p = rotation * point + translation;
     residual[0] = T(k[0]) * p.x() / p.z() + T(k[2]) - T(xy.x());
     residual[1] = T(k[1]) * p.y() / p.z() + T(k[3]) - T(xy.y());
@@ -61,9 +64,9 @@ struct RelativePosePrior {
       : r(rotation_ba), t(translation_ba), sigma_r(sigma_r), sigma_t(sigma_t) {}
 
   template <typename T>
-  bool operator()(const T* qa, const T* ta, const T* qb, const T* tb, T* residual) const {
-    const Eigen::Map<const Eigen::Quaternion<T>> ra(qa), rb(qb);
-    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> pa(ta), pb(tb);
+  bool operator()(const T* a, const T* b, T* residual) const {
+    const Eigen::Map<const Eigen::Quaternion<T>> ra(a), rb(b);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> pa(a + 4), pb(b + 4);
     const Eigen::Quaternion<T> rba = rb * ra.conjugate();
     const Eigen::Matrix<T, 3, 1> tba = pb - rba * pa;
     const Eigen::Quaternion<T> d = rba * r.cast<T>().conjugate();
@@ -227,36 +230,39 @@ ceres::Solver::Summary adjust(State& s, const Gauge& gauge, const RefinementConf
   problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(problem_options);
   const std::unique_ptr<ceres::LossFunction> loss = lossOf(config);
-  std::map<int, std::array<double, 4>> q;  // Eigen's order: x, y, z, w
-  std::map<int, Eigen::Vector3d> t;
-  for (const auto& [id, pose] : s.poses) {
-    q[id] = {pose.rotation.x(), pose.rotation.y(), pose.rotation.z(), pose.rotation.w()};
-    t[id] = pose.translation;
-  }
+  // One block a pose: Eigen's quaternion (x, y, z, w) and the translation, so that Ceres' Schur
+  // eliminator runs its fixed-size <2, 3, 6> kernels.
+  std::map<int, std::array<double, 7>> pose;
+  for (const auto& [id, p] : s.poses)
+    pose[id] = {p.rotation.x(), p.rotation.y(), p.rotation.z(), p.rotation.w(),
+                p.translation.x(), p.translation.y(), p.translation.z()};
   std::set<int> used;
   for (auto& [id, track] : s.tracks)
     for (const auto& e : track) {
-      auto* cost = new ceres::AutoDiffCostFunction<ReprojectionError, 2, 4, 3, 3>(
+      auto* cost = new ceres::AutoDiffCostFunction<ReprojectionError, 2, 7, 3>(
           new ReprojectionError(s.observed(e), s.intrinsics.at(e.image_id)));
-      problem.AddResidualBlock(cost, loss.get(), q[e.image_id].data(), t[e.image_id].data(),
-                               s.points[id].data());
+      problem.AddResidualBlock(cost, loss.get(), pose[e.image_id].data(), s.points[id].data());
       used.insert(e.image_id);
     }
   ceres::CauchyLoss prior_loss(config.prior_loss_scale);
   for (const Prior& p : gauge.priors) {
-    auto* cost = new ceres::AutoDiffCostFunction<RelativePosePrior, 6, 4, 3, 4, 3>(
+    auto* cost = new ceres::AutoDiffCostFunction<RelativePosePrior, 6, 7, 7>(
         new RelativePosePrior(p.rotation_ba, p.translation_ba, p.sigma_r, p.sigma_t));
-    problem.AddResidualBlock(cost, &prior_loss, q[p.a].data(), t[p.a].data(), q[p.b].data(), t[p.b].data());
+    problem.AddResidualBlock(cost, &prior_loss, pose[p.a].data(), pose[p.b].data());
     used.insert(p.a);
     used.insert(p.b);
   }
+  using PoseManifold = ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>;
+  using ScaleHeldManifold = ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::SubsetManifold>;
   for (int id : used) {
-    problem.SetManifold(q[id].data(), new ceres::EigenQuaternionManifold);
     if (!moving.count(id)) {
-      problem.SetParameterBlockConstant(q[id].data());
-      problem.SetParameterBlockConstant(t[id].data());
+      problem.SetManifold(pose[id].data(), new PoseManifold);
+      problem.SetParameterBlockConstant(pose[id].data());
     } else if (id == gauge.scale_image) {
-      problem.SetManifold(t[id].data(), new ceres::SubsetManifold(3, {gauge.scale_axis}));
+      problem.SetManifold(pose[id].data(), new ScaleHeldManifold(ceres::EigenQuaternionManifold(),
+                                                                 ceres::SubsetManifold(3, {gauge.scale_axis})));
+    } else {
+      problem.SetManifold(pose[id].data(), new PoseManifold);
     }
   }
   ceres::Solver::Options options;
@@ -268,10 +274,11 @@ ceres::Solver::Summary adjust(State& s, const Gauge& gauge, const RefinementConf
   ceres::Solver::Summary summary;
   if (problem.NumResidualBlocks() == 0) return summary;
   ceres::Solve(options, &problem, &summary);
+  if (config.verbose) std::fprintf(stderr, "%s\n", summary.FullReport().c_str());
   for (int id : used) {
-    const auto& v = q[id];
+    const auto& v = pose[id];
     s.poses[id].rotation = Eigen::Quaterniond(v[3], v[0], v[1], v[2]).normalized();
-    s.poses[id].translation = t[id];
+    s.poses[id].translation = Eigen::Vector3d(v[4], v[5], v[6]);
   }
   return summary;
 }

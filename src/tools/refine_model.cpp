@@ -60,6 +60,7 @@ Cameras must be PINHOLE or SIMPLE_PINHOLE.
   --no-align         do not align the result to the input poses
   --threads N        Ceres threads (default 0: one per core)
   --quiet            no summary line
+  --verbose          Ceres' report of every solve on stderr
   --help             this text
 )";
 
@@ -107,7 +108,7 @@ int run(int argc, char** argv) {
                          "rounds", "iterations", "min-observations", "max-correction-depth-ratio",
                          "max-correction-deg", "threads", "prior-translation-ratio", "prior-rotation-deg",
                          "prior-loss-scale"},
-                        {"no-align", "quiet", "help"});
+                        {"no-align", "quiet", "verbose", "help"});
   if (cli.flag("help")) {
     std::cout << kUsage;
     return 0;
@@ -128,6 +129,7 @@ int run(int argc, char** argv) {
   config.prior_rotation_deg = cli.real("prior-rotation-deg", config.prior_rotation_deg, 1e-9, 180.0);
   config.prior_loss_scale = cli.real("prior-loss-scale", config.prior_loss_scale, 1e-9, 1e9);
   config.align_to_input = !cli.flag("no-align");
+  config.verbose = cli.flag("verbose");
   config.threads = static_cast<int>(cli.integer("threads", config.threads, 0, 256));
 
   const io::ColmapModel input = io::readColmapModel(*cli.text("input"));

@@ -56,6 +56,7 @@ struct RefinementConfig {
   /// With every image movable: align the result to the input poses (Sim(3)); see above.
   bool align_to_input = true;
   int threads = 0;  ///< Ceres threads; 0: one per core
+  bool verbose = false;  ///< Ceres' report of each solve on stderr
 
   /// Throws core::InvalidArgument naming the bad value.
   void validate() const;
