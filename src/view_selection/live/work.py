@@ -13,8 +13,9 @@ from .attempts import Attempts
 
 class LiveWork:
     def __init__(self, project: ColmapProject, continuity=True, max_backlog=2000, max_batch_pairs=24,
-                 max_attempts=3, log=None):
+                 max_attempts=3, log=None, refinement=None):
         self.project = project
+        self.refinement = refinement  # refinement.refiner.ModelRefinement, or None: the model as triangulated
         self.continuity = continuity
         self.max_backlog, self.max_batch_pairs = int(max_backlog), max(1, int(max_batch_pairs))
         self.images = Attempts(max_attempts)
@@ -166,6 +167,8 @@ class LiveWork:
             else:
                 try:
                     path = project.known_pose_model(have)
+                    if self.refinement is not None:  # issue 29: sparse/0 refined, sparse/unrefined kept
+                        out["refinement"] = self.refinement.apply(project, path)
                 except ProjectError as e:
                     if project.deadline is not None or project.cancelled:
                         raise  # out of time at shutdown: the model written before stays
