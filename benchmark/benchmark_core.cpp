@@ -9,6 +9,7 @@
 #include "view_selection/core/error_resistance.h"
 #include "view_selection/core/error_resistance_matrix.h"
 #include "view_selection/core/selection.h"
+#include "view_selection/core/selection_cache.h"
 #include "view_selection/core/selection_output.h"
 #include "view_selection/core/view_selector.h"
 #include "view_selection/eval/reference_error_resistance.h"

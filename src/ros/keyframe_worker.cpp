@@ -7,6 +7,7 @@
 #include "view_selection/points/map_point_source.h"
 #include "view_selection/points/point_source_factory.h"
 #include "view_selection/ros/conversions.h"
+#include "view_selection/ros/frame_checks.h"
 
 #include <ros/console.h>
 
@@ -18,6 +19,17 @@
 
 namespace view_selection::ros_node {
 
+namespace {
+
+std::unique_ptr<core::PointSource> makePoints(const NodeConfig& config,
+                                              const PointSourceFactory& make_points) {
+  return make_points ? make_points(config)
+                     : points::makePointSource(config.point_source, config.point_params,
+                                               config.selector.matrix.occlusion);
+}
+
+}  // namespace
+
 KeyframeWorker::KeyframeWorker(const NodeConfig& config, PoseProvider& poses,
                                InputStatistics& statistics, StateKeeper& keeper,
                                KeyframeVerdicts* verdicts, const PointSourceFactory& make_points,
@@ -28,20 +40,12 @@ KeyframeWorker::KeyframeWorker(const NodeConfig& config, PoseProvider& poses,
       keeper_(keeper),
       verdicts_(verdicts),
       pairs_(pairs),
-      image_writer_(image_writer) {
-  selector_ = std::make_unique<core::ViewSelector>(
-      config_.selector, make_points ? make_points(config_)
-                                    : points::makePointSource(config_.point_source,
-                                                              config_.point_params,
-                                                              config_.selector.matrix.occlusion));
-  if (config_.save_keyframe_images) {
-    image_folder_ = std::make_shared<ImageFolder>(config_.image_dir);
-    if (!image_folder_->error().empty())
-      ROS_ERROR_STREAM("view_selection: ~image_dir: " << image_folder_->error()
-                                                      << "; keyframe images beyond ~image_cache_mb "
-                                                         "will be lost (not exported)");
-    images_ = newImageCache();
-  }
+      selector_(std::make_unique<core::ViewSelector>(config_.selector,
+                                                     makePoints(config_, make_points))),
+      intake_(static_cast<size_t>(config_.max_pending_frames), statistics_, generation_),
+      shared_(generation_),
+      handoff_(config_, keeper_, statistics_, pairs_),
+      images_(config_, image_writer) {
   selector_->trackPairChanges(pairs_ != nullptr);
   {
     std::lock_guard<std::timed_mutex> lock(state_mutex_);
@@ -52,69 +56,17 @@ KeyframeWorker::KeyframeWorker(const NodeConfig& config, PoseProvider& poses,
 }
 
 KeyframeWorker::~KeyframeWorker() {
-  {
-    std::lock_guard<std::mutex> lock(queue_mutex_);
-    stopping_ = true;
-  }
-  queue_cv_.notify_all();
+  intake_.stop();
   poses_.stop();
   if (verdicts_) verdicts_->stop();
   if (thread_.joinable()) thread_.join();
-  if (!keeper_.enabled()) return;
-  std::optional<JournalSnapshot> record;
-  std::optional<StateSnapshot> last;
-  {
-    std::lock_guard<std::timed_mutex> lock(state_mutex_);
-    if (changed_since_save_) {
-      if (keeper_.wantsFull())
-        last = captureStateLocked();
-      else
-        record = captureDeltaLocked();
-    }
-  }
-  if (record) {
-    const SaveResult appended = keeper_.appendNow(std::move(*record));
-    if (appended.ok) {
-      ROS_INFO_STREAM("view_selection: session saved on shutdown: " << appended.message);
-      return;
-    }
-    std::lock_guard<std::timed_mutex> lock(state_mutex_);
-    last = captureStateLocked();  // the journal could not continue: a whole save
-  }
-  if (!last) return;
-  const SaveResult saved = keeper_.saveNow(std::move(*last));
-  if (saved.ok)
-    ROS_INFO_STREAM("view_selection: session saved on shutdown: " << saved.message);
-  else
-    ROS_ERROR_STREAM("view_selection: " << saved.message);
-}
-
-std::shared_ptr<KeyframeImageCache> KeyframeWorker::newImageCache() const {
-  return std::make_shared<KeyframeImageCache>(
-      static_cast<size_t>(config_.image_cache_mb * 1024.0 * 1024.0), image_folder_);
+  handoff_.saveOnShutdown(*selector_, state_mutex_);
 }
 
 void KeyframeWorker::restoreLoaded() {
-  std::optional<io::SessionState> loaded = keeper_.takeLoaded();
+  const std::optional<io::SessionState> loaded =
+      handoff_.continueLoaded(*selector_, config_.selector);
   if (!loaded) return;
-  try {
-    io::restoreSession(*selector_, *loaded);
-    saved_.markSaved(*selector_);  // what the file holds; a reconfigure below changes rows
-    // The node's parameters win over the saved ones, as a live reconfigure would apply them
-    // (compared as they act: the saved ones are the values in force, the gate's preset applied).
-    core::ViewSelectorConfig wanted = config_.selector;
-    wanted.matrix.applyGate();
-    if (core::paramsOf(selector_->config()) != core::paramsOf(wanted)) {
-      ROS_INFO(
-          "view_selection: the saved session used other method parameters; applying this "
-          "node's (the matrix is recomputed where its gates changed)");
-      selector_->setConfig(config_.selector);
-    }
-  } catch (const core::Error& e) {
-    selector_->reset();
-    keeper_.refuseLoaded(e.what());
-    return;
-  }
   last_stamp_ = loaded->selector.last_stamp;
   if (pairs_) {
     // The continued session's pairs count as announced (a consumer catches up on the whole set
@@ -125,15 +77,12 @@ void KeyframeWorker::restoreLoaded() {
   }
   const size_t keyframes = selector_->matrix().size();
   keyframe_count_ = keyframes;
-  // The state file keeps no images: the continued keyframes have none (null), later ones do.
-  if (images_)
-    for (size_t i = 0; i < keyframes; ++i) images_->push(nullptr);
+  // The state file keeps no images: the continued keyframes have none, later ones do.
+  images_.continued(keyframes);
   statistics_.restore(loaded->statistics, keyframes);
   const auto& last = loaded->statistics.last_frame_stamp;
   statistics_.stateSaved(static_cast<uint32_t>(keyframes),
                          last && *last > 0.0 ? ros::Time(*last) : ros::Time());
-  // The restored session counts as saved: the file holds it.
-  changed_since_save_ = false;
   ROS_INFO_STREAM(
       "view_selection: continuing the saved session: "
       << keyframes << " keyframes, " << loaded->statistics.frames_offered << " frames offered"
@@ -141,42 +90,22 @@ void KeyframeWorker::restoreLoaded() {
 }
 
 void KeyframeWorker::push(PendingFrame frame) {
-  std::optional<Queued> overflow;
-  {
-    std::lock_guard<std::mutex> lock(queue_mutex_);
-    if (stopping_) return;
-    // An image that arrived before a ~reset or a time jump: not part of the new session.
-    if (frame.generation != generation_.load()) return;
-    if (queue_.size() >= static_cast<size_t>(config_.max_pending_frames)) {
-      overflow = std::move(queue_.front());
-      queue_.pop_front();
-    }
-    // Counted under the lock reset() starts a new session under: a frame belongs to exactly one
-    // session. No other lock: the inputs never wait for an insertion.
-    const uint64_t session = statistics_.frameReceived();
-    queue_.push_back({std::move(frame), generation_.load(), session, ros::WallTime::now()});
-    queued_count_ = queue_.size();
-  }
+  FrameQueue::Pushed pushed = intake_.push(std::move(frame));
+  if (!pushed.queued) return;
   if (pairs_) pairs_->frameSeen();
-  queue_cv_.notify_one();
-  if (overflow)
-    drop(*overflow, "worker_behind",
+  if (pushed.overflow)
+    drop(*pushed.overflow, "worker_behind",
          "the worker is " + std::to_string(config_.max_pending_frames) +
              " frames behind (~max_pending_frames); dropped the oldest waiting frame");
 }
 
-void KeyframeWorker::drop(const Queued& queued, const std::string& reason,
+void KeyframeWorker::drop(const QueuedFrame& queued, const std::string& reason,
                           const std::string& message) {
   statistics_.drop(queued.session, reason, message, queued.frame.image->header.stamp);
-  if (queued.generation == generation_.load()) changed_since_save_ = true;
+  if (queued.generation == generation_.load()) handoff_.markChanged();
 }
 
-size_t KeyframeWorker::pending(double* oldest_age) const {
-  std::lock_guard<std::mutex> lock(queue_mutex_);
-  if (oldest_age)
-    *oldest_age = queue_.empty() ? 0.0 : (ros::WallTime::now() - queue_.front().queued).toSec();
-  return queue_.size();
-}
+size_t KeyframeWorker::pending(double* oldest_age) const { return intake_.pending(oldest_age); }
 
 size_t KeyframeWorker::reset() {
   // The SLAM system's verdicts so far belong to the old session too (a waiting frame gives up).
@@ -209,55 +138,29 @@ std::optional<double> KeyframeWorker::lastStamp() const {
 size_t KeyframeWorker::startSession(bool time_jump) {
   std::shared_ptr<const ServedSelection> old;  // released after the locks
   size_t forgotten = 0;
-  {
-    std::lock_guard<std::mutex> queue_lock(queue_mutex_);
-    queue_.clear();
-    queued_count_ = 0;
-    if (time_jump && keeper_.enabled()) {
-      std::lock_guard<std::mutex> lock(aside_mutex_);
-      // Frames of the old session still queued are discarded: its statistics are final here.
-      if (!aside_) aside_ = Aside{generation_.load(), statistics_.toSaved()};
-    }
-    if (time_jump)
+  intake_.startGeneration([&] {  // under the queue lock, the waiting frames forgotten
+    if (time_jump) {
+      handoff_.keepAside(generation_.load());  // the old session, under the aside lock
       statistics_.timeJump();
-    else
+    } else {
       statistics_.reset();
-    std::lock_guard<std::mutex> lock(served_mutex_);
-    ++generation_;
-    forgotten = keyframe_count_.exchange(0);
-    // Empty at once, with the parameters in force; the worker's thread clears the selector
-    // itself before its next frame (applyResetLocked) and shares its own empty selection then.
-    auto empty = std::make_shared<ServedSelection>();
-    empty->version = ++version_;
-    empty->selection.config = served_->selection.config;
-    empty->selection.params = served_->selection.params;
-    old = std::move(served_);
-    served_ = std::move(empty);
-  }
-  queue_cv_.notify_one();
+    }
+    old = shared_.serveEmpty([&] {  // under the served lock
+      ++generation_;
+      forgotten = keyframe_count_.exchange(0);
+    });
+  });
   return forgotten;
 }
 
 void KeyframeWorker::applyResetLocked(uint64_t generation) {
-  std::optional<Aside> aside;
-  {
-    std::lock_guard<std::mutex> lock(aside_mutex_);
-    aside = std::move(aside_);
-    aside_.reset();
-  }
-  // Only when the selector holds that session still (no ~reset came between).
-  if (aside && aside->generation == applied_generation_) {
-    StateSnapshot old = captureStateLocked();
-    old.state.statistics = aside->statistics;
-    keeper_.saveAside(std::move(old));
-  }
+  handoff_.beforeClear(*selector_, applied_generation_);  // a time jump's session kept aside
   // Every pose a frame was given belongs to the old session (the worker looks poses up, so
   // none of the new one is recorded yet).
   poses_.clearHistory();
   selector_->reset();
-  if (images_) images_ = newImageCache();  // selections shared before keep the old one
+  images_.newSession();  // selections shared before keep the old images
   last_stamp_.reset();
-  keyframes_since_save_ = 0;
   applied_generation_ = generation;
   unshared_ = false;
   if (pairs_) {
@@ -265,18 +168,12 @@ void KeyframeWorker::applyResetLocked(uint64_t generation) {
     pairs_->reset(selector_->output());
   }
   shareSelectionLocked();
-  keeper_.saveLater(captureStateLocked());
+  handoff_.afterClear(*selector_);  // the empty session saved
 }
 
 void KeyframeWorker::applyRequests() {
-  std::optional<core::ViewSelectorConfig> config;
   uint64_t generation = 0;
-  {
-    std::lock_guard<std::mutex> lock(queue_mutex_);
-    config = std::move(pending_config_);
-    pending_config_.reset();
-    generation = generation_.load();
-  }
+  const std::optional<core::ViewSelectorConfig> config = intake_.takeRequests(&generation);
   if (generation == applied_generation_ && !config) return;
   std::lock_guard<std::timed_mutex> lock(state_mutex_);
   if (generation != applied_generation_) applyResetLocked(generation);
@@ -284,38 +181,14 @@ void KeyframeWorker::applyRequests() {
     // Readers keep the selection shared last meanwhile (its lists are shared copy-on-write,
     // so recomputing E in place does not touch what they read).
     selector_->setConfig(*config);
-    changed_since_save_ = true;
+    handoff_.markChanged();
     shareSelectionLocked();
   }
 }
 
 StateSnapshot KeyframeWorker::captureState() {
   std::lock_guard<std::timed_mutex> lock(state_mutex_);
-  return captureStateLocked();
-}
-
-StateSnapshot KeyframeWorker::captureStateLocked() {
-  StateSnapshot s;
-  s.sequence = ++captures_;
-  s.state = io::captureSession(*selector_);
-  s.state.statistics = statistics_.toSaved();
-  s.state.saved_at = ros::WallTime::now().toSec();
-  if (pairs_) s.state.pair_sequence = pairs_->sequence();
-  saved_.markSaved(*selector_);
-  changed_since_save_ = false;
-  return s;
-}
-
-JournalSnapshot KeyframeWorker::captureDeltaLocked() {
-  JournalSnapshot j;
-  j.follows = captures_;
-  j.sequence = ++captures_;
-  j.delta = saved_.capture(*selector_);
-  j.delta.rest.statistics = statistics_.toSaved();
-  j.delta.rest.saved_at = ros::WallTime::now().toSec();
-  if (pairs_) j.delta.rest.pair_sequence = pairs_->sequence();
-  changed_since_save_ = false;
-  return j;
+  return handoff_.captureWhole(*selector_);
 }
 
 void KeyframeWorker::setMapPoints(Eigen::Matrix3Xd points) {
@@ -324,18 +197,14 @@ void KeyframeWorker::setMapPoints(Eigen::Matrix3Xd points) {
   if (!map) return;
   map->setMapPoints(std::move(points));
   const std::vector<core::ViewId> rows = selector_->applyPointUpdates();
-  changed_since_save_ = true;
+  handoff_.markChanged();
   if (!rows.empty()) shareSelectionLocked();
   ROS_DEBUG_STREAM("view_selection: map of " << map->mapPoints().cols() << " points, "
                                              << rows.size() << " keyframe rows recomputed");
 }
 
 void KeyframeWorker::reconfigure(const core::ViewSelectorConfig& config) {
-  {
-    std::lock_guard<std::mutex> lock(queue_mutex_);
-    pending_config_ = config;
-  }
-  queue_cv_.notify_one();
+  intake_.reconfigure(config);
 }
 
 size_t KeyframeWorker::correctPoses(
@@ -362,10 +231,7 @@ std::string KeyframeWorker::cameraFrame() const {
   return camera_frame_;
 }
 
-std::shared_ptr<const ServedSelection> KeyframeWorker::served() const {
-  std::lock_guard<std::mutex> lock(served_mutex_);
-  return served_;
-}
+std::shared_ptr<const ServedSelection> KeyframeWorker::served() const { return shared_.get(); }
 
 namespace {
 
@@ -398,29 +264,18 @@ void KeyframeWorker::shareSelectionLocked() {
   auto next = std::make_shared<ServedSelection>();
   next->selection = selector_->output();  // O(what changed): the lists' chunks are shared
   if (pairs_) pairs_->update(selector_->takePairChanges(), next->selection);
-  next->images = images_;
-  next->image_count = images_ ? images_->size() : 0;
+  next->images = images_.cache();
+  next->image_count = images_.count();
   unshared_ = false;
   last_share_ = ros::WallTime::now();
-  installServed(std::move(next), applied_generation_);
-}
-
-void KeyframeWorker::installServed(std::shared_ptr<ServedSelection> next, uint64_t generation) {
-  std::shared_ptr<const ServedSelection> old;  // released after the lock
-  {
-    std::lock_guard<std::mutex> lock(served_mutex_);
-    if (generation != generation_.load()) return;  // a reset since: its empty selection stays
-    next->version = ++version_;
-    old = std::move(served_);
-    served_ = std::move(next);
-  }
+  shared_.install(std::move(next), applied_generation_);
 }
 
 void KeyframeWorker::keyframeInsertedLocked() {
   if (applied_generation_ == generation_.load()) keyframe_count_ = selector_->matrix().size();
   // While frames wait, shares are coalesced (at most kMaxShareInterval apart); a service that
   // wants the newest keyframe meanwhile asks for it (servedLatest).
-  if (queued_count_.load() == 0 ||
+  if (intake_.queuedCount() == 0 ||
       (ros::WallTime::now() - last_share_).toSec() >= kMaxShareInterval)
     shareSelectionLocked();
   else
@@ -428,90 +283,28 @@ void KeyframeWorker::keyframeInsertedLocked() {
 }
 
 void KeyframeWorker::loop() {
+  // Idle with keyframes not shared yet: share them before waiting.
+  const auto idle = [this] {
+    if (!unshared_) return;
+    std::lock_guard<std::timed_mutex> state(state_mutex_);
+    if (unshared_) shareSelectionLocked();
+  };
   while (true) {
     applyRequests();
-    Queued queued;
-    {
-      std::unique_lock<std::mutex> lock(queue_mutex_);
-      if (queue_.empty() && unshared_) {
-        // Idle with keyframes not shared yet: share them before waiting.
-        lock.unlock();
-        {
-          std::lock_guard<std::timed_mutex> state(state_mutex_);
-          if (unshared_) shareSelectionLocked();
-        }
-        lock.lock();
-      }
-      queue_cv_.wait(lock, [this] {
-        return stopping_ || !queue_.empty() || pending_config_ ||
-               generation_.load() != applied_generation_;
-      });
-      if (stopping_) return;
-      if (queue_.empty()) continue;  // a request: applied at the top
-      queued = std::move(queue_.front());
-      queue_.pop_front();
-      queued_count_ = queue_.size();
-    }
+    bool stop = false;
+    const std::optional<QueuedFrame> queued = intake_.next(applied_generation_, idle, &stop);
+    if (stop) return;
+    if (!queued) continue;  // a request: applied at the top
     try {
-      process(queued);
+      process(*queued);
     } catch (const std::exception& e) {
       // process() turns every expected failure into a drop; this is the last line of defence.
-      drop(queued, "invalid_frame", std::string("unexpected error: ") + e.what());
+      drop(*queued, "invalid_frame", std::string("unexpected error: ") + e.what());
     }
   }
 }
 
-bool KeyframeWorker::convert(const Queued& queued, CameraModel& camera) {
-  const PendingFrame& frame = queued.frame;
-  const sensor_msgs::Image& image = *frame.image;
-  try {
-    checkImageMessage(image, "image");
-  } catch (const core::InvalidInput& e) {
-    drop(queued, "bad_image", e.what());
-    return false;
-  }
-  if (frame.depth) {
-    try {
-      checkImageMessage(*frame.depth, "depth");
-      checkDepthEncoding(*frame.depth);
-    } catch (const core::InvalidInput& e) {
-      drop(queued, "bad_depth", e.what());
-      return false;
-    }
-    // Depth sampled at colour pixels must be registered to the colour camera.
-    const std::string depth_frame = normaliseFrameId(frame.depth->header.frame_id);
-    const std::string image_frame = normaliseFrameId(image.header.frame_id);
-    if (!depth_frame.empty() && !image_frame.empty() && depth_frame != image_frame) {
-      drop(queued, "bad_depth",
-           "the depth image is in frame '" + depth_frame + "', not the colour image's '" +
-               image_frame +
-               "': use depth registered to the colour camera (e.g. depth_registered, "
-               "aligned_depth_to_color)");
-      return false;
-    }
-  }
-  try {
-    camera = cameraModelFromInfo(*frame.info);
-  } catch (const core::InvalidInput& e) {
-    drop(queued, "bad_camera_info", e.what());
-    return false;
-  }
-  const core::PinholeIntrinsics& k = camera.intrinsics;
-  if (image.width != static_cast<uint32_t>(k.width) ||
-      image.height != static_cast<uint32_t>(k.height)) {
-    std::ostringstream s;
-    s << "image is " << image.width << "x" << image.height << " but camera_info says " << k.width
-      << "x" << k.height
-      << (frame.info->binning_x > 1 || frame.info->binning_y > 1 || frame.info->roi.width > 0
-              ? " (with its binning and ROI)"
-              : "");
-    drop(queued, "bad_camera_info", s.str());
-    return false;
-  }
-  return true;
-}
-
-void KeyframeWorker::process(const Queued& queued) {
+void KeyframeWorker::process(const QueuedFrame& queued) {
   if (pairs_) pairs_->frameSeen();  // handled frames count as seen too (a backlog is no pause)
   const PendingFrame& frame = queued.frame;
   const ros::Time stamp = frame.image->header.stamp;
@@ -528,12 +321,13 @@ void KeyframeWorker::process(const Queued& queued) {
         << " the previous frame's " << stampText(ros::Time(*last_stamp_));
       statistics_.drop(queued.session, duplicate ? "duplicate_stamp" : "out_of_order_stamp",
                        s.str(), stamp);
-      changed_since_save_ = true;
+      handoff_.markChanged();
       return;
     }
   }
   CameraModel camera;
-  if (!convert(queued, camera)) return;
+  if (const std::optional<FrameDefect> defect = checkFrame(frame, camera))
+    return drop(queued, defect->reason, defect->message);
   {
     std::lock_guard<std::timed_mutex> lock(state_mutex_);
     if (queued.generation != generation_.load()) return;
@@ -562,7 +356,7 @@ void KeyframeWorker::process(const Queued& queued) {
   // Drops from here on are under the state lock: counted directly, the session marked changed.
   auto dropLocked = [&](const std::string& reason, const std::string& message) {
     statistics_.drop(queued.session, reason, message, stamp);
-    changed_since_save_ = true;
+    handoff_.markChanged();
   };
   if (last_stamp_ && !(stamp.toSec() > *last_stamp_))
     return dropLocked("out_of_order_stamp",
@@ -604,15 +398,10 @@ void KeyframeWorker::process(const Queued& queued) {
     return dropLocked("invalid_frame", e.what());
   }
   last_stamp_ = core_frame.stamp;
-  changed_since_save_ = true;
+  handoff_.markChanged();
   double insertion = -1.0;
   if (result.outcome == core::FrameOutcome::kKeyframe) {
-    // A distorted camera's keyframe images are kept rectified, as the exported intrinsics are.
-    sensor_msgs::ImageConstPtr kept;
-    if (images_ || image_writer_)
-      kept = camera.rectify ? rectifiedImageMessage(camera, frame.image) : frame.image;
-    if (images_) images_->push(kept);
-    if (image_writer_) image_writer_->push(core_frame.image_name, kept);
+    images_.keyframeAccepted(core_frame.image_name, frame.image, camera);
     insertion = result.points_seconds + result.matrix_seconds;
     // Counted before the selection is shared: a reader never sees more keyframes in the
     // selection than in the statistics.
@@ -623,16 +412,7 @@ void KeyframeWorker::process(const Queued& queued) {
                      << " points, insertion " << 1e3 * insertion << " ms (points "
                      << 1e3 * result.points_seconds << " ms, matrix " << 1e3 * result.matrix_seconds
                      << " ms), " << selector_->matrix().size() << " keyframes");
-    if (config_.autosave_keyframes > 0 && ++keyframes_since_save_ >= config_.autosave_keyframes &&
-        keeper_.enabled()) {
-      keyframes_since_save_ = 0;
-      // Only what changed since the last save, appended to the journal on the keeper's thread;
-      // a whole copy when the journal cannot continue (no base yet, a failed write).
-      if (keeper_.wantsFull())
-        keeper_.saveLater(captureStateLocked());
-      else
-        keeper_.appendLater(captureDeltaLocked());
-    }
+    handoff_.keyframeInserted(*selector_);  // an autosave every ~autosave_keyframes
     return;
   }
   statistics_.frameOffered(queued.session, stamp, insertion);

@@ -25,6 +25,14 @@ class Keyframe:
     def __repr__(self):
         return "Keyframe(%d, %r)" % (self.id, self.name)
 
+    def colmap_camera_params(self):
+        """(fx, fy, cx, cy) in COLMAP's pixel convention: ROS's camera_info (and OpenCV) put the
+        top-left pixel's centre at (0, 0), COLMAP at (0.5, 0.5), so the principal point moves by
+        half a pixel. Keypoints move the same way (features/sift.py; COLMAP's own extractor
+        writes them so), and the two agree."""
+        fx, fy, cx, cy = self.intrinsics
+        return fx, fy, cx + 0.5, cy + 0.5
+
     def camera_key(self):
         """Keyframes with the same key share one COLMAP camera."""
         return self.intrinsics, self.width, self.height

@@ -2,8 +2,11 @@
 // view sets", "View check", "Completion", "Outputs"), plus randomized invariants.
 #include "view_selection/core/selection.h"
 
+#include "view_selection/core/chunked_selection.h"
 #include "view_selection/core/error_resistance.h"
 #include "view_selection/core/exceptions.h"
+#include "view_selection/core/pair_buckets.h"
+#include "view_selection/core/selection_cache.h"
 
 #include <gtest/gtest.h>
 

@@ -10,7 +10,7 @@
 // fifth of the matching; a few keyframes of patience take it under a tenth.
 #pragma once
 
-#include "view_selection/core/selection.h"
+#include "view_selection/core/pair_buckets.h"
 #include "view_selection/core/types.h"
 
 #include <cstddef>

@@ -6,6 +6,7 @@
 // not O(n).
 #pragma once
 
+#include "view_selection/core/chunked_selection.h"
 #include "view_selection/core/chunked_vector.h"
 #include "view_selection/core/error_resistance_matrix.h"
 #include "view_selection/core/keyframe_summary.h"

@@ -6,9 +6,11 @@
 #include "view_selection/core/error_resistance_matrix.h"
 #include "view_selection/core/frame.h"
 #include "view_selection/core/keyframe_policy.h"
+#include "view_selection/core/pair_buckets.h"
 #include "view_selection/core/parameters.h"
 #include "view_selection/core/point_source.h"
 #include "view_selection/core/selection.h"
+#include "view_selection/core/selection_cache.h"
 #include "view_selection/core/selection_output.h"
 
 #include <memory>

@@ -2,6 +2,7 @@
 #pragma once
 
 #include "view_selection/core/error_resistance_matrix.h"
+#include "view_selection/core/pair_buckets.h"
 #include "view_selection/core/selection.h"
 #include "view_selection/core/selection_output.h"
 

@@ -1,31 +1,41 @@
-// The worker: frames from the inputs wait in a bounded queue; one thread looks up each frame's
-// pose, converts it and hands it to the core's ViewSelector, which keeps the keyframes and the
-// matrix. After a change it shares an immutable ServedSelection, which services and outputs read
-// without waiting for an insertion. Nothing waits for the worker: the inputs queue frames under
-// the queue lock alone, ~reset and reconfigures are handed to the worker's thread and return at
-// once, and a ServedSelection costs O(what changed) (core::SelectionOutput shares its chunks).
+// The worker: one thread takes each frame the inputs queued, looks up its pose, converts it and
+// hands it to the core's ViewSelector, which keeps the keyframes and the matrix; after a change
+// it shares an immutable ServedSelection, which services and outputs read without waiting for an
+// insertion. Its parts, each in a file of its own with the lock it takes:
+//   intake            ros/frame_queue       the queue lock: frames and the requests other
+//                                            threads hand over (~reset, time jumps, reconfigures)
+//   checks            ros/frame_checks      no lock: a frame's messages and camera model
+//   insertion         here                  the state lock: the selector, pose corrections, map
+//                                            points; the waits for a pose or a verdict hold none
+//   sharing           ros/served_selection  the served lock: the selection readers get
+//   persistence       ros/session_handoff   under the state lock (and the aside lock): what
+//                                            the state keeper's thread writes
+//   image output      ros/keyframe_images   under the state lock: the image cache for ~export,
+//                                            the keyframe image writer's thread
+// Nothing waits for the worker: the inputs queue frames under the queue lock alone, ~reset and
+// reconfigures are handed to the worker's thread and return at once, and a ServedSelection costs
+// O(what changed) (core::SelectionOutput shares its chunks). Locks nest queue > aside and
+// queue > served (a new generation), state > served (a share) and state > aside (a time jump's
+// session handed over); the state lock is never taken under the queue lock or the served lock.
 #pragma once
 
 #include "view_selection/core/pose_correction.h"
 #include "view_selection/core/selection_output.h"
 #include "view_selection/core/view_selector.h"
-#include "view_selection/ros/camera_model.h"
-#include "view_selection/ros/image_cache.h"
+#include "view_selection/ros/frame_queue.h"
 #include "view_selection/ros/input_statistics.h"
 #include "view_selection/ros/keyframe_image_writer.h"
+#include "view_selection/ros/keyframe_images.h"
 #include "view_selection/ros/keyframe_verdicts.h"
 #include "view_selection/ros/node_config.h"
 #include "view_selection/ros/pair_stream.h"
 #include "view_selection/ros/pose_provider.h"
+#include "view_selection/ros/served_selection.h"
+#include "view_selection/ros/session_handoff.h"
 #include "view_selection/ros/state_keeper.h"
 
-#include <sensor_msgs/CameraInfo.h>
-#include <sensor_msgs/Image.h>
-
 #include <atomic>
-#include <condition_variable>
 #include <cstdint>
-#include <deque>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -34,26 +44,6 @@
 #include <vector>
 
 namespace view_selection::ros_node {
-
-/// One synchronised frame as it arrived.
-struct PendingFrame {
-  sensor_msgs::ImageConstPtr image;
-  sensor_msgs::CameraInfoConstPtr info;
-  sensor_msgs::ImageConstPtr depth;  ///< null without depth
-  /// The worker's generation() when the image arrived: a frame of an earlier one (a ~reset or a
-  /// time jump since) is discarded by push(), so it never enters the new session.
-  uint64_t generation = 0;
-};
-
-/// What services and publishers read: the selection and, with ~save_keyframe_images, the
-/// keyframe images. Immutable once shared.
-struct ServedSelection {
-  uint64_t version = 0;  ///< bumps with every change
-  core::SelectionOutput selection;
-  /// By keyframe id, ids below image_count (null without ~save_keyframe_images); RAM-bounded.
-  std::shared_ptr<const KeyframeImageCache> images;
-  size_t image_count = 0;
-};
 
 /// Makes the worker's point source from the node's configuration (points::makePointSource by
 /// default; tests pass another, e.g. a deliberately slow one).
@@ -128,41 +118,24 @@ class KeyframeWorker {
   size_t pending(double* oldest_age = nullptr) const;
 
  private:
-  struct Queued {
-    PendingFrame frame;
-    uint64_t generation = 0;  ///< reset() count when it was queued
-    uint64_t session = 0;     ///< its statistics session
-    ros::WallTime queued;
-  };
-
   void loop();
   /// Before the next frame: a ~reset or reconfigure handed over since. Takes the state lock.
   void applyRequests();
-  void process(const Queued& queued);
-  /// Checks and converts a frame; false (after counting the drop) when it is unusable.
-  bool convert(const Queued& queued, CameraModel& camera);
+  void process(const QueuedFrame& queued);
   /// Under state_mutex_: shares the selector's state with readers (unless a reset happened since
   /// the state's generation began).
   void shareSelectionLocked();
   /// Under state_mutex_, after a keyframe: shares now, or leaves it for later while frames wait.
   void keyframeInsertedLocked();
-  /// Installs `next` as the served selection, unless `generation` is over; the old one is
-  /// released outside the lock.
-  void installServed(std::shared_ptr<ServedSelection> next, uint64_t generation);
   /// Under state_mutex_: clears the selector for reset() generation `generation` (after
   /// handing the old session to the keeper when a time jump ended it).
   void applyResetLocked(uint64_t generation);
   /// reset() and timeJump(): a new generation and statistics session, the queue emptied, an
   /// empty selection served. Returns the number of keyframes forgotten.
   size_t startSession(bool time_jump);
-  /// Under state_mutex_: the session for the state file.
-  StateSnapshot captureStateLocked();
-  /// What changed since the last capture, for the state journal (O(changed) but the version scan).
-  JournalSnapshot captureDeltaLocked();
   /// At construction: continues the session the keeper read, or starts empty.
   void restoreLoaded();
-  void drop(const Queued& queued, const std::string& reason, const std::string& message);
-  std::shared_ptr<KeyframeImageCache> newImageCache() const;
+  void drop(const QueuedFrame& queued, const std::string& reason, const std::string& message);
 
   const NodeConfig& config_;
   PoseProvider& poses_;
@@ -170,47 +143,27 @@ class KeyframeWorker {
   StateKeeper& keeper_;
   KeyframeVerdicts* verdicts_;
   PairStream* pairs_;
-  KeyframeImageWriter* image_writer_;
+
+  // Bumps on reset() and timeJump(), under the queue lock and the served lock; frames and
+  // shares of an older generation are discarded.
+  std::atomic<uint64_t> generation_{0};
 
   // The method's state, guarded by state_mutex_ (timed: servedLatest() waits only so long).
   mutable std::timed_mutex state_mutex_;
-  std::unique_ptr<core::ViewSelector> selector_;
-  std::shared_ptr<ImageFolder> image_folder_;    // with ~save_keyframe_images: ~image_dir
-  std::shared_ptr<KeyframeImageCache> images_;  // by keyframe id; a new one after each reset
-  std::optional<double> last_stamp_;                // of the last frame offered to the core
-  std::string camera_frame_;                        // the images' frame_id, normalised
-  uint64_t applied_generation_ = 0;  // the generation selector_ belongs to
-  uint64_t captures_ = 0;            // state snapshots taken (their sequence)
-  int keyframes_since_save_ = 0;     // towards ~autosave_keyframes
-  io::DeltaTracker saved_;           // what the last capture held (state lock)
-  std::atomic<bool> changed_since_save_{false};  // anything a saved session would differ in
-  std::atomic<bool> unshared_{false};  // keyframes inserted and not yet shared
+  std::unique_ptr<core::ViewSelector> selector_;  // made first: bad parameters throw here
+  std::optional<double> last_stamp_;  // of the last frame offered to the core
+  std::string camera_frame_;          // the images' frame_id, normalised
+  uint64_t applied_generation_ = 0;   // the generation selector_ belongs to
+  std::atomic<bool> unshared_{false};      // keyframes inserted and not yet shared
   std::atomic<size_t> keyframe_count_{0};  // keyframes accepted in this generation
-  std::atomic<size_t> queued_count_{0};    // queue_.size(), read without the queue lock
   ros::WallTime last_share_;
 
-  // Bumps on reset() (under queue_mutex_ and served_mutex_); frames and shares of an older
-  // generation are discarded.
-  std::atomic<uint64_t> generation_{0};
+  // The parts, each with its own lock or under the state lock (see the top of this file).
+  FrameQueue intake_;        // the queue lock
+  SharedSelection shared_;   // the served lock
+  SessionHandoff handoff_;   // under the state lock; the aside lock
+  KeyframeImages images_;    // under the state lock
 
-  mutable std::mutex served_mutex_;
-  std::shared_ptr<const ServedSelection> served_;
-  uint64_t version_ = 0;  // of served_; guarded by served_mutex_
-
-  // A time jump's old session, to be kept in <state_file>.previous when the worker clears it:
-  // the generation it belonged to and its statistics at the jump. The first one pending wins.
-  struct Aside {
-    uint64_t generation = 0;
-    io::SessionStatistics statistics;
-  };
-  std::mutex aside_mutex_;
-  std::optional<Aside> aside_;
-
-  mutable std::mutex queue_mutex_;
-  std::condition_variable queue_cv_;
-  std::deque<Queued> queue_;
-  std::optional<core::ViewSelectorConfig> pending_config_;  // reconfigure() not yet applied
-  bool stopping_ = false;
   std::thread thread_;  // last: started when everything above exists
 };
 

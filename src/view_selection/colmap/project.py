@@ -144,12 +144,13 @@ class ColmapProject:
     def register(self, keyframes):
         """Rows in `images` for keyframes the database does not have yet, in id order (so the
         image ids, and the direction each pair is matched in, do not depend on when images
-        arrived or on a restart), each with the PINHOLE camera of its intrinsics."""
+        arrived or on a restart), each with the PINHOLE camera of its intrinsics (in COLMAP's
+        pixel convention, Keyframe.colmap_camera_params)."""
         with self.db() as d:
             known = d.image_ids()
             for k in sorted(keyframes, key=lambda k: k.id):
                 if k.name not in known:
-                    known[k.name] = d.add_image(k.name, d.camera_id(k.width, k.height, k.intrinsics))
+                    known[k.name] = d.add_image(k.name, d.camera_id(k.width, k.height, k.colmap_camera_params()))
 
     def extracted(self):
         """Names of the images with features."""
@@ -255,17 +256,21 @@ class ColmapProject:
                  self.timeouts.images(n))
         return output
 
-    def poses_only_model(self, keyframes, output=None):
-        """DIR/sparse/0 with the keyframes at their poses and no points: what is left when no
-        pair verified, or point_triangulator failed (it aborts on a database without matches)."""
+    def write_model(self, model, output=None):
+        """A colmap.model.Model into DIR/sparse/0 (binary), replacing the one there in one step."""
         output = output or os.path.join(self.root, "sparse", "0")
-        work = tempfile.mkdtemp(prefix=".poses_", dir=os.path.join(self.root, "sparse"))
+        work = tempfile.mkdtemp(prefix=".write_", dir=os.path.join(self.root, "sparse"))
         try:
-            colmap_model.write_model(self.known_poses(keyframes), os.path.join(work, "made"), binary=True)
+            colmap_model.write_model(model, os.path.join(work, "made"), binary=True)
             replace_folder(os.path.join(work, "made"), output)
         finally:
             shutil.rmtree(work, ignore_errors=True)
         return output
+
+    def poses_only_model(self, keyframes, output=None):
+        """DIR/sparse/0 with the keyframes at their poses and no points: what is left when no
+        pair verified, or point_triangulator failed (it aborts on a database without matches)."""
+        return self.write_model(self.known_poses(keyframes), output)
 
     def mapper_model(self, seed=0, output=None):
         """DIR/sparse/0: COLMAP's mapper from scratch (its largest model)."""

@@ -27,6 +27,9 @@ from ..colmap.database import DatabaseError
 from ..colmap.project import ColmapProject, ProjectError, write_json_atomically
 from ..keyframes import Keyframe
 from ..refinement.refiner import ModelRefinement, RefinementOptions
+from ..features.sift import SiftExtractor
+from ..matching.backend import PoseGuidedBackend
+from ..matching.guided import GuidedOptions
 from .stream import PairStream
 from .work import LiveWork
 
@@ -45,6 +48,13 @@ PARAMETERS = """Parameters (private, ~name):
   finish_after_idle  [s] build the model once no keyframe came for this long (0: off)
   shutdown_budget    [s] the finish at shutdown must be done within this (12; roslaunch waits 15)
   model              known_poses (the keyframes at the node's poses) or mapper (COLMAP's own)
+  matcher            guided (OpenCV SIFT here, matches guided by the node's poses; COLMAP's matcher
+                     for the pairs whose poses disagree with the images) or colmap (COLMAP's
+                     feature_extractor and matches_importer for everything) (guided)
+  max_features       SIFT features per keyframe, the strongest (2048; guided)
+  guided_window_deg  how far the poses may be off and still guide a pair [deg of view] (1.5; guided)
+  triangulation      live (the points triangulated as pairs verify; the finish writes them) or
+                     colmap (COLMAP's point_triangulator over the whole model at the finish) (live)
   node_timeout       [s] how long the finish waits for the node's ~get_selection (10)
   continuity_pairs   also match each keyframe with the one before it (true)
   refine             known_poses: refine the model (true): keyframe poses and points bundle-adjusted
@@ -83,8 +93,16 @@ class Bridge:
         niceness = int(_param("nice", 10))
         if niceness > 0:
             os.nice(niceness)  # COLMAP, started from here, inherits it: the node keeps priority
+        self.matcher = _param("matcher", "guided")
+        if self.matcher not in ("guided", "colmap"):
+            raise ProjectError("~matcher is '%s': guided or colmap" % self.matcher)
         self.project = ColmapProject(self.project_dir, _param("colmap", "colmap"), _param("threads", -1))
         self.project.open()
+        self.backend = None
+        if self.matcher == "guided":
+            self.backend = PoseGuidedBackend(
+                self.project, SiftExtractor(max_features=int(_param("max_features", 2048))),
+                GuidedOptions(window_deg=float(_param("guided_window_deg", 1.5))))
         refinement = None
         if self.model == "known_poses" and bool(_param("refine", True)):
             defaults = RefinementOptions()
@@ -98,7 +116,8 @@ class Bridge:
         self.work_state = LiveWork(self.project, continuity=bool(_param("continuity_pairs", True)),
                                    max_backlog=_param("max_backlog", 2000),
                                    max_batch_pairs=_param("max_batch_pairs", 24),
-                                   max_attempts=_param("max_attempts", 3), log=self._log, refinement=refinement)
+                                   max_attempts=_param("max_attempts", 3), log=self._log, backend=self.backend,
+                                   triangulation=_param("triangulation", "live"), refinement=refinement)
         self.world_frame = ""  # the node's, from its messages
         self.refined_path = rospy.Publisher("~refined_path", Path, queue_size=1, latch=True)
 
@@ -115,8 +134,8 @@ class Bridge:
         self.finish_service = rospy.Service("~finish", Trigger, self.on_finish)
         self.thread = threading.Thread(target=self.loop, name="colmap_bridge", daemon=True)
         self.thread.start()
-        rospy.loginfo("colmap_bridge: project %s, pairs from %s, model %s%s", self.project.root,
-                      self.node or "the view_selection node (looking for it)", self.model,
+        rospy.loginfo("colmap_bridge: project %s, pairs from %s, model %s, matcher %s%s", self.project.root,
+                      self.node or "the view_selection node (looking for it)", self.model, self.matcher,
                       ", finish after %.1f s without keyframes" % self.finish_after_idle
                       if self.finish_after_idle > 0 else "")
 
@@ -229,8 +248,12 @@ class Bridge:
                 return False
             try:
                 self.work_state.extract(keyframes)
-                return self.work_state.match(keyframes, pairs)
-            except (ProjectError, DatabaseError, OSError) as e:
+                more = self.work_state.match(keyframes, pairs)
+                if self.work_state.model is not None:
+                    with self.work_state.clock.measure("triangulation", 1):
+                        self.work_state.feed_model(keyframes)
+                return more
+            except (ProjectError, DatabaseError, OSError, ValueError) as e:
                 self.work_state.error("project %s: %s" % (self.project.root, e))
                 return False
 
@@ -285,7 +308,12 @@ class Bridge:
                 "seconds_from_last_keyframe": (done - last_keyframe) if last_keyframe else None,
                 "stream_messages": self.stream.messages, "sequence": self.stream.sequence,
                 "backlog_max": self.work_state.backlog_max, "deferred_to_finish": self.work_state.deferred,
-                "errors": self.work_state.errors[-5:], "finished_at": time.time()})
+                "errors": self.work_state.errors[-5:], "finished_at": time.time(), "matcher": self.matcher})
+            stages = self.work_state.clock.summary()
+            if self.backend:
+                report["matching"] = self.backend.path_counts()
+                stages.update(self.backend.clock.summary())
+            report["stages"] = stages
             write_json_atomically(os.path.join(self.project.root, "report.json"), report)
             self.last_report = report
             if report.get("refinement", {}).get("refined"):
@@ -383,6 +411,8 @@ def main(argv):
         sys.stdout.write(USAGE)
         return 0
     rospy.init_node("colmap_bridge")
+    import cv2
+    cv2.setNumThreads(1)  # the budget: the node keeps the cores (docs/live.md)
     try:
         bridge = Bridge()
     except (ProjectError, DatabaseError) as e:

@@ -13,14 +13,29 @@ from .attempts import Attempts
 
 class LiveWork:
     def __init__(self, project: ColmapProject, continuity=True, max_backlog=2000, max_batch_pairs=24,
-                 max_attempts=3, log=None, refinement=None):
+                 max_attempts=3, log=None, backend=None, triangulation="live", refinement=None):
+        """backend: what extracts and matches (register, extract, match, extracted, matched,
+        has_image): the project itself (COLMAP's commands) or matching.backend's pose-guided
+        one. triangulation: "live" (live/model.py: points as pairs verify, the finish writes
+        them) or "colmap" (point_triangulator over the whole model at the finish).
+        refinement: refinement.refiner.ModelRefinement (issue 29: the known-pose model refined,
+        DIR/sparse/0 refined, DIR/sparse/unrefined kept), or None."""
+        from ..matching.backend import StageClock
+        from .model import LiveModel
         self.project = project
-        self.refinement = refinement  # refinement.refiner.ModelRefinement, or None: the model as triangulated
+        self.refinement = refinement
+        self.backend = backend or project
+        if triangulation not in ("live", "colmap"):
+            raise ValueError("triangulation: live or colmap, not %r" % triangulation)
+        self.triangulation = triangulation
+        self.clock = StageClock()
         self.continuity = continuity
         self.max_backlog, self.max_batch_pairs = int(max_backlog), max(1, int(max_batch_pairs))
         self.images = Attempts(max_attempts)
         self.pairs = Attempts(max_attempts)
         self.log = log or (lambda level, text: None)
+        self.model = LiveModel() if triangulation == "live" else None
+        self.fed_poses = {}        # name -> the pose the model has for it
         self.backlog_max = 0
         self.deferred = 0  # pairs beyond ~max_backlog at some point, left for the finish
         self.errors = []   # the last few, for the report
@@ -60,9 +75,11 @@ class LiveWork:
             half = len(failed) // 2
             return (self._attempt(failed[:half], run, done, attempts, kind, ledger_kind, budget) +
                     self._attempt(failed[half:], run, done, attempts, kind, ledger_kind, budget))
-        reason = error or ("COLMAP extracted no features (an image it cannot read?)" if kind == "image"
-                           else "COLMAP wrote no two-view geometry for it")
+        default = error or ("no features were extracted (an image that cannot be read?)" if kind == "image"
+                            else "no two-view geometry was written for it")
+        errors = getattr(self.backend, "errors", None) or {}
         for i in failed:
+            reason = errors.get(i, default)
             if attempts.failed(i, reason):
                 label = i if isinstance(i, str) else "%s %s" % i
                 self.project.ledger(ledger_kind, [label])
@@ -73,14 +90,14 @@ class LiveWork:
     def extract(self, keyframes):
         """Features of the keyframes whose images are there, that have none and are due.
         Returns how many were tried."""
-        self.project.register(keyframes)
-        done = self.project.extracted()
-        todo = [k for k in keyframes if k.name not in done and self.project.has_image(k.name) and self.images.due(k.name)]
+        self.backend.register(keyframes)
+        done = self.backend.extracted()
+        todo = [k for k in keyframes if k.name not in done and self.backend.has_image(k.name) and self.images.due(k.name)]
         if not todo:
             return 0
         by_name = {k.name: k for k in todo}
-        self._attempt([k.name for k in todo], lambda names: self.project.extract([by_name[n] for n in names]),
-                      self.project.extracted, self.images, "image", "skipped-image")
+        self._attempt([k.name for k in todo], lambda names: self.backend.extract([by_name[n] for n in names]),
+                      self.backend.extracted, self.images, "image", "skipped-image")
         return len(todo)
 
     # -- matches -----------------------------------------------------------------------------
@@ -95,8 +112,8 @@ class LiveWork:
         """Matches at most `limit` (~max_batch_pairs) of the wanted pairs not matched yet whose
         images have features and that are due; True when more are waiting."""
         limit = self.max_batch_pairs if limit is None else limit
-        backlog = sorted(self.wanted_pairs(keyframes, pairs) - self.project.matched())
-        have = self.project.extracted()
+        backlog = sorted(self.wanted_pairs(keyframes, pairs) - self.backend.matched())
+        have = self.backend.extracted()
         backlog = [p for p in backlog if p[0] in have and p[1] in have and not self.pairs.given_up(p)]
         self.backlog_max = max(self.backlog_max, len(backlog))
         if len(backlog) > self.max_backlog:
@@ -107,8 +124,38 @@ class LiveWork:
         due = [p for p in backlog if self.pairs.due(p)]
         if not due:
             return False
-        self._attempt(due[:limit], self.project.match, self.project.matched, self.pairs, "pair", "skipped-pair")
+        self._attempt(due[:limit], self.backend.match, self.backend.matched, self.pairs, "pair", "skipped-pair")
         return len(due) > limit
+
+    # -- the live model ----------------------------------------------------------------------
+    def feed_model(self, keyframes):
+        """The live model takes the keyframes' poses (new ones, and corrected ones) and the
+        verified pairs it does not have yet, and triangulates the tracks that changed; returns
+        how many. Also after a restart: the database's pairs all come in once."""
+        from .. import geometry
+        from ..colmap.model import CAMERA_MODELS
+        m = self.model
+        with self.project.db() as d:
+            ids, cams, cameras = d.image_ids(), d.image_cameras(), d.cameras()
+            with_features = {ids[n] for n in d.images_with_features() if n in ids}
+            for k in keyframes:
+                iid = ids.get(k.name)
+                if iid is None:
+                    continue
+                pose = (k.position, k.orientation)
+                known = m.images.get(iid)
+                if known is not None and self.fed_poses.get(k.name) == pose and (
+                        len(known.keypoints) or iid not in with_features):
+                    continue
+                q, t = geometry.world_to_camera(k.position, k.orientation)
+                mid, w, h, params = cameras[cams[iid]]
+                keypoints = d.keypoints(iid) if (known is None or not len(known.keypoints)) else known.keypoints
+                m.add_image(iid, k.name, cams[iid], (CAMERA_MODELS[mid][0], w, h, params), q, t, keypoints)
+                self.fed_poses[k.name] = pose
+            for (a, b), n in d.inlier_counts().items():
+                if n > 0 and (a, b) not in m.matched_pairs and a in m.images and b in m.images:
+                    m.add_matches(a, b, d.matches(a, b, "two_view_geometries"))
+        return m.update()
 
     def skipped(self, all_failed=False):
         """What was given up (with all_failed: also what failed and was not retried yet)."""
@@ -160,21 +207,30 @@ class LiveWork:
                 raise ProjectError("%d of %d keyframes have their image in %s: a model needs at least 2 "
                                    "(the node keeps earlier keyframes' images only with ~save_keyframe_images)"
                                    % (len(have), len(keyframes), project.images))
-            if out["pairs_verified"] == 0:
+            if self.model is not None:
+                with self.clock.measure("triangulation", 1):
+                    out["tracks_triangulated_at_finish"] = self.feed_model(keyframes)
+                with project.db() as d:
+                    ids = d.image_ids()
+                path = project.write_model(self.model.to_model([ids[k.name] for k in have if k.name in ids]))
+                if out["pairs_verified"] == 0:
+                    out["model_error"] = "no pair verified: the model holds the keyframes' poses and no points"
+                    self.error(out["model_error"])
+            elif out["pairs_verified"] == 0:
                 out["model_error"] = "no pair verified: the model holds the keyframes' poses and no points"
                 self.error(out["model_error"])
                 path = project.poses_only_model(have)
             else:
                 try:
                     path = project.known_pose_model(have)
-                    if self.refinement is not None:  # issue 29: sparse/0 refined, sparse/unrefined kept
-                        out["refinement"] = self.refinement.apply(project, path)
                 except ProjectError as e:
                     if project.deadline is not None or project.cancelled:
                         raise  # out of time at shutdown: the model written before stays
                     out["model_error"] = "%s: the model holds the keyframes' poses and no points" % e
                     self.error(out["model_error"])
                     path = project.poses_only_model(have)
+        if self.refinement is not None and model != "mapper" and "model_error" not in out:
+            out["refinement"] = self.refinement.apply(project, path)  # issue 29
         out["model_path"] = path
         out.update(colmap_model.read_model(path).statistics())
         out["waste_ratio"] = out["pairs_wasted"] / out["pairs_matched"] if out["pairs_matched"] else 0.0

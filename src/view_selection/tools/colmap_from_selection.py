@@ -36,6 +36,7 @@ from ..colmap.project import ColmapProject, ProjectError, write_json_atomically
 from ..export_folder import ExportError, ExportFolder
 from ..live.work import LiveWork
 from ..refinement.refiner import ModelRefinement, RefinementOptions
+from ..matching.backend import PoseGuidedBackend
 
 
 def log(msg):
@@ -57,6 +58,14 @@ def parse_args(argv):
     p.add_argument("--model", choices=["mapper", "known_poses"], default="mapper",
                    help="mapper (default): COLMAP's mapper from scratch; known_poses: the keyframes at "
                         "their poses, points from point_triangulator (colmap_bridge's model)")
+    p.add_argument("--matcher", choices=["guided", "colmap"],
+                   help="guided (default with known_poses): OpenCV SIFT and matches guided by the selection's "
+                        "poses, COLMAP's matcher for pairs whose poses disagree with the images (colmap_bridge's "
+                        "~matcher); colmap (default with mapper): COLMAP's feature_extractor and matches_importer")
+    p.add_argument("--triangulation", choices=["live", "colmap"], default="live",
+                   help="known_poses: live (default; colmap_bridge's ~triangulation): the points triangulated and "
+                        "filtered by the package, as the bridge does while pairs verify; colmap: COLMAP's "
+                        "point_triangulator over the whole model")
     p.add_argument("--refine", choices=["on", "off"], default="on",
                    help="known_poses: refine the model (default on, as colmap_bridge's ~refine): poses and points "
                         "bundle-adjusted, the SLAM poses' drift corrected; off: the keyframes stay at their poses")
@@ -94,21 +103,32 @@ def main(argv=None):
         os.makedirs(project.images)
         link_images(export, images, project)
         project.open()
+        if args.threads > 0:
+            import cv2
+            cv2.setNumThreads(args.threads)
         known = args.model == "known_poses"
+        matcher = args.matcher or ("guided" if known else "colmap")
+        backend = PoseGuidedBackend(project) if matcher == "guided" else None
         refinement = None
         if known and args.refine == "on":
             refinement = ModelRefinement(RefinementOptions(retriangulations=args.refine_retriangulations,
                                                            threads=args.threads),
                                          tool=args.refine_tool, log=lambda level, text: log(text))
         work = LiveWork(project, continuity=known and not args.no_continuity, max_batch_pairs=len(export.pairs) + 1,
-                        log=lambda level, text: log(text), refinement=refinement)
+                        log=lambda level, text: log(text), backend=backend,
+                        triangulation=args.triangulation if known else "colmap", refinement=refinement)
         log("%s model of %d keyframes, %d pairs" % ("known-pose" if known else "mapper", len(export.keyframes),
                                                     len(export.pairs)))
         if not known:
             project.init_pair = export.initial_pair() if args.init_pair == "on" else None
         report = work.build_model(export.keyframes, export.pairs, args.model, seed=args.seed)
         report.update({"export": export.folder, "images": images, "seconds": project.seconds,
-                       "init_pair": args.init_pair})
+                       "init_pair": args.init_pair, "matcher": matcher})
+        stages = work.clock.summary()
+        if backend:
+            report["matching"] = backend.path_counts()
+            stages.update(backend.clock.summary())
+        report["stages"] = stages
         write_json_atomically(os.path.join(out, "report.json"), report)
         print("colmap_from_selection: %d of %d keyframes %s, %d points, reprojection error %.3f px in %s (%d of %d "
               "pairs verified); %s" % (report.get("registered", 0), len(export.keyframes),

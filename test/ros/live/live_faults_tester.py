@@ -104,8 +104,10 @@ class LiveFaults(unittest.TestCase):
             f.write('#!/bin/sh\n[ "$1" = matches_importer ] && { echo "simulated failure" >&2; exit 3; }\n'
                     'exec colmap "$@"\n')
         os.chmod(fake, stat.S_IRWXU)
+        # ~matcher colmap: COLMAP's own pipeline (a user without poses they trust), where every
+        # pair goes through the failing matches_importer.
         bridge = self.start_bridge('/bridge_failing', {'project': os.path.join(self.tmp, 'failing'),
-                                                       'colmap': fake, 'batch_period': 0.2})
+                                                       'colmap': fake, 'batch_period': 0.2, 'matcher': 'colmap'})
         try:
             rospy.wait_for_service(bridge.name + '/finish', timeout=60)
             images = os.path.join(self.tmp, 'failing', 'images')

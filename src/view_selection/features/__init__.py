@@ -1,0 +1,1 @@
+"""Local features of the keyframe images, in COLMAP's database format (sift.py)."""

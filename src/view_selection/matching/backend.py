@@ -1,0 +1,170 @@
+"""The pose-guided way of filling a project's database: SIFT features extracted here (OpenCV),
+pairs matched with the node's poses (guided.py), both written in COLMAP's schema; the pairs whose
+poses cannot be trusted go to COLMAP's own matcher (matches_importer: brute force and RANSAC) on
+the same features. A drop-in for the COLMAP way (ColmapProject.extract/match): the same
+methods, the same database, the same ledger.
+"""
+import collections
+import os
+import resource
+import time
+
+import numpy as np
+
+from ..colmap import database as db
+from ..colmap.project import ProjectError
+from ..features.sift import Features, SiftExtractor
+from ..keyframes import pair_of
+from . import guided
+
+
+def _children_cpu():
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+class StageClock:
+    """Wall and CPU seconds of a stage, our process and the COLMAP children it ran, and how many
+    items it handled."""
+
+    def __init__(self):
+        self.wall = collections.defaultdict(float)
+        self.cpu = collections.defaultdict(float)
+        self.items = collections.defaultdict(int)
+
+    def measure(self, stage, items):
+        clock = self
+
+        class Scope:
+            def __enter__(self):
+                self.t = (time.monotonic(), time.process_time(), _children_cpu())
+
+            def __exit__(self, *exc):
+                clock.wall[stage] += time.monotonic() - self.t[0]
+                clock.cpu[stage] += (time.process_time() - self.t[1]) + (_children_cpu() - self.t[2])
+                clock.items[stage] += items
+                return False
+        return Scope()
+
+    def summary(self):
+        return {s: {"items": self.items[s], "wall_seconds": round(self.wall[s], 3), "cpu_seconds": round(self.cpu[s], 3),
+                    "cpu_seconds_per_item": round(self.cpu[s] / self.items[s], 4) if self.items[s] else None}
+                for s in sorted(self.wall)}
+
+
+class PoseGuidedBackend:
+    def __init__(self, project, extractor=None, options=None, cache_images=64):
+        self.project = project
+        self.extractor = extractor or SiftExtractor()
+        self.options = options or guided.GuidedOptions()
+        self.keyframes = {}           # name -> Keyframe, with the newest poses
+        self.cache = collections.OrderedDict()  # name -> Features (the last few used)
+        self.cache_images = int(cache_images)
+        self.errors = {}              # item -> why it failed in the last run
+        self.paths = {}               # pair -> PairResult.summary()
+        self.clock = StageClock()
+
+    # -- what the project has ----------------------------------------------------------------
+    def register(self, keyframes):
+        for k in keyframes:
+            self.keyframes[k.name] = k
+        self.project.register(keyframes)
+
+    def extracted(self):
+        return self.project.extracted()
+
+    def matched(self):
+        return self.project.matched()
+
+    def has_image(self, name):
+        return self.project.has_image(name)
+
+    # -- features ----------------------------------------------------------------------------
+    def extract(self, keyframes):
+        """Features of the keyframes (their images are there): read, extracted and written in
+        one transaction; an image that cannot be read is left out, with its reason in errors."""
+        self.register(keyframes)
+        self.errors = {}
+        made = {}
+        with self.clock.measure("extraction", len(keyframes)):
+            for k in keyframes:
+                if self.project.cancelled:
+                    raise ProjectError("extraction cancelled")
+                try:
+                    made[k.name] = self.extractor.extract_file(os.path.join(self.project.images, k.name))
+                except (ValueError, OSError) as e:
+                    self.errors[k.name] = str(e)
+            with self.project.db() as d:
+                ids = d.image_ids()
+                for name, features in made.items():
+                    d.write_features(ids[name], *features.to_colmap())
+        for name, features in made.items():
+            self._remember(name, features)
+        self.project.ledger("extracted", list(made))
+        return len(keyframes)
+
+    def _remember(self, name, features):
+        self.cache[name] = features
+        self.cache.move_to_end(name)
+        while len(self.cache) > self.cache_images:
+            self.cache.popitem(last=False)
+
+    def features(self, name, database):
+        if name in self.cache:
+            self.cache.move_to_end(name)
+            return self.cache[name]
+        iid = database.image_ids()[name]
+        f = Features.from_colmap(database.keypoints(iid), database.descriptors(iid))
+        self._remember(name, f)
+        return f
+
+    # -- matches -----------------------------------------------------------------------------
+    def match(self, pairs):
+        """Each pair (name, name) guided by the poses; the ones that fall back are matched by
+        COLMAP's matches_importer afterwards. Every pair gets its raw matches and its two-view
+        geometry (verified, or empty) in the database."""
+        pairs = [pair_of(*p) for p in pairs]
+        self.errors = {}
+        fallback = []
+        with self.clock.measure("guided_matching", len(pairs)):
+            with self.project.db() as d:
+                ids = d.image_ids()
+                for a, b in pairs:
+                    if self.project.cancelled:
+                        raise ProjectError("matching cancelled")
+                    ka, kb = self.keyframes.get(a), self.keyframes.get(b)
+                    if ka is None or kb is None:
+                        self.errors[(a, b)] = "no pose for %s" % (a if ka is None else b)
+                        continue
+                    result = guided.match_pair(self.features(a, d), self.features(b, d), ka, kb, self.options)
+                    self.paths[(a, b)] = result.summary()
+                    if result.path == guided.FALLBACK:
+                        fallback.append((a, b))
+                        continue
+                    d.write_matches(ids[a], ids[b], result.matches)
+                    d.write_two_view_geometry(ids[a], ids[b], result.inliers, db.CALIBRATED, F=result.F, E=result.E,
+                                              qvec=_quaternion(result.R), tvec=result.t)
+        done = [p for p in pairs if p not in fallback and p not in self.errors]
+        self.project.ledger("matched", ["%s %s" % p for p in done])
+        if fallback:
+            with self.clock.measure("fallback_matching", len(fallback)):
+                self.project.match(fallback)  # COLMAP's own; it writes the ledger
+        return len(pairs)
+
+    def path_counts(self):
+        """Which path the pairs matched so far took: {'guided': n, 'fallback': n}, the fallbacks'
+        reasons, the bands of the guided ones (median, 90th percentile, max [px]), and each
+        pair's summary."""
+        counts = collections.Counter(s["path"] for s in self.paths.values())
+        bands = [s["band_px"] for s in self.paths.values() if s["path"] == guided.GUIDED]
+        return {"guided": counts.get(guided.GUIDED, 0), "fallback": counts.get(guided.FALLBACK, 0),
+                "fallback_pairs": {"%s %s" % p: s.get("why", "") for p, s in sorted(self.paths.items())
+                                   if s["path"] == guided.FALLBACK},
+                "band_px": {"median": float(np.median(bands)), "p90": float(np.percentile(bands, 90)),
+                            "max": float(max(bands))} if bands else None,
+                "pairs": {"%s %s" % p: s for p, s in sorted(self.paths.items())}}
+
+
+def _quaternion(r):
+    from ..geometry import quaternion_of
+    return quaternion_of(np.asarray(r))

@@ -1,0 +1,151 @@
+"""Pose-guided matching: on synthetic features with exact correspondences, and with real SIFT on
+two rendered views of a textured plane. No ROS, no COLMAP."""
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from view_selection import geometry
+from view_selection.features.sift import Features, SiftExtractor
+from view_selection.keyframes import Keyframe
+from view_selection.matching import guided
+
+K = (500.0, 500.0, 320.0, 240.0)
+
+
+def look_at(i, centre, target, up=(0, -1, 0)):
+    """A keyframe at `centre` looking at `target` (optical frame: z forward, y down)."""
+    z = np.asarray(target, float) - centre
+    z /= np.linalg.norm(z)
+    x = np.cross(up, z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    r = np.stack([x, y, z], axis=1)  # camera -> world
+    return Keyframe(i, "%d.png" % i, float(i), centre, geometry.quaternion_of(r), K, 640, 480)
+
+
+def project(k, points):
+    q, t = geometry.world_to_camera(k.position, k.orientation)
+    pc = points @ geometry.rotation_of(q).T + t
+    fx, fy, cx, cy = k.intrinsics
+    return np.stack([fx * pc[:, 0] / pc[:, 2] + cx, fy * pc[:, 1] / pc[:, 2] + cy], axis=1), pc[:, 2]
+
+
+def synthetic_pair(n=1500, seed=0, noise_px=0.5, distractors=500):
+    rng = np.random.default_rng(seed)
+    points = rng.uniform([-2, -1.5, 3], [2, 1.5, 6], (n, 3))
+    a = look_at(0, np.array([0.0, 0.0, 0.0]), [0, 0, 4.5])
+    b = look_at(1, np.array([0.4, 0.05, 0.1]), [0, 0, 4.5])
+    xa, za = project(a, points)
+    xb, zb = project(b, points)
+    seen = (za > 0) & (zb > 0) & np.all((xa >= 0) & (xa < [640, 480]), 1) & np.all((xb >= 0) & (xb < [640, 480]), 1)
+    points, xa, xb = points[seen], xa[seen], xb[seen]
+    desc = rng.normal(size=(len(points), 128)).astype(np.float32)
+    desc_b = desc + rng.normal(scale=0.25, size=desc.shape).astype(np.float32)  # the same point, seen again
+    extra = rng.normal(size=(distractors, 128)).astype(np.float32)
+    unit = lambda d: d / np.linalg.norm(d, axis=1, keepdims=True)
+    fa = Features(xa + rng.normal(scale=noise_px, size=xa.shape), np.ones(len(xa)), np.zeros(len(xa)), unit(desc))
+    xb_all = np.vstack([xb + rng.normal(scale=noise_px, size=xb.shape), rng.uniform([0, 0], [640, 480], (distractors, 2))])
+    fb = Features(xb_all, np.ones(len(xb_all)), np.zeros(len(xb_all)), unit(np.vstack([desc_b, extra])))
+    return a, b, fa, fb, len(points)
+
+
+def test_exact_poses_find_the_true_correspondences():
+    a, b, fa, fb, n = synthetic_pair()
+    r = guided.match_pair(fa, fb, a, b)
+    assert r.path == guided.GUIDED, r.why
+    correct = np.sum(r.inliers[:, 0] == r.inliers[:, 1])  # feature i of a is point i, so is feature i of b
+    assert correct >= 0.9 * n
+    assert correct >= 0.99 * len(r.inliers)  # the distractors are not matched
+    assert r.band_px <= 4.0 + 1e-9  # exact poses: the narrowest band
+
+
+def test_every_inlier_lies_within_the_band_of_the_poses_epipolar_lines():
+    a, b, fa, fb, _ = synthetic_pair(noise_px=1.5, seed=3)
+    r = guided.match_pair(fa, fb, a, b)
+    assert r.path == guided.GUIDED
+    d = guided.epipolar_distances(r.F, fa.xy[r.inliers[:, 0]], fb.xy[r.inliers[:, 1]])
+    assert np.all(np.diag(d) <= r.band_px + 1e-6)
+
+
+def test_poses_a_little_off_widen_the_band():
+    a, b, fa, fb, n = synthetic_pair(seed=1)
+    c = np.asarray(b.position) + [0.0, 0.02, 0.0]  # 2 cm off across the baseline: a few pixels
+    off = Keyframe(b.id, b.name, b.stamp, c, b.orientation, b.intrinsics, b.width, b.height)
+    r = guided.match_pair(fa, fb, a, off)
+    assert r.path == guided.GUIDED, r.why
+    assert r.band_px > 4.0
+    assert np.sum(r.inliers[:, 0] == r.inliers[:, 1]) >= 0.8 * n
+
+
+def test_poses_that_disagree_with_the_images_fall_back():
+    """A tilt of 5.7 degrees moves every point across the (near horizontal) epipolar lines by
+    about 50 px, further than the window. (A pan would move them along the lines, where an
+    epipolar constraint cannot see a pose error, and the matches found would still be right.)"""
+    a, b, fa, fb, _ = synthetic_pair(seed=2)
+    turn = geometry.rotation_of(b.orientation) @ geometry.rotation_of((math.cos(0.05), math.sin(0.05), 0, 0))
+    wrong = Keyframe(b.id, b.name, b.stamp, b.position, geometry.quaternion_of(turn), b.intrinsics, b.width, b.height)
+    r = guided.match_pair(fa, fb, a, wrong)
+    assert r.path == guided.FALLBACK
+    assert "epipolar" in r.why or "inliers" in r.why
+
+
+def test_no_baseline_falls_back():
+    a, _, fa, fb, _ = synthetic_pair()
+    r = guided.match_pair(fa, fb, a, a)
+    assert r.path == guided.FALLBACK and "baseline" in r.why
+
+
+def test_features_round_trip_through_colmaps_format():
+    rng = np.random.default_rng(4)
+    d = rng.random((20, 128)).astype(np.float32)
+    f = Features(rng.uniform(0, 600, (20, 2)), rng.uniform(1, 5, 20), rng.uniform(-3, 3, 20),
+                 d / np.linalg.norm(d, axis=1, keepdims=True))
+    kp, desc = f.to_colmap()
+    assert kp.dtype == np.float32 and kp.shape == (20, 4) and desc.dtype == np.uint8 and desc.shape == (20, 128)
+    assert np.allclose(kp[:, :2], f.xy + 0.5, atol=1e-4)  # COLMAP's pixel centres
+    back = Features.from_colmap(kp, desc)
+    assert np.allclose(back.xy, f.xy, atol=1e-4)
+    assert np.all(np.sum(back.descriptors * f.descriptors, axis=1) > 0.999)  # uint8 quantisation only
+
+
+def textured_plane_views():
+    """Two renderings of a textured plane z = 3 m, and the homography between them."""
+    rng = np.random.default_rng(5)
+    texture = cv2.GaussianBlur((rng.random((1200, 1600)) * 255).astype(np.uint8), (0, 0), 2.0)
+    texture = cv2.equalizeHist(texture)
+    a = look_at(0, np.array([0.0, 0.0, 0.0]), [0, 0, 3])
+    b = look_at(1, np.array([0.3, -0.05, 0.05]), [0.05, 0, 3])
+    # the plane's texture coordinates: x, y in [-2, 2] x [-1.5, 1.5] m -> 1600 x 1200 px
+    plane_to_texture = np.array([[400.0, 0, 800], [0, 400.0, 600], [0, 0, 1]])
+    images, homographies = [], []
+    for k in (a, b):
+        q, t = geometry.world_to_camera(k.position, k.orientation)
+        r = geometry.rotation_of(q)
+        kk = guided.intrinsic_matrix(k)
+        plane_to_image = kk @ np.column_stack([r[:, 0], r[:, 1], r[:, 2] * 3.0 + t])  # (X, Y, 1) on z = 3
+        h = plane_to_image @ np.linalg.inv(plane_to_texture)
+        images.append(cv2.warpPerspective(texture, h, (640, 480), flags=cv2.INTER_LINEAR))
+        homographies.append(h)
+    return a, b, images, homographies[1] @ np.linalg.inv(homographies[0])
+
+
+def test_real_sift_on_a_rendered_plane_gives_correct_inliers():
+    a, b, (ia, ib), a_to_b = textured_plane_views()
+    extractor = SiftExtractor(max_features=2048)
+    fa, fb = extractor.extract(ia), extractor.extract(ib)
+    assert len(fa) > 500 and len(fb) > 500
+    r = guided.match_pair(fa, fb, a, b)
+    assert r.path == guided.GUIDED, r.why
+    moved = cv2.perspectiveTransform(fa.xy[r.inliers[:, 0]].reshape(-1, 1, 2), a_to_b).reshape(-1, 2)
+    error = np.linalg.norm(moved - fb.xy[r.inliers[:, 1]], axis=1)
+    assert len(r.inliers) >= 200
+    assert np.mean(error < 2.0) >= 0.98
+
+
+def test_an_unreadable_image_is_a_clear_error(tmp_path):
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(b"not an image")
+    with pytest.raises(ValueError, match="cannot read"):
+        SiftExtractor().extract_file(str(bad))

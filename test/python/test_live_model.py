@@ -1,0 +1,109 @@
+"""The live model: tracks from verified matches, points at the poses, filtering, and the COLMAP
+model it writes. Exact synthetic scenes; no ROS, no COLMAP."""
+import numpy as np
+
+from view_selection import geometry
+from view_selection.colmap import model as cm
+from view_selection.live.model import LiveModel
+
+PARAMS = (500.0, 500.0, 320.5, 240.5)
+CAMERA = ("PINHOLE", 640, 480, PARAMS)
+
+
+def scene(n_images=4, n_points=300, seed=0):
+    rng = np.random.default_rng(seed)
+    points = rng.uniform([-1.5, -1, 4], [1.5, 1, 6], (n_points, 3))
+    poses, keypoints = [], []
+    for i in range(n_images):
+        centre = np.array([0.3 * i, 0.02 * i, 0.0])
+        q, t = geometry.world_to_camera(centre, (1.0, 0.0, 0.0, 0.0))
+        r = geometry.rotation_of(q)
+        pc = points @ r.T + t
+        uv = np.stack([PARAMS[0] * pc[:, 0] / pc[:, 2] + PARAMS[2], PARAMS[1] * pc[:, 1] / pc[:, 2] + PARAMS[3]], 1)
+        order = rng.permutation(n_points)  # keypoint j of image i is point order[j]
+        poses.append((q, t))
+        keypoints.append((uv[order], order))
+    return points, poses, keypoints
+
+
+def build(points, poses, keypoints, pairs=None):
+    m = LiveModel()
+    for i, ((q, t), (uv, _)) in enumerate(zip(poses, keypoints)):
+        m.add_image(i + 1, "%d.png" % i, 1, CAMERA, q, t, np.hstack([uv, np.zeros((len(uv), 2))]))
+    n = len(poses)
+    for a, b in pairs or [(a, b) for a in range(n) for b in range(a + 1, n)]:
+        kp_of_point_b = np.argsort(keypoints[b][1])
+        matches = np.stack([np.arange(len(points)), kp_of_point_b[keypoints[a][1]]], 1)
+        m.add_matches(a + 1, b + 1, matches)
+    m.update()
+    return m
+
+
+def test_exact_poses_give_the_points_back():
+    points, poses, kps = scene()
+    m = build(points, poses, kps)
+    model = m.to_model()
+    assert len(model.points) == len(points)
+    for p in model.points.values():
+        im = model.images[int(p.image_ids[0])]
+        truth = points[kps[im.id - 1][1][int(p.point2D_idxs[0])]]
+        assert np.linalg.norm(p.xyz - truth) < 1e-6
+        assert p.error < 1e-6
+        assert len(p.image_ids) == 4  # the pairs joined into one track per point
+
+
+def test_the_model_is_consistent_and_readable(tmp_path):
+    points, poses, kps = scene(n_images=3, n_points=50)
+    model = build(points, poses, kps).to_model()
+    cm.write_model(model, str(tmp_path))
+    back = cm.read_model(str(tmp_path))
+    for p in back.points.values():
+        for iid, idx in zip(p.image_ids, p.point2D_idxs):
+            assert back.images[int(iid)].point3D_ids[int(idx)] == p.id
+    assert sum(int((im.point3D_ids >= 0).sum()) for im in back.images.values()) == back.statistics()["observations"]
+
+
+def test_a_wrong_observation_is_dropped_not_the_point():
+    points, poses, kps = scene(n_images=4, n_points=40)
+    uv, order = kps[3]
+    uv = uv.copy()
+    uv[:, 1] += np.where(order == 7, 25.0, 0.0)  # point 7 seen 25 px off in image 4, across the baseline
+    kps[3] = (uv, order)
+    model = build(points, poses, kps).to_model()
+    assert len(model.points) == 40
+    seven = [p for p in model.points.values()
+             if any(kps[int(i) - 1][1][int(k)] == 7 for i, k in zip(p.image_ids, p.point2D_idxs))][0]
+    assert sorted(seven.image_ids.tolist()) == [1, 2, 3]
+    assert seven.error < 1e-6
+
+
+def test_a_match_that_would_give_a_track_two_keypoints_of_one_image_is_left_out():
+    m = LiveModel()
+    for i in range(3):
+        m.add_image(i + 1, "%d" % i, 1, CAMERA, (1, 0, 0, 0), (-0.3 * i, 0, 0), np.zeros((5, 4)))
+    m.add_matches(1, 2, [[0, 0]])
+    m.add_matches(2, 3, [[0, 0]])
+    m.add_matches(1, 3, [[1, 0]])  # keypoint 1 of image 1 to the track that holds keypoint 0 of image 1
+    assert m.conflicts == 1
+    assert len(m.members) == 1 and list(m.members.values())[0] == {1: 0, 2: 0, 3: 0}
+
+
+def test_a_moved_pose_triangulates_its_tracks_again():
+    points, poses, kps = scene(n_images=3, n_points=30)
+    m = build(points, poses, kps)
+    assert m.update() == 0  # nothing changed
+    q, t = poses[2]
+    m.set_pose(3, q, np.asarray(t) + [0.0, 0.05, 0.0])
+    assert m.update() == 30
+    m.set_pose(3, q, t)
+    m.update()
+    assert all(p[1] < 1e-6 for p in m.points.values())
+
+
+def test_points_without_parallax_or_behind_a_camera_are_not_kept():
+    m = LiveModel()
+    for i in range(2):  # 1 mm apart: no parallax for points 5 m away
+        m.add_image(i + 1, "%d" % i, 1, CAMERA, (1, 0, 0, 0), (-0.001 * i, 0, 0), np.array([[320.5, 240.5, 1, 0]]))
+    m.add_matches(1, 2, [[0, 0]])
+    m.update()
+    assert m.to_model().points == {}
