@@ -2,10 +2,12 @@
 
 #include "view_selection/core/exceptions.h"
 #include "view_selection/eval/trajectory_alignment.h"
+#include "view_selection/refine/tracks.h"
 
 #include <ceres/ceres.h>
 #include <ceres/product_manifold.h>
 #include <ceres/rotation.h>
+#include <Eigen/Eigenvalues>
 
 #include <algorithm>
 #include <chrono>
@@ -98,6 +100,7 @@ struct State {
   std::map<int, const io::ColmapImage*> images;
   std::map<int64_t, Eigen::Vector3d> points;
   std::map<int64_t, std::vector<io::ColmapTrackElement>> tracks;
+  std::map<int64_t, std::array<uint8_t, 3>> colours;
 
   Eigen::Vector2d observed(const io::ColmapTrackElement& e) const {
     return images.at(e.image_id)->points2D[static_cast<size_t>(e.point2D_idx)].xy;
@@ -151,6 +154,7 @@ State stateOf(const io::ColmapModel& model) {
     if (!p.xyz.allFinite()) throw core::InvalidArgument("point " + std::to_string(id) + " is not finite");
     s.points[id] = p.xyz;
     s.tracks[id] = p.track;
+    s.colours[id] = p.rgb;
   }
   return s;
 }
@@ -190,6 +194,7 @@ std::pair<size_t, size_t> filter(State& s, const RefinementConfig& config, const
     if (!keep) {
       observations += track.size();
       s.points.erase(it->first);
+      s.colours.erase(it->first);
       it = s.tracks.erase(it);
       ++points;
     } else {
@@ -266,8 +271,9 @@ ceres::Solver::Summary adjust(State& s, const Gauge& gauge, const RefinementConf
     }
   }
   ceres::Solver::Options options;
-  options.linear_solver_type = used.size() <= 50 ? ceres::DENSE_SCHUR : ceres::SPARSE_SCHUR;
+  options.linear_solver_type = used.size() <= config.dense_up_to ? ceres::DENSE_SCHUR : ceres::SPARSE_SCHUR;
   options.max_num_iterations = config.max_iterations;
+  options.function_tolerance = config.function_tolerance;
   options.num_threads = config.threads > 0 ? config.threads
                                            : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
   options.logging_type = ceres::SILENT;
@@ -394,6 +400,114 @@ Gauge gaugeOf(const State& s, const std::map<int, State::Pose>& reference, const
   return g;
 }
 
+/// The points of `tracks` triangulated anew at the poses of `s` (images in `excluded` and their
+/// observations left out), replacing its points: a linear (DLT) point from the rays, three
+/// Gauss-Newton steps on the pixel error, and the worst observation dropped while it is further
+/// than triangulation_max_error (the point again from the rest); kept when it has two
+/// observations left, lies in front of them and is seen at min_triangulation_angle_deg at
+/// least. A point takes the colour of an old point that shared an observation.
+void retriangulate(State& s, const Tracks& tracks, const std::set<int>& excluded, const RefinementConfig& config,
+                   double max_error) {
+  std::map<std::pair<int, int>, int64_t> old_point;  // (image, 2D index) -> old point id
+  for (const auto& [id, track] : s.tracks)
+    for (const auto& e : track) old_point[{e.image_id, e.point2D_idx}] = id;
+  std::map<int64_t, Eigen::Vector3d> points;
+  std::map<int64_t, std::vector<io::ColmapTrackElement>> new_tracks;
+  std::map<int64_t, std::array<uint8_t, 3>> colours;
+  const double min_angle = config.min_triangulation_angle_deg * kPi / 180.0;
+  int64_t next = 1;
+  for (const auto& track : tracks.tracks) {
+    std::vector<io::ColmapTrackElement> obs;
+    for (const Observation& o : track) {
+      const auto im = s.images.find(o.image_id);
+      if (im == s.images.end() || excluded.count(o.image_id) || o.point2D_idx < 0 ||
+          static_cast<size_t>(o.point2D_idx) >= im->second->points2D.size())
+        continue;
+      obs.push_back({o.image_id, o.point2D_idx});
+    }
+    Eigen::Vector3d x = Eigen::Vector3d::Zero();
+    bool ok = false;
+    while (obs.size() >= 2) {
+      Eigen::Matrix4d a = Eigen::Matrix4d::Zero();
+      for (const auto& e : obs) {
+        const State::Pose& pose = s.poses.at(e.image_id);
+        const Eigen::Vector4d& k = s.intrinsics.at(e.image_id);
+        const Eigen::Vector2d xy = s.observed(e);
+        const Eigen::Vector2d n((xy.x() - k[2]) / k[0], (xy.y() - k[3]) / k[1]);
+        Eigen::Matrix<double, 3, 4> pm;
+        pm << pose.rotation.toRotationMatrix(), pose.translation;
+        const Eigen::RowVector4d r0 = n.x() * pm.row(2) - pm.row(0);
+        const Eigen::RowVector4d r1 = n.y() * pm.row(2) - pm.row(1);
+        a += r0.transpose() * r0 + r1.transpose() * r1;
+      }
+      const Eigen::Vector4d h = Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d>(a).eigenvectors().col(0);
+      if (!(std::abs(h.w()) > 1e-12 * h.head<3>().norm())) break;  // at infinity
+      x = h.head<3>() / h.w();
+      for (int step = 0; step < 3; ++step) {  // Gauss-Newton, the poses held
+        Eigen::Matrix3d jtj = Eigen::Matrix3d::Zero();
+        Eigen::Vector3d jtr = Eigen::Vector3d::Zero();
+        for (const auto& e : obs) {
+          const State::Pose& pose = s.poses.at(e.image_id);
+          const Eigen::Vector4d& k = s.intrinsics.at(e.image_id);
+          const Eigen::Matrix3d r = pose.rotation.toRotationMatrix();
+          const Eigen::Vector3d p = r * x + pose.translation;
+          if (!(p.z() > 0.0)) continue;
+          const Eigen::Vector2d res(k[0] * p.x() / p.z() + k[2] - s.observed(e).x(),
+                                    k[1] * p.y() / p.z() + k[3] - s.observed(e).y());
+          Eigen::Matrix<double, 2, 3> d;
+          d << k[0] / p.z(), 0.0, -k[0] * p.x() / (p.z() * p.z()), 0.0, k[1] / p.z(), -k[1] * p.y() / (p.z() * p.z());
+          const Eigen::Matrix<double, 2, 3> j = d * r;
+          jtj += j.transpose() * j;
+          jtr += j.transpose() * res;
+        }
+        const Eigen::Vector3d dx = (jtj + 1e-12 * Eigen::Matrix3d::Identity()).ldlt().solve(-jtr);
+        if (!dx.allFinite()) break;
+        x += dx;
+      }
+      size_t worst = 0;
+      double worst_error = -1.0;
+      bool behind = false;
+      for (size_t q = 0; q < obs.size(); ++q) {
+        const auto [error, depth] = s.reproject(obs[q].image_id, x, s.observed(obs[q]));
+        if (!(depth > 0.0)) behind = true;
+        const double e = std::isfinite(error) ? error : std::numeric_limits<double>::max();
+        if (e > worst_error) {
+          worst_error = e;
+          worst = q;
+        }
+      }
+      if (!behind && worst_error <= max_error) {
+        ok = true;
+        break;
+      }
+      obs.erase(obs.begin() + static_cast<long>(worst));
+    }
+    if (!ok || !x.allFinite()) continue;
+    double widest = 0.0;
+    for (size_t p = 0; p < obs.size() && widest < min_angle; ++p)
+      for (size_t q = p + 1; q < obs.size() && widest < min_angle; ++q) {
+        const Eigen::Vector3d ra = (s.poses.at(obs[p].image_id).centre() - x).normalized();
+        const Eigen::Vector3d rb = (s.poses.at(obs[q].image_id).centre() - x).normalized();
+        widest = std::max(widest, std::acos(std::clamp(ra.dot(rb), -1.0, 1.0)));
+      }
+    if (widest < min_angle) continue;
+    const int64_t id = next++;
+    points[id] = x;
+    colours[id] = {{128, 128, 128}};
+    for (const auto& e : obs) {
+      const auto old = old_point.find({e.image_id, e.point2D_idx});
+      if (old != old_point.end() && s.colours.count(old->second)) {
+        colours[id] = s.colours.at(old->second);
+        break;
+      }
+    }
+    new_tracks[id] = std::move(obs);
+  }
+  s.points = std::move(points);
+  s.tracks = std::move(new_tracks);
+  s.colours = std::move(colours);
+}
+
 struct PassResult {
   State state;
   bool diverged = false;
@@ -404,13 +518,14 @@ struct PassResult {
   size_t observations_filtered = 0, points_filtered = 0;
   bool aligned = false;
   double scale = 1.0;
+  int retriangulations = 0;
 };
 
 /// Rounds of adjust-then-filter on `input` with the images in `kept` left out (their
 /// observations too) and those not in `movable` held; aligned to the input when the caller held
 /// nothing.
 PassResult pass(const State& input, const std::map<int, State::Pose>& reference, const std::set<int>& movable,
-                const std::set<int>& kept, const RefinementConfig& config) {
+                const std::set<int>& kept, const RefinementConfig& config, const Tracks* tracks) {
   PassResult r;
   r.state = input;
   State& s = r.state;
@@ -423,19 +538,28 @@ PassResult pass(const State& input, const std::map<int, State::Pose>& reference,
   r.observations_filtered += obs;
   r.points_filtered += pts;
   const Gauge gauge = gaugeOf(s, reference, movable, kept, config);
+  const int stages = tracks ? 1 + config.retriangulations : 1;
+  for (int stage = 0; stage < stages; ++stage) {
+  if (stage > 0 || (tracks && config.triangulate_first)) {
+    // Earlier triangulations admit more (the poses are still off), the last one the final limit.
+    const int later = config.retriangulations - stage;
+    retriangulate(s, *tracks, kept, config,
+                  config.triangulation_max_error * std::pow(config.triangulation_growth, std::max(0, later)));
+    ++r.retriangulations;
+  }
   for (int round = 0; round < config.max_rounds; ++round) {
     const size_t before = s.observations();
     if (before == 0) break;
     const ceres::Solver::Summary summary = adjust(s, gauge, config);
     ++r.rounds;
     r.iterations += static_cast<int>(summary.iterations.size());
-    if (round == 0) r.initial_cost = summary.initial_cost;
+    if (stage == 0 && round == 0) r.initial_cost = summary.initial_cost;
     r.final_cost = summary.final_cost;
     if (summary.termination_type == ceres::FAILURE || summary.termination_type == ceres::USER_FAILURE ||
         !std::isfinite(summary.final_cost) || summary.final_cost > summary.initial_cost * (1.0 + 1e-9)) {
       r.diverged = true;
       std::ostringstream why;
-      why << "the adjustment failed in round " << round + 1 << " (" << summary.message << "; cost "
+      why << "the adjustment failed in round " << r.rounds << " (" << summary.message << "; cost "
           << summary.initial_cost << " -> " << summary.final_cost << ")";
       r.why = why.str();
       return r;
@@ -449,12 +573,13 @@ PassResult pass(const State& input, const std::map<int, State::Pose>& reference,
     if (static_cast<double>(obs) > config.max_filtered_ratio * static_cast<double>(before)) {
       r.diverged = true;
       std::ostringstream why;
-      why << "the adjustment ran away in round " << round + 1 << ": " << obs << " of " << before
+      why << "the adjustment ran away in round " << r.rounds << ": " << obs << " of " << before
           << " observations left more than " << config.max_reprojection_error << " px from their points";
       r.why = why.str();
       return r;
     }
     if (static_cast<double>(obs) < 1e-3 * static_cast<double>(before)) break;
+  }
   }
   if (!caller_fixed && config.align_to_input) {
     std::vector<int> ids;
@@ -489,7 +614,9 @@ io::ColmapModel modelOf(const io::ColmapModel& input, const State& s) {
     for (auto& p : im.points2D) p.point3D_id = -1;
   }
   for (const auto& [id, track] : s.tracks) {
-    io::ColmapPoint3D p = input.points.at(id);
+    io::ColmapPoint3D p;
+    p.id = id;
+    p.rgb = s.colours.count(id) ? s.colours.at(id) : std::array<uint8_t, 3>{{128, 128, 128}};
     p.xyz = s.points.at(id);
     p.track = track;
     double e = 0.0;
@@ -513,11 +640,15 @@ void RefinementConfig::validate() const {
   if (!(min_triangulation_angle_deg >= 0.0 && min_triangulation_angle_deg < 90.0))
     throw core::InvalidArgument("min_triangulation_angle_deg must be in [0, 90)");
   if (max_rounds < 1 || max_iterations < 1) throw core::InvalidArgument("max_rounds and max_iterations must be >= 1");
+  if (!(function_tolerance > 0.0 && function_tolerance < 1.0))
+    throw core::InvalidArgument("function_tolerance must be in (0, 1)");
   if (min_observations < 0) throw core::InvalidArgument("min_observations must be >= 0");
   if (!(max_correction_depth_ratio > 0.0)) throw core::InvalidArgument("max_correction_depth_ratio must be positive");
   if (!(max_correction_deg > 0.0 && max_correction_deg <= 180.0))
     throw core::InvalidArgument("max_correction_deg must be in (0, 180]");
   if (threads < 0) throw core::InvalidArgument("threads must be >= 0");
+  if (!(triangulation_max_error > 0.0)) throw core::InvalidArgument("triangulation_max_error must be positive [px]");
+  if (retriangulations < 0) throw core::InvalidArgument("retriangulations must be >= 0");
   if (!(max_filtered_ratio > 0.0 && max_filtered_ratio <= 1.0))
     throw core::InvalidArgument("max_filtered_ratio must be in (0, 1]");
   if (!(prior_translation_ratio >= 0.0)) throw core::InvalidArgument("prior_translation_ratio must be >= 0");
@@ -533,7 +664,7 @@ std::set<int> allImages(const io::ColmapModel& model) {
 
 io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& movable_in,
                             const RefinementConfig& config, RefinementReport* report,
-                            const io::ColmapModel* reference_model) {
+                            const io::ColmapModel* reference_model, const std::vector<Match>* matches) {
   const auto start = std::chrono::steady_clock::now();
   config.validate();
   RefinementReport local;
@@ -553,6 +684,11 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
   std::set<int> movable;
   for (int id : movable_in)
     if (initial.poses.count(id)) movable.insert(id);
+  Tracks tracks;
+  if (matches) tracks = buildTracks(*matches);
+  const Tracks* with_tracks = matches ? &tracks : nullptr;
+  rep.tracks = tracks.tracks.size();
+  rep.track_conflicts = tracks.conflicts;
   rep.points_input = initial.points.size();
   rep.observations_input = initial.observations();
   rep.reprojection_error_input = initial.meanError();
@@ -603,7 +739,7 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
     for (const auto& [id, why] : kept) ids.insert(id);
     return ids;
   };
-  PassResult result = pass(initial, reference, movable, keptIds(), config);
+  PassResult result = pass(initial, reference, movable, keptIds(), config, with_tracks);
   // Implausible corrections, or images left without enough observations: start again with them
   // kept at their input poses (once; what the second pass still moves too far is put back).
   const auto offenders = [&](const State& s, bool record) {
@@ -631,7 +767,7 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
   };
   if (!result.diverged && !offenders(result.state, true).empty()) {
     rep.passes = 2;
-    result = pass(initial, reference, movable, keptIds(), config);
+    result = pass(initial, reference, movable, keptIds(), config, with_tracks);
   }
   if (result.diverged) {
     rep.status = "diverged";
@@ -653,7 +789,14 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
   // Kept images sit at their input poses; their observations that fit the refined points stay.
   std::set<int> none;
   for (const auto& [id, why] : kept) s.poses[id] = reference.at(id);
-  if (!kept.empty()) {
+  if (!kept.empty() && with_tracks) {
+    // Kept images at their input poses take part again: the tracks triangulated once more.
+    retriangulate(s, tracks, {}, config, config.triangulation_max_error);
+    ++result.retriangulations;
+    const auto [obs, pts] = filter(s, config, none);
+    result.observations_filtered += obs;
+    result.points_filtered += pts;
+  } else if (!kept.empty()) {
     State with_kept = s;
     for (const auto& [pid, x] : initial.points)
       if (with_kept.points.count(pid)) {
@@ -679,6 +822,7 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
   rep.observations_filtered = result.observations_filtered;
   rep.points_filtered = result.points_filtered;
   rep.aligned = result.aligned;
+  rep.retriangulations = result.retriangulations;
   rep.alignment_scale = result.scale;
   for (auto& c : rep.images) {
     if (!c.movable) continue;

@@ -39,6 +39,18 @@ Cameras must be PINHOLE or SIMPLE_PINHOLE.
   --output DIR       where the refined model is written (created)
   --report FILE      JSON: status, rounds, costs, points and observations before and after,
                      and per image the correction (translation in model units, rotation in deg)
+  --matches FILE     the project's verified matches (VSMATCH1: image id, 2D point index, image id,
+                     2D point index, as the model's images number their 2D points): after the first
+                     adjustment the points are triangulated anew from their tracks at the refined
+                     poses, --retriangulations times, each followed by adjustment rounds; matches
+                     the drifting poses rejected become points (colmap_bridge writes it from its
+                     database)
+  --retriangulations N  (default 1)
+  --triangulation-max-error PX  a new point drops its worst observation while it is further than
+                     this (default 3) in the last triangulation ...
+  --triangulation-growth G  ... and this factor more in each earlier one (default 3: 9 px in the
+                     first, made at the input poses before the first adjustment)
+  --no-triangulate-first  with --matches: the first adjustment on the input's own points
   --fixed FILE       image names (one a line) that must not move; default: every image moves
   --reference MODEL  the poses corrections are measured against, the result is aligned to and
                      kept images return to (default: the input's); e.g. the SLAM poses when the
@@ -49,6 +61,7 @@ Cameras must be PINHOLE or SIMPLE_PINHOLE.
   --min-angle DEG    points with a smaller triangulation angle are removed (default 1.5)
   --rounds N         adjust-and-filter rounds at most (default 4)
   --iterations N     Ceres iterations per round at most (default 100)
+  --function-tolerance F  a solve stops when the cost changes by less than F, relative (default 1e-6)
   --min-observations N  images with fewer keep their pose (default 15)
   --max-correction-depth-ratio R  (default 0.5)
   --max-correction-deg DEG        (default 15)
@@ -59,6 +72,7 @@ Cameras must be PINHOLE or SIMPLE_PINHOLE.
   --prior-loss-scale S            Cauchy loss on the priors at S sigmas (default 3)
   --no-align         do not align the result to the input poses
   --threads N        Ceres threads (default 0: one per core)
+  --dense-up-to N    Ceres' dense Schur solver up to N images, the sparse one above (default 50)
   --quiet            no summary line
   --verbose          Ceres' report of every solve on stderr
   --help             this text
@@ -86,6 +100,9 @@ nlohmann::json reportJson(const refine::RefinementReport& r) {
           {"rounds", r.rounds},
           {"iterations", r.iterations},
           {"passes", r.passes},
+          {"retriangulations", r.retriangulations},
+          {"tracks", r.tracks},
+          {"track_conflicts", r.track_conflicts},
           {"initial_cost", r.initial_cost},
           {"final_cost", r.final_cost},
           {"points_input", r.points_input},
@@ -107,8 +124,9 @@ int run(int argc, char** argv) {
                         {"input", "output", "report", "fixed", "reference", "loss", "loss-scale", "max-error", "min-angle",
                          "rounds", "iterations", "min-observations", "max-correction-depth-ratio",
                          "max-correction-deg", "threads", "prior-translation-ratio", "prior-rotation-deg",
-                         "prior-loss-scale"},
-                        {"no-align", "quiet", "verbose", "help"});
+                         "prior-loss-scale", "dense-up-to", "function-tolerance", "matches", "retriangulations",
+                         "triangulation-max-error", "triangulation-growth"},
+                        {"no-align", "quiet", "verbose", "no-triangulate-first", "help"});
   if (cli.flag("help")) {
     std::cout << kUsage;
     return 0;
@@ -130,6 +148,12 @@ int run(int argc, char** argv) {
   config.prior_loss_scale = cli.real("prior-loss-scale", config.prior_loss_scale, 1e-9, 1e9);
   config.align_to_input = !cli.flag("no-align");
   config.verbose = cli.flag("verbose");
+  config.retriangulations = static_cast<int>(cli.integer("retriangulations", config.retriangulations, 0, 100));
+  config.triangulation_max_error = cli.real("triangulation-max-error", config.triangulation_max_error, 1e-6, 1e6);
+  config.triangulation_growth = cli.real("triangulation-growth", config.triangulation_growth, 1.0, 100.0);
+  config.triangulate_first = !cli.flag("no-triangulate-first");
+  config.function_tolerance = cli.real("function-tolerance", config.function_tolerance, 1e-12, 0.5);
+  config.dense_up_to = static_cast<size_t>(cli.integer("dense-up-to", static_cast<long>(config.dense_up_to), 0, 100000));
   config.threads = static_cast<int>(cli.integer("threads", config.threads, 0, 256));
 
   const io::ColmapModel input = io::readColmapModel(*cli.text("input"));
@@ -146,8 +170,11 @@ int run(int argc, char** argv) {
   refine::RefinementReport report;
   io::ColmapModel reference;
   if (cli.has("reference")) reference = io::readColmapModel(*cli.text("reference"));
-  const io::ColmapModel out =
-      refine::refineModel(input, movable, config, &report, cli.has("reference") ? &reference : nullptr);
+  std::vector<refine::Match> matches;
+  if (cli.has("matches")) matches = refine::readMatches(*cli.text("matches"));
+  const io::ColmapModel out = refine::refineModel(input, movable, config, &report,
+                                                  cli.has("reference") ? &reference : nullptr,
+                                                  cli.has("matches") ? &matches : nullptr);
   io::writeColmapModel(out, *cli.text("output"));
   if (cli.has("report"))
     io::writeAtomically(*cli.text("report"), [&](const std::string& tmp) {

@@ -243,19 +243,6 @@ class ColmapProject:
             shutil.rmtree(work, ignore_errors=True)
         return output
 
-    def triangulate(self, given, output):
-        """Points of the database's verified matches triangulated at the poses of the model in
-        `given` (point_triangulator, existing points cleared, poses and intrinsics held) into
-        `output`: the refinement's re-triangulation at refined poses."""
-        os.makedirs(output, exist_ok=True)
-        n = len(colmap_model.read_model(given).images)
-        self.run(["point_triangulator", "--database_path", self.database, "--image_path", self.images,
-                  "--input_path", given, "--output_path", output, "--clear_points", "1",
-                  "--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_principal_point", "0",
-                  "--Mapper.ba_refine_extra_params", "0", "--Mapper.num_threads", self.threads], "refinement",
-                 self.timeouts.images(n))
-        return output
-
     def write_model(self, model, output=None):
         """A colmap.model.Model into DIR/sparse/0 (binary), replacing the one there in one step."""
         output = output or os.path.join(self.root, "sparse", "0")

@@ -1,18 +1,19 @@
 """The known-pose model refined: refine_model (C++/Ceres) run as a process on a COLMAP model
 folder, as the project runs COLMAP (a timeout, a clear error naming the stage, killed with its
-parent), then the points re-triangulated at the refined poses and refined again.
+parent), with the project's verified matches:
 
-  1. refine_model on the model triangulated at the SLAM poses: poses and points adjusted with
-     the intrinsics fixed, a robust (Cauchy) loss, observations beyond 4 px filtered, round after
-     round; implausible corrections kept at the SLAM pose;
-  2. re-triangulation at the refined poses (point_triangulator, points cleared): matches that
-     the drifted poses rejected become points now;
-  3. refine_model again, its corrections measured against the SLAM poses.
+  1. the poses and points adjusted with the intrinsics fixed, a robust (Cauchy) loss, the SLAM's
+     relative motion between consecutive keyframes as soft priors, observations beyond 4 px
+     filtered, round after round;
+  2. the points triangulated anew from the tracks of the matches at the refined poses: matches
+     that the drifting poses rejected become points now;
+  3. adjusted and filtered again; corrections measured against the SLAM poses, implausible ones
+     kept at the SLAM pose; the result aligned to the SLAM poses.
 
 Points triangulated at wrong poses are outlier observations at the right ones: an adjustment
 without filtering and re-triangulation follows them (issue 29: COLMAP's bundle_adjuster made a
-drifted DTU set 7.3x worse). The seam: `refine(model folder, which images stay fixed) -> the
-refined folder + the report's section`, with the per-keyframe corrections.
+drifted DTU set 7.3x worse). The seam: `refine(model folder, which images stay fixed, the
+database) -> the refined folder + the report's section`, with the per-keyframe corrections.
 """
 import json
 import os
@@ -26,7 +27,7 @@ import numpy as np
 
 from .. import geometry
 from ..colmap import model as colmap_model
-from ..colmap.process import Colmap, ColmapError, _death_signal_prefix
+from ..colmap.process import Colmap, _death_signal_prefix
 
 
 class RefinementError(Exception):
@@ -36,8 +37,8 @@ class RefinementError(Exception):
 class RefinementOptions:
     """What refine_model is given (its --help says more) and how the steps run.
 
-    retriangulations: how many times the points are re-triangulated at the refined poses and
-    refined again (0: one adjustment on the model as it came)."""
+    retriangulations: how many times the points are triangulated anew from the matches at the
+    refined poses and refined again (0: the model's own points only)."""
 
     def __init__(self, loss="cauchy", loss_scale=1.0, max_error=4.0, min_angle=1.5, rounds=4, iterations=100,
                  min_observations=15, max_correction_depth_ratio=0.5, max_correction_deg=15.0,
@@ -53,6 +54,7 @@ class RefinementOptions:
                 "--min-observations", str(self.min_observations),
                 "--max-correction-depth-ratio", repr(self.max_correction_depth_ratio),
                 "--max-correction-deg", repr(self.max_correction_deg),
+                "--retriangulations", str(self.retriangulations),
                 "--threads", str(max(0, self.threads))]
 
     def to_json(self):
@@ -85,12 +87,16 @@ def find_refine_tool(explicit=None):
     raise RefinementError("cannot find the refine_model tool (build the package; or give its path)")
 
 
-def run_refine_model(tool, model, output, report, options, fixed=(), reference=None, log_path=None, timeout=None):
+def run_refine_model(tool, model, output, report, options, fixed=(), reference=None, log_path=None, timeout=None,
+                     matches=None):
     """One refine_model process; returns its report (dict). RefinementError when it cannot run,
     fails or exceeds the timeout (then it is killed)."""
     args = [tool, "--input", model, "--output", output, "--report", report, "--quiet"] + options.arguments()
     if reference:
         args += ["--reference", reference]
+    if matches:
+        args += ["--matches", matches]
+    args += os.environ.get("VS_REFINE_EXTRA", "").split()  # development: more refine_model options
     if fixed:
         listing = output.rstrip("/") + ".fixed.txt"
         with open(listing, "w") as f:
@@ -152,12 +158,32 @@ def corrections(before, after):
     return out
 
 
-def refine(model_dir, output, options=None, fixed=(), retriangulate=None, tool=None, log_path=None, deadline=None,
+def write_matches(database_path, path):
+    """The database's verified matches (two-view geometries' inliers) as refine_model's VSMATCH1
+    file: image id and keypoint index of both sides, the ids the model's images have. Returns
+    how many."""
+    import struct
+    from ..colmap import database as cdb
+    rows = []
+    with cdb.open_database(database_path) as d:
+        for (a, b), n in sorted(d.inlier_counts().items()):
+            if n <= 0:
+                continue
+            m = np.asarray(d.matches(a, b, "two_view_geometries"), np.int64).reshape(-1, 2)
+            if len(m):
+                rows.append(np.stack([np.full(len(m), a), m[:, 0], np.full(len(m), b), m[:, 1]], axis=1))
+    data = np.concatenate(rows).astype("<i4") if rows else np.zeros((0, 4), "<i4")
+    with open(path, "wb") as f:
+        f.write(b"VSMATCH1" + struct.pack("<Q", len(data)) + data.tobytes())
+    return len(data)
+
+
+def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, log_path=None, deadline=None,
            log=None):
     """Refines the model in `model_dir` into `output` (replaced only at the end; on any error
     `output` is untouched and RefinementError says why). `fixed`: image names that must not
-    move. `retriangulate(given, made)`: writes into `made` the points triangulated at the poses
-    of the poses-only model `given` (None: no re-triangulation). `deadline`: time.monotonic()
+    move. `database`: the project's database, whose verified matches the points are
+    triangulated anew from (None: the model's own points only). `deadline`: time.monotonic()
     by which it must be done. Returns the report's `refinement` section (dict)."""
     options = options or RefinementOptions()
     log = log or (lambda text: None)
@@ -166,74 +192,48 @@ def refine(model_dir, output, options=None, fixed=(), retriangulate=None, tool=N
     parent = os.path.dirname(os.path.abspath(output))
     os.makedirs(parent, exist_ok=True)
     work = tempfile.mkdtemp(prefix=".refine_", dir=parent)
-    stages = []
-
-    def time_left():
-        if deadline is None:
-            return options.timeout
-        left = deadline - time.monotonic()
-        if left <= 1.0:
+    timeout = options.timeout
+    if deadline is not None:
+        timeout = min(timeout, deadline - time.monotonic())
+        if timeout <= 1.0:
             raise RefinementError("no time left for the refinement")
-        return min(options.timeout, left)
-
     try:
-        current = os.path.abspath(model_dir)
-        reports = []
-        for stage in range(options.retriangulations + 1):
-            if stage > 0:
-                if retriangulate is None:
-                    break
-                given, made = os.path.join(work, "given%d" % stage), os.path.join(work, "triangulated%d" % stage)
-                colmap_model.write_model(poses_only(colmap_model.read_model(current)), given, binary=False)
-                t0 = time.monotonic()
-                retriangulate(given, made)
-                stages.append({"stage": "retriangulation", "seconds": time.monotonic() - t0})
-                current = made
-            made = os.path.join(work, "refined%d" % stage)
-            t0 = time.monotonic()
-            report = run_refine_model(tool, current, made, made + ".json", options, fixed,
-                                      reference=model_dir if stage > 0 else None, log_path=log_path,
-                                      timeout=time_left())
-            stages.append({"stage": "adjustment", "seconds": time.monotonic() - t0, "status": report["status"],
-                           "rounds": report["rounds"], "iterations": report["iterations"],
-                           "points": [report["points_input"], report["points_refined"]],
-                           "reprojection_error": [report["reprojection_error_input"],
-                                                  report["reprojection_error_refined"]]})
-            reports.append(report)
-            log("refinement stage %d: %s" % (stage + 1, report["message"]))
-            current = made
-            if not report["refined"]:
-                break  # diverged or nothing to refine: the input stands
-        first, last = reports[0], reports[-1]
-        refined = any(r["refined"] for r in reports)
-        final = current if last["refined"] or len(reports) == 1 else os.path.join(work, "refined%d" % (len(reports) - 2))
-        if not last["refined"] and len(reports) > 1:
-            last = reports[-2]  # a later stage that could not refine leaves the earlier result
+        matches, count = None, 0
+        if database and options.retriangulations > 0:
+            matches = os.path.join(work, "matches.bin")
+            count = write_matches(database, matches)
+        made = os.path.join(work, "refined")
+        report = run_refine_model(tool, os.path.abspath(model_dir), made, made + ".json", options, fixed,
+                                  log_path=log_path, timeout=timeout, matches=matches)
+        log("refinement: %s" % report["message"])
         from ..colmap.project import replace_folder
-        replace_folder(final, os.path.abspath(output))
+        replace_folder(made, os.path.abspath(output))
         keyframes = []
-        for im in last["images"]:
+        for im in report["images"]:
             keyframes.append({"name": im["name"], "refined": im["refined"], "kept": im["kept"] or None,
+                              "weak": im.get("weak", False),
                               "translation": im["translation"], "rotation_deg": im["rotation_deg"],
                               "observations": [im["observations_input"], im["observations_refined"]]})
         moved = [k for k in keyframes if k["refined"]]
         translations = sorted(k["translation"] for k in moved)
         rotations = sorted(k["rotation_deg"] for k in moved)
         return {
-            "status": last["status"] if refined else reports[-1]["status"], "refined": refined,
-            "message": last["message"] if refined else reports[-1]["message"],
+            "status": report["status"], "refined": report["refined"], "message": report["message"],
             "keyframes": keyframes, "keyframes_refined": len(moved),
             "keyframes_kept": [{"name": k["name"], "why": k["kept"]} for k in keyframes if k["kept"]],
             "translation_median": translations[len(translations) // 2] if translations else 0.0,
             "translation_max": translations[-1] if translations else 0.0,
             "rotation_median_deg": rotations[len(rotations) // 2] if rotations else 0.0,
             "rotation_max_deg": rotations[-1] if rotations else 0.0,
-            "points": [first["points_input"], last["points_refined"]],
-            "observations": [first["observations_input"], last["observations_refined"]],
-            "reprojection_error": [first["reprojection_error_input"], last["reprojection_error_refined"]],
-            "aligned": last["aligned"], "alignment_scale": last["alignment_scale"],
-            "retriangulations": sum(1 for s in stages if s["stage"] == "retriangulation"),
-            "stages": stages, "seconds": time.monotonic() - start, "options": options.to_json()}
+            "points": [report["points_input"], report["points_refined"]],
+            "observations": [report["observations_input"], report["observations_refined"]],
+            "observations_filtered": report["observations_filtered"],
+            "reprojection_error": [report["reprojection_error_input"], report["reprojection_error_refined"]],
+            "rounds": report["rounds"], "iterations": report["iterations"], "passes": report["passes"],
+            "retriangulations": report.get("retriangulations", 0), "matches": count,
+            "tracks": report.get("tracks", 0), "aligned": report["aligned"],
+            "alignment_scale": report["alignment_scale"], "adjustment_seconds": report["seconds"],
+            "seconds": time.monotonic() - start, "options": options.to_json()}
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
@@ -250,6 +250,7 @@ class ModelRefinement:
         self.log = log or (lambda level, text: None)
 
     def apply(self, project, model_path):
+        from ..colmap.database import DatabaseError
         from ..colmap.project import ProjectError
         unrefined = os.path.join(os.path.dirname(model_path), "unrefined")
         start = time.monotonic()
@@ -257,10 +258,11 @@ class ModelRefinement:
             if os.path.exists(unrefined):
                 shutil.rmtree(unrefined)
             shutil.copytree(model_path, unrefined)
-            section = refine(model_path, model_path, self.options, retriangulate=project.triangulate, tool=self.tool,
+            section = refine(model_path, model_path, self.options, database=project.database, tool=self.tool,
                              log_path=project.log_path, deadline=project.deadline,
                              log=lambda text: self.log("info", text))
-        except (RefinementError, ProjectError, colmap_model.ModelError, OSError, KeyError, ValueError) as e:
+        except (RefinementError, ProjectError, DatabaseError, colmap_model.ModelError, OSError, KeyError,
+                ValueError) as e:
             message = "refinement failed, the unrefined model stays in %s: %s" % (model_path, e)
             self.log("error", message)
             return {"refined": False, "status": "error", "error": message, "unrefined_path": unrefined,
