@@ -46,7 +46,7 @@ void OdometryConfig::validate() const {
     throw core::InvalidArgument("min_valid_depth must be in [0, 1]");
   if (!(min_contrast >= 0.0)) throw core::InvalidArgument("min_contrast must be >= 0");
   if (restart_after_lost < 1) throw core::InvalidArgument("restart_after_lost must be >= 1");
-  if (downsample < 1 || downsample > 8) throw core::InvalidArgument("downsample must be in [1, 8]");
+  if (max_width < 0) throw core::InvalidArgument("max_width must be >= 0 (0: full size)");
 }
 
 struct RgbdOdometryTracker::Impl {
@@ -86,9 +86,10 @@ OdometryResult RgbdOdometryTracker::track(double stamp, const cv::Mat& full_imag
     throw core::InvalidInput("odometry: unusable intrinsics");
   cv::Mat image = full_image, depth = full_depth;
   core::PinholeIntrinsics k = full_k;
-  if (config_.downsample > 1) {
-    const double f = 1.0 / config_.downsample;
-    const cv::Size size(full_image.cols / config_.downsample, full_image.rows / config_.downsample);
+  const int factor = config_.max_width > 0 ? (full_image.cols + config_.max_width - 1) / config_.max_width : 1;
+  if (factor > 1) {
+    const double f = 1.0 / factor;
+    const cv::Size size(full_image.cols / factor, full_image.rows / factor);
     cv::resize(full_image, image, size, 0, 0, cv::INTER_AREA);
     cv::resize(full_depth, depth, size, 0, 0, cv::INTER_NEAREST);  // no depth invented between surfaces
     k.fx *= f;

@@ -39,7 +39,7 @@ RgbdOdometryRosConfig loadRgbdOdometryConfig(const ros::NodeHandle& p) {
   o.min_valid_depth = param(p, "min_valid_depth", o.min_valid_depth);
   o.min_contrast = param(p, "min_contrast", o.min_contrast);
   o.restart_after_lost = param(p, "restart_after_lost", o.restart_after_lost);
-  o.downsample = param(p, "downsample", o.downsample);
+  o.max_width = param(p, "max_width", o.max_width);
   o.validate();
   c.odom_frame = normaliseFrameId(param(p, "odom_frame", c.odom_frame));
   c.camera_frame = normaliseFrameId(param(p, "camera_frame", c.camera_frame));
@@ -63,7 +63,10 @@ RgbdOdometryRos::RgbdOdometryRos(ros::NodeHandle nh, ros::NodeHandle private_nh)
   odometry_pub_ = private_nh_.advertise<nav_msgs::Odometry>("odometry", 10);
   diagnostics_.setHardwareID("rgbd_odometry");
   diagnostics_.add("tracking", this, &RgbdOdometryRos::diagnose);
-  diagnostics_timer_ = nh_.createTimer(ros::Duration(1.0), [this](const ros::TimerEvent&) { diagnostics_.update(); });
+  // Wall time: with a bag's /clock the sim time stops when the bag does, and the counts must
+  // still be reported after it.
+  diagnostics_timer_ =
+      nh_.createWallTimer(ros::WallDuration(1.0), [this](const ros::WallTimerEvent&) { diagnostics_.force_update(); });
   thread_ = std::thread(&RgbdOdometryRos::run, this);
   image_sub_ = nh_.subscribe("image", 5, &RgbdOdometryRos::onImage, this);
   depth_sub_ = nh_.subscribe("depth", 10, &RgbdOdometryRos::onDepth, this);

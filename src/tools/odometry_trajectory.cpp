@@ -38,14 +38,15 @@ after a similarity alignment, and the end point's error as a share of the distan
                      run on it as on SLAM poses
   --reference R      frame (default) or keyframe: the odometry's reference (the node's ~reference)
   --method M         rgbd (default), icp or rgbd_icp
-  --downsample N     track on images N times smaller (the node's ~downsample)
+  --max-width W      track on images made smaller by a whole factor until at most W wide (the
+                     node's ~max_width, default 320; 0: full size)
   --every N          only every Nth frame (a front end that keeps up with 1 in N)
   --quiet            no summary
   --help             this text
 )";
 
 int run(int argc, char** argv) {
-  const CommandLine cli(argc, argv, {"dataset", "out", "out-dataset", "reference", "method", "downsample", "every"}, {"quiet", "help"});
+  const CommandLine cli(argc, argv, {"dataset", "out", "out-dataset", "reference", "method", "max-width", "every"}, {"quiet", "help"});
   if (cli.flag("help")) {
     std::cout << kUsage;
     return 0;
@@ -56,7 +57,7 @@ int run(int argc, char** argv) {
   odometry::OdometryConfig config;
   config.reference = cli.choice("reference", config.reference, {"keyframe", "frame"});
   config.method = cli.choice("method", config.method, {"rgbd", "icp", "rgbd_icp"});
-  config.downsample = static_cast<int>(cli.integer("downsample", config.downsample, 1, 8));
+  config.max_width = static_cast<int>(cli.integer("max-width", config.max_width, 0, 100000));
   const long every = cli.integer("every", 1, 1, 1000);
   odometry::RgbdOdometryTracker tracker(config);
   std::vector<io::TumPoseEntry> out;

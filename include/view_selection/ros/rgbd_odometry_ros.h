@@ -66,7 +66,7 @@ class RgbdOdometryRos {
   ros::Publisher odometry_pub_;
   tf2_ros::TransformBroadcaster tf_;
   diagnostic_updater::Updater diagnostics_;
-  ros::Timer diagnostics_timer_;
+  ros::WallTimer diagnostics_timer_;
 
   std::mutex lock_;
   std::condition_variable wake_;
