@@ -67,8 +67,8 @@ Cameras must be PINHOLE or SIMPLE_PINHOLE.
   --max-correction-deg DEG        (default 15)
   --prior-translation-ratio R     the given poses' relative motion between consecutive images
                      (by id) is a soft constraint: a step may change by R of its length (1 sigma;
-                     default 0.05; 0: no such priors)
-  --prior-rotation-deg DEG        ... and turn by DEG (1 sigma; default 1)
+                     default 0.2; 0: no such priors)
+  --prior-rotation-deg DEG        ... and turn by DEG (1 sigma; default 3)
   --prior-loss-scale S            Cauchy loss on the priors at S sigmas (default 3)
   --no-align         do not align the result to the input poses
   --threads N        Ceres threads (default 0: one per core)

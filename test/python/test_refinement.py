@@ -39,9 +39,11 @@ def arc_poses(n=30):
     return poses
 
 
-def known_pose_model(exact, given, rng, k=(525.0, 525.0, 319.5, 239.5)):
+def known_pose_model(exact, given, rng, k=(525.0, 525.0, 319.5, 239.5), database=None):
     """Observations of 500 points at the exact poses (0.5 px noise), points triangulated at the
-    `given` poses, observations beyond 4 px of them dropped: point_triangulator's model."""
+    `given` poses, observations beyond 4 px of them dropped: point_triangulator's model. With
+    `database` (a path), also the project's database: images, keypoints, and every pair of a
+    point's observations as verified matches."""
     points = rng.uniform(-1, 1, size=(500, 3))
     m = cm.Model({1: cm.Camera(1, "PINHOLE", 640, 480, k)})
     obs = {i: [] for i in range(len(exact))}
@@ -89,6 +91,23 @@ def known_pose_model(exact, given, rng, k=(525.0, 525.0, 319.5, 239.5)):
             ids[i][idx] = pid
     for i, (q, t) in enumerate(w2c):
         m.images[i + 1] = cm.Image(i + 1, q, t, 1, "image_%02d.png" % i, xys[i], ids[i])
+    if database:
+        from view_selection.colmap import database as cdb
+        with cdb.open_database(database, create=True) as d:
+            cid = d.camera_id(640, 480, k)
+            for i in range(len(exact)):
+                assert d.add_image("image_%02d.png" % i, cid) == i + 1
+                d.write_features(i + 1, np.asarray(xys[i], np.float32).reshape(-1, 2),
+                                 np.zeros((len(xys[i]), 128), np.uint8))
+            pairs = {}
+            for track in tracks.values():
+                for x in range(len(track)):
+                    for y in range(x + 1, len(track)):
+                        (a, ia), (b, ib) = track[x], track[y]
+                        pairs.setdefault((a + 1, b + 1), []).append((ia, ib))
+            for (a, b), matches in pairs.items():
+                d.write_matches(a, b, matches)
+                d.write_two_view_geometry(a, b, matches)
     return m
 
 
@@ -130,14 +149,16 @@ def test_refine_brings_a_drifted_model_closer(tmp_path):
     rng = np.random.default_rng(29)
     exact = arc_poses()
     given = drift.add_drift(exact, 0.02, 0.3, seed=3)
-    m = known_pose_model(exact, given, rng)
+    m = known_pose_model(exact, given, rng, database=str(tmp_path / "database.db"))
     cm.write_model(m, str(tmp_path / "in"))
-    section = refiner.refine(str(tmp_path / "in"), str(tmp_path / "out"), tool=tool)
+    section = refiner.refine(str(tmp_path / "in"), str(tmp_path / "out"), tool=tool,
+                             database=str(tmp_path / "database.db"))
     out = cm.read_model(str(tmp_path / "out"))
     truth = [c for c, _ in exact]
     before, after = ate_rmse(centres(m), truth), ate_rmse(centres(out), truth)
     assert after < 0.5 * before, (before, after, section["message"])
     assert section["refined"] and section["status"] == "converged"
+    assert section["retriangulations"] == 2 and section["matches"] > 1000  # the database's matches reached it
     assert len(section["keyframes"]) == 30 and section["keyframes_refined"] == 30
     by_name = {k["name"]: k for k in section["keyframes"]}
     moved = refiner.corrections(m, out)
@@ -159,10 +180,8 @@ def fake_tool(path, body):
 class FakeProject:
     def __init__(self, root):
         self.log_path = os.path.join(root, "colmap.log")
+        self.database = None
         self.deadline = None
-
-    def triangulate(self, given, made):
-        raise AssertionError("not reached: the first adjustment fails")
 
 
 def test_a_failing_refinement_leaves_the_unrefined_model(tmp_path):

@@ -5,6 +5,7 @@
 #include "view_selection/eval/trajectory_alignment.h"
 #include "view_selection/io/colmap_model.h"
 #include "view_selection/refine/model_refinement.h"
+#include "view_selection/refine/tracks.h"
 
 #include <gtest/gtest.h>
 
@@ -85,7 +86,8 @@ Eigen::Vector3d triangulate(const std::vector<Eigen::Matrix<double, 3, 4>>& proj
 /// points triangulated at these poses, observations beyond 4 px of them dropped.
 io::ColmapModel knownPoseModel(const Scene& exact, const std::vector<Eigen::Quaterniond>& rotation,
                                const std::vector<Eigen::Vector3d>& translation, std::mt19937& rng,
-                               double outlier_ratio = 0.0, double max_error = 4.0) {
+                               double outlier_ratio = 0.0, double max_error = 4.0,
+                               std::vector<refine::Match>* matches = nullptr) {
   std::normal_distribution<double> noise(0.0, 0.5);
   std::uniform_real_distribution<double> u(0.0, 1.0);
   io::ColmapModel m;
@@ -124,6 +126,10 @@ io::ColmapModel knownPoseModel(const Scene& exact, const std::vector<Eigen::Quat
       normalised.emplace_back((px.x() - exact.k[2]) / exact.k[0], (px.y() - exact.k[3]) / exact.k[1]);
     }
     if (track.size() < 2) continue;
+    if (matches)  // the matcher found every pair of the point's observations (outliers included)
+      for (size_t a = 0; a < track.size(); ++a)
+        for (size_t b = a + 1; b < track.size(); ++b)
+          matches->push_back({{track[a].image_id, track[a].point2D_idx}, {track[b].image_id, track[b].point2D_idx}});
     io::ColmapPoint3D point;
     point.id = static_cast<int64_t>(p) + 1;
     point.xyz = triangulate(projections, normalised);
@@ -164,16 +170,30 @@ class Refinement : public ::testing::Test {
   std::vector<Eigen::Vector3d> translation;
 };
 
-TEST_F(Refinement, DriftedPosesComeCloserToTheExactOnes) {
+TEST_F(Refinement, WithoutTheMatchesTheModelIsNoWorse) {
+  // Only the points triangulated at the drifting poses: their tracks keep what fits those poses,
+  // so little can be corrected, but nothing may get worse.
   const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng);
   refine::RefinementReport report;
   const io::ColmapModel out = refine::refineModel(input, refine::allImages(input), {}, &report);
+  EXPECT_TRUE(report.refined) << report.message;
+  EXPECT_EQ(0, report.retriangulations);
+  EXPECT_LT(ate(out, exact), 1.05 * ate(input, exact));
+}
+
+TEST_F(Refinement, DriftedPosesComeCloserToTheExactOnes) {
+  std::vector<refine::Match> matches;
+  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.0, 4.0, &matches);
+  refine::RefinementReport report;
+  const io::ColmapModel out = refine::refineModel(input, refine::allImages(input), {}, &report, nullptr, &matches);
   const double before = ate(input, exact), after = ate(out, exact);
   EXPECT_GT(before, 0.003);  // the drift is there: millimetres to centimetres on a 5 m arc
   EXPECT_LT(after, 0.5 * before) << report.message;
   EXPECT_EQ("converged", report.status) << report.message;
   EXPECT_TRUE(report.refined);
   EXPECT_TRUE(report.aligned);
+  EXPECT_EQ(2, report.retriangulations);  // before the first adjustment, and after it
+  EXPECT_GT(report.observations_refined, report.observations_input);  // what the drift rejected is back
   EXPECT_EQ(input.images.size(), out.images.size());
   EXPECT_LT(report.reprojection_error_refined, report.reprojection_error_input);
   EXPECT_LT(report.reprojection_error_refined, 0.8);  // 0.5 px noise
@@ -190,14 +210,16 @@ TEST_F(Refinement, DriftedPosesComeCloserToTheExactOnes) {
 }
 
 TEST_F(Refinement, OutlierObservationsAreFiltered) {
-  // 5% of the observations anywhere in the image; those within 4 px of the drifted points
-  // survive triangulation and are what the robust loss and the filter must remove.
-  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.05, 1e9);
+  // 5% of the observations anywhere in the image, in the tracks and in the matches: the robust
+  // loss, the triangulation's limit and the filter must keep them out.
+  std::vector<refine::Match> matches;
+  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.05, 1e9, &matches);
   refine::RefinementReport report;
-  const io::ColmapModel out = refine::refineModel(input, refine::allImages(input), {}, &report);
+  const io::ColmapModel out = refine::refineModel(input, refine::allImages(input), {}, &report, nullptr, &matches);
   EXPECT_LT(ate(out, exact), 0.5 * ate(input, exact)) << report.message;
-  EXPECT_GT(report.observations_filtered, 0.04 * static_cast<double>(report.observations_input));
   EXPECT_LT(report.reprojection_error_refined, 1.0);
+  // The outliers are not in the model: every observation within the filter's 4 px.
+  for (const auto& [id, p] : out.points) EXPECT_LE(p.error, 4.0);
 }
 
 TEST_F(Refinement, HeldImagesDoNotMove) {
@@ -268,6 +290,24 @@ TEST_F(Refinement, RejectsCamerasItCannotProject) {
   refine::RefinementConfig bad;
   bad.loss = "square";
   EXPECT_THROW(bad.validate(), core::InvalidArgument);
+}
+
+TEST(Tracks, MatchesJoinIntoTracksWithoutTwoKeypointsOfOneImage) {
+  using refine::Match;
+  const std::vector<Match> matches = {{{1, 0}, {2, 5}}, {{2, 5}, {3, 7}}, {{1, 0}, {3, 8}},  // 3/7 vs 3/8: left out
+                                      {{4, 1}, {5, 1}}};
+  const refine::Tracks t = refine::buildTracks(matches);
+  ASSERT_EQ(2u, t.tracks.size());
+  EXPECT_EQ(1u, t.conflicts);
+  EXPECT_EQ(3u, t.tracks[0].size() + t.tracks[1].size() - 2);
+  const fs::path file = fs::temp_directory_path() / ("vs_matches_" + std::to_string(::getpid()));
+  refine::writeMatches(file.string(), matches);
+  const std::vector<Match> back = refine::readMatches(file.string());
+  ASSERT_EQ(matches.size(), back.size());
+  EXPECT_TRUE(back[2].b == (refine::Observation{3, 8}));
+  fs::resize_file(file, fs::file_size(file) - 3);
+  EXPECT_THROW(refine::readMatches(file.string()), core::IoError);
+  fs::remove(file);
 }
 
 TEST(ColmapModelFiles, WrittenModelReadsBackTheSame) {
