@@ -13,10 +13,14 @@
 //             record and appended with fdatasync (the keeper's part). The ...CaptureAtScale
 //             variant leaves the disk out (capture + encode only).
 #include "view_selection/core/view_selector.h"
-#include "view_selection/io/state_file.h"
+#include "view_selection/images/image_conversion.h"
+#include "view_selection/io/file_ops.h"
 #include "view_selection/io/tum_frames.h"
-#include "view_selection/points/image_conversion.h"
 #include "view_selection/points/point_source_factory.h"
+#include "view_selection/session/capture.h"
+#include "view_selection/session/delta_tracker.h"
+#include "view_selection/session/journal.h"
+#include "view_selection/session/state_file.h"
 #include "view_selection/sim/synthetic_sequence.h"
 
 #include <benchmark/benchmark.h>
@@ -58,7 +62,7 @@ const core::ViewSelector& session(int keyframes) {
       frame.image_name = std::to_string(q) + ".png";
       frame.intrinsics = c.intrinsics;
       frame.pose = f.pose;
-      frame.depth = points::depthImageOf(points::depthToMetres(f.depth, 1.0 / 5000.0));
+      frame.depth = images::depthImageOf(images::depthToMetres(f.depth, 1.0 / 5000.0));
       s->addFrame(frame);
     }
   }
@@ -73,14 +77,14 @@ void counters(benchmark::State& state, size_t bytes) {
 
 void BM_Capture(benchmark::State& state) {
   const core::ViewSelector& s = session(static_cast<int>(state.range(0)));
-  for (auto _ : state) benchmark::DoNotOptimize(io::captureSession(s));
-  counters(state, io::encodeState(io::captureSession(s)).size());
+  for (auto _ : state) benchmark::DoNotOptimize(session::captureSession(s));
+  counters(state, session::encodeState(session::captureSession(s)).size());
 }
 
 void BM_Encode(benchmark::State& state) {
-  const io::SessionState captured = io::captureSession(session(static_cast<int>(state.range(0))));
+  const session::SessionState captured = session::captureSession(session(static_cast<int>(state.range(0))));
   size_t bytes = 0;
-  for (auto _ : state) bytes = io::encodeState(captured).size();
+  for (auto _ : state) bytes = session::encodeState(captured).size();
   counters(state, bytes);
 }
 
@@ -91,20 +95,20 @@ std::string scratch() {
 }
 
 void BM_Write(benchmark::State& state) {
-  const io::SessionState captured = io::captureSession(session(static_cast<int>(state.range(0))));
+  const session::SessionState captured = session::captureSession(session(static_cast<int>(state.range(0))));
   const std::string path = scratch();
   size_t bytes = 0;
-  for (auto _ : state) bytes = io::writeStateFile(path, captured);
+  for (auto _ : state) bytes = session::writeStateFile(path, captured);
   counters(state, bytes);
   fs::remove_all(fs::path(path).parent_path());
 }
 
 void BM_Read(benchmark::State& state) {
-  const io::SessionState captured = io::captureSession(session(static_cast<int>(state.range(0))));
+  const session::SessionState captured = session::captureSession(session(static_cast<int>(state.range(0))));
   const std::string path = scratch();
-  const size_t bytes = io::writeStateFile(path, captured);
+  const size_t bytes = session::writeStateFile(path, captured);
   for (auto _ : state) {
-    auto selector = io::selectorFor(io::readStateFile(path));
+    auto selector = session::selectorFor(session::readStateFile(path));
     benchmark::DoNotOptimize(selector);
   }
   counters(state, bytes);
@@ -186,16 +190,16 @@ Walk& walk(int n) {
 
 void autosave(benchmark::State& state, bool disk) {
   Walk& w = walk(static_cast<int>(state.range(0)));
-  io::DeltaTracker tracker;
+  session::DeltaTracker tracker;
   tracker.markSaved(*w.selector);
-  const std::string path = io::journalPath(scratch());
+  const std::string path = session::journalPath(scratch());
   size_t bytes = 0, keyframes = 0, rows = 0;
   for (auto _ : state) {
     state.PauseTiming();
     w.add();
     state.ResumeTiming();
-    const io::SessionDelta delta = tracker.capture(*w.selector);
-    const std::vector<uint8_t> record = io::encodeJournalRecord(1, 0, delta);
+    const session::SessionDelta delta = tracker.capture(*w.selector);
+    const std::vector<uint8_t> record = session::encodeJournalRecord(1, 0, delta);
     if (disk) io::appendToFile(path, record);
     bytes = record.size();
     keyframes = delta.keyframes.size();

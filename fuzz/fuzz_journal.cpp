@@ -7,7 +7,9 @@
 // record decoder and applyDelta instead of stopping at a checksum.
 #include "fuzz_target.h"
 
-#include "view_selection/io/state_file.h"
+#include "view_selection/io/crc32.h"
+#include "view_selection/session/journal.h"
+#include "view_selection/session/state_file.h"
 
 using namespace view_selection;
 
@@ -29,33 +31,33 @@ void put64(std::vector<uint8_t>& b, size_t at, uint64_t v) {
 }
 
 void check(const std::vector<uint8_t>& base, const std::vector<uint8_t>& journal) {
-  io::SessionState state;
+  session::SessionState state;
   try {
-    state = io::decodeState(base.data(), base.size());
+    state = session::decodeState(base.data(), base.size());
   } catch (const io::StateFileError&) {
     return;
   }
-  const io::SessionState before = state;
-  const io::JournalReplay replay = io::replayJournal(state, journal.data(), journal.size());
+  const session::SessionState before = state;
+  const session::JournalReplay replay = session::replayJournal(state, journal.data(), journal.size());
   if (replay.total_bytes != journal.size()) fuzz::broken("total_bytes is not the journal's size");
   if (replay.good_bytes > journal.size()) fuzz::broken("more good bytes than the journal has");
   if (replay.error.empty() != (replay.good_bytes == journal.size()))
     fuzz::broken("an error without a dropped tail, or a dropped tail without an error");
-  if (replay.records == 0 && io::encodeState(state) != io::encodeState(before))
+  if (replay.records == 0 && session::encodeState(state) != session::encodeState(before))
     fuzz::broken("no record applied, yet the session changed");
 
   // The good prefix alone: the same records, the same session, nothing dropped.
-  io::SessionState again = before;
-  const io::JournalReplay prefix = io::replayJournal(again, journal.data(), replay.good_bytes);
+  session::SessionState again = before;
+  const session::JournalReplay prefix = session::replayJournal(again, journal.data(), replay.good_bytes);
   if (!prefix.error.empty() || prefix.records != replay.records || prefix.stale != replay.stale)
     fuzz::broken("replaying the good prefix differs from replaying the whole journal");
-  const std::vector<uint8_t> encoded = io::encodeState(state);
-  if (io::encodeState(again) != encoded) fuzz::broken("the good prefix gives another session");
+  const std::vector<uint8_t> encoded = session::encodeState(state);
+  if (session::encodeState(again) != encoded) fuzz::broken("the good prefix gives another session");
 
   // What the replay yields is a session a state file holds.
   try {
-    const io::SessionState decoded = io::decodeState(encoded.data(), encoded.size());
-    if (io::encodeState(decoded) != encoded) fuzz::broken("a replayed session does not round-trip");
+    const session::SessionState decoded = session::decodeState(encoded.data(), encoded.size());
+    if (session::encodeState(decoded) != encoded) fuzz::broken("a replayed session does not round-trip");
   } catch (const io::StateFileError&) {
     fuzz::broken("a replayed session does not encode to a readable state file");
   }

@@ -6,7 +6,9 @@
 #include "fuzz_target.h"
 
 #include "view_selection/core/exceptions.h"
-#include "view_selection/io/state_file.h"
+#include "view_selection/io/crc32.h"
+#include "view_selection/session/capture.h"
+#include "view_selection/session/state_file.h"
 
 using namespace view_selection;
 
@@ -19,21 +21,21 @@ void put32(std::vector<uint8_t>& b, size_t at, uint32_t v) {
 }
 
 void check(const uint8_t* data, size_t size) {
-  io::SessionState state;
+  session::SessionState state;
   try {
-    state = io::decodeState(data, size);
+    state = session::decodeState(data, size);
   } catch (const io::StateFileError&) {
     return;
   }
-  const std::vector<uint8_t> again = io::encodeState(state);
+  const std::vector<uint8_t> again = session::encodeState(state);
   try {
-    const io::SessionState twice = io::decodeState(again.data(), again.size());
-    if (io::encodeState(twice) != again) fuzz::broken("encode(decode(encode(s))) != encode(s)");
+    const session::SessionState twice = session::decodeState(again.data(), again.size());
+    if (session::encodeState(twice) != again) fuzz::broken("encode(decode(encode(s))) != encode(s)");
   } catch (const io::StateFileError&) {
     fuzz::broken("a re-encoded state file does not decode");
   }
   try {
-    auto selector = io::selectorFor(state);
+    auto selector = session::selectorFor(state);
     const core::SelectionOutput snapshot = selector->output();
     if (snapshot.size() != state.selector.keyframes.size()) fuzz::broken("keyframes lost");
     // Continue with one frame (no depth: the depth source refuses it, the others may take it).

@@ -5,10 +5,13 @@
 // and, with a third folder, seeds for fuzz_journal: each session's state file after its second
 // frame as the base, and the records of its third frame and of a reset to one keyframe after it.
 #include "view_selection/core/view_selector.h"
-#include "view_selection/io/state_file.h"
-#include "view_selection/points/image_conversion.h"
+#include "view_selection/images/image_conversion.h"
 #include "view_selection/points/point_source_factory.h"
 #include "view_selection/ros/compressed_images.h"
+#include "view_selection/session/capture.h"
+#include "view_selection/session/delta_tracker.h"
+#include "view_selection/session/journal.h"
+#include "view_selection/session/state_file.h"
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -86,14 +89,14 @@ int main(int argc, char** argv) {
     }
     // fuzz_journal's seed: u32 size of the base, the base, the records.
     std::vector<uint8_t> journal_seed;
-    io::DeltaTracker tracker;
+    session::DeltaTracker tracker;
     const uint64_t base_id = 0x5eed5eedu;
     for (int q = 0; q < 3; ++q) {
       if (q == 2) {
-        io::SessionState base = io::captureSession(selector);
+        session::SessionState base = session::captureSession(selector);
         base.producer = "fuzz_make_seeds";
         base.base_id = base_id;
-        const std::vector<uint8_t> bytes = io::encodeState(base);
+        const std::vector<uint8_t> bytes = session::encodeState(base);
         const auto n = static_cast<uint32_t>(bytes.size());
         for (int i = 0; i < 4; ++i) journal_seed.push_back(static_cast<uint8_t>(n >> (8 * i)));
         journal_seed.insert(journal_seed.end(), bytes.begin(), bytes.end());
@@ -105,9 +108,9 @@ int main(int argc, char** argv) {
       f.intrinsics = {60.0, 60.0, 32.0, 24.0, 64, 48};
       f.pose.position = Eigen::Vector3d(0.05 * q, 0.0, 0.0);
       const cv::Mat image = wall(cv::Rect(10 * q, 0, 64, 48)).clone();
-      f.image = points::colourImageOf(image);
+      f.image = images::colourImageOf(image);
       cv::Mat depth(48, 64, CV_32FC1, cv::Scalar(2.0f));
-      if (std::string(source) != "auto" || q != 1) f.depth = points::depthImageOf(depth);
+      if (std::string(source) != "auto" || q != 1) f.depth = images::depthImageOf(depth);
       try {
         selector.addFrame(f);
       } catch (const core::Error& e) {
@@ -115,12 +118,12 @@ int main(int argc, char** argv) {
       }
     }
     if (argc == 4 && !journal_seed.empty()) {
-      std::vector<uint8_t> record = io::encodeJournalRecord(base_id, 0, tracker.capture(selector));
+      std::vector<uint8_t> record = session::encodeJournalRecord(base_id, 0, tracker.capture(selector));
       journal_seed.insert(journal_seed.end(), record.begin(), record.end());
       // A second record that truncates the session to its first keyframe.
-      io::SessionDelta cut = tracker.capture(selector);
+      session::SessionDelta cut = tracker.capture(selector);
       cut.keyframe_count = std::min<uint64_t>(cut.keyframe_count, 1);
-      record = io::encodeJournalRecord(base_id, 1, cut);
+      record = session::encodeJournalRecord(base_id, 1, cut);
       journal_seed.insert(journal_seed.end(), record.begin(), record.end());
       const std::string path = std::string(argv[3]) + "/" + source;
       std::ofstream(path, std::ios::binary)
@@ -128,10 +131,10 @@ int main(int argc, char** argv) {
                  static_cast<std::streamsize>(journal_seed.size()));
       std::printf("%s: %zu bytes\n", path.c_str(), journal_seed.size());
     }
-    io::SessionState state = io::captureSession(selector);
+    session::SessionState state = session::captureSession(selector);
     state.producer = "fuzz_make_seeds";
     const std::string path = std::string(argv[1]) + "/" + source + ".state";
-    io::writeStateFile(path, state);
+    session::writeStateFile(path, state);
     std::printf("%s: %zu keyframes\n", path.c_str(), selector.matrix().size());
   }
   return 0;

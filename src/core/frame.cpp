@@ -22,7 +22,7 @@ void validateFrame(const Frame& frame) {
     throw InvalidInput("camera pose is not finite or its quaternion is not of unit length");
   if (!frame.depth.empty()) {
     if (frame.depth.channels != 1)
-      throw InvalidInput("depth must be one channel of metres (see points::depthToMetres)");
+      throw InvalidInput("depth must be one channel of metres (see images::depthToMetres)");
     // A depth image may be a scaled copy of the colour image, but with the same aspect ratio.
     const double ratio_image = static_cast<double>(k.width) / k.height;
     const double ratio_depth = static_cast<double>(frame.depth.width) / frame.depth.height;

@@ -1,7 +1,7 @@
 #include "view_selection/io/tum_frames.h"
 
 #include "view_selection/core/exceptions.h"
-#include "view_selection/points/image_conversion.h"
+#include "view_selection/images/image_conversion.h"
 
 #include <opencv2/imgcodecs.hpp>
 
@@ -36,8 +36,8 @@ core::Frame loadTumFrame(const TumDataset& dataset, const TumFrame& tum,
   if (options.depth && dataset.has_depth && !tum.depth_path.empty()) {
     const std::string path = (root / tum.depth_path).string();
     try {
-      frame.depth = points::depthImageOf(
-          points::depthToMetres(readImage(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_GRAYSCALE),
+      frame.depth = images::depthImageOf(
+          images::depthToMetres(readImage(path, cv::IMREAD_ANYDEPTH | cv::IMREAD_GRAYSCALE),
                                 dataset.depth_metres_per_unit));
     } catch (const core::InvalidInput& e) {
       throw core::InvalidInput("depth image '" + path + "': " + e.what());
@@ -45,7 +45,7 @@ core::Frame loadTumFrame(const TumDataset& dataset, const TumFrame& tum,
   }
   if (options.image)
     frame.image =
-        points::colourImageOf(readImage((root / tum.rgb_path).string(), cv::IMREAD_COLOR));
+        images::colourImageOf(readImage((root / tum.rgb_path).string(), cv::IMREAD_COLOR));
   return frame;
 }
 

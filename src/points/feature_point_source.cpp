@@ -1,7 +1,7 @@
 #include "view_selection/points/feature_point_source.h"
 
 #include "view_selection/core/exceptions.h"
-#include "view_selection/points/image_conversion.h"
+#include "view_selection/images/image_conversion.h"
 
 #include <opencv2/core/hal/hal.hpp>
 #include <opencv2/imgproc.hpp>
@@ -581,7 +581,7 @@ size_t FeaturePointSource::validTracks() const {
 
 core::PointSourceResult FeaturePointSource::process(core::ViewId id, const core::Frame& frame) {
   // Everything that can throw comes before the first change of state.
-  const cv::Mat grey = toGrey(matOf(frame.image));
+  const cv::Mat grey = toGrey(images::matOf(frame.image));
   if (!index_of_.empty() && id <= index_of_.rbegin()->first) {
     std::ostringstream s;
     s << "feature point source: keyframe id " << id << " is not after the previous one ("

@@ -33,6 +33,26 @@ core::Params AutoPointSource::params() const {
   return {{"depth", false, true, depth_.params()}, {"features", false, true, features_.params()}};
 }
 
+MapPointSource* mapSourceOf(core::PointSource& source) {
+  return dynamic_cast<MapPointSource*>(&source);
+}
+
+const MapPointSource* mapSourceOf(const core::PointSource& source) {
+  return dynamic_cast<const MapPointSource*>(&source);
+}
+
+FeaturePointSource* featureSourceOf(core::PointSource& source) {
+  if (auto* f = dynamic_cast<FeaturePointSource*>(&source)) return f;
+  if (auto* a = dynamic_cast<AutoPointSource*>(&source)) return &a->features();
+  return nullptr;
+}
+
+const FeaturePointSource* featureSourceOf(const core::PointSource& source) {
+  if (auto* f = dynamic_cast<const FeaturePointSource*>(&source)) return f;
+  if (auto* a = dynamic_cast<const AutoPointSource*>(&source)) return &a->features();
+  return nullptr;
+}
+
 const std::vector<std::string>& pointSourceNames() {
   static const std::vector<std::string> names = {"depth", "features", "map", "auto"};
   return names;

@@ -1,7 +1,7 @@
 #include "view_selection/ros/conversions.h"
 
 #include "view_selection/core/exceptions.h"
-#include "view_selection/points/image_conversion.h"
+#include "view_selection/images/image_conversion.h"
 
 #include <cv_bridge/cv_bridge.h>
 #include <sensor_msgs/image_encodings.h>
@@ -165,7 +165,7 @@ cv::Mat imageForCore(const sensor_msgs::ImageConstPtr& msg) { return shareForCor
 
 core::ColourImage colourImageForCore(const sensor_msgs::ImageConstPtr& msg) {
   const cv_bridge::CvImageConstPtr shared = shareForCore(msg);
-  core::ColourImage view = points::colourImageOf(shared->image);
+  core::ColourImage view = images::colourImageOf(shared->image);
   view.owner = keepAlive(shared);  // keeps the message (or the converted copy) alive with the view
   return view;
 }
@@ -191,7 +191,7 @@ void checkDepthEncoding(const sensor_msgs::Image& msg) {
 cv::Mat depthToMetres(const sensor_msgs::Image& msg, double metres_per_unit_16u) {
   checkDepthEncoding(msg);
   const cv::Mat view = imageView(msg);
-  return points::depthToMetres(view, view.type() == CV_16UC1 ? metres_per_unit_16u : 1.0);
+  return images::depthToMetres(view, view.type() == CV_16UC1 ? metres_per_unit_16u : 1.0);
 }
 
 core::CameraPose poseFromMsg(const geometry_msgs::Pose& pose) {

@@ -153,9 +153,9 @@ uint64_t InputStatistics::session() const {
   return session_;
 }
 
-io::SessionStatistics InputStatistics::toSaved() const {
+session::SessionStatistics InputStatistics::toSaved() const {
   std::lock_guard<std::mutex> lock(mutex_);
-  io::SessionStatistics s;
+  session::SessionStatistics s;
   s.frames_offered = counts_.frames_offered;
   s.frames_received = counts_.frames_offered + counts_.frames_dropped();
   s.dropped = counts_.dropped;
@@ -167,7 +167,7 @@ io::SessionStatistics InputStatistics::toSaved() const {
   return s;
 }
 
-void InputStatistics::restore(const io::SessionStatistics& saved, uint64_t keyframes) {
+void InputStatistics::restore(const session::SessionStatistics& saved, uint64_t keyframes) {
   std::lock_guard<std::mutex> lock(mutex_);
   counts_ = Counts{};
   counts_.keyframes = keyframes;

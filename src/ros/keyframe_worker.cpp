@@ -3,7 +3,7 @@
 #include "view_selection/core/exceptions.h"
 #include "view_selection/core/parameters.h"
 #include "view_selection/core/sanitizers.h"
-#include "view_selection/points/image_conversion.h"
+#include "view_selection/images/image_conversion.h"
 #include "view_selection/points/map_point_source.h"
 #include "view_selection/points/point_source_factory.h"
 #include "view_selection/ros/conversions.h"
@@ -64,7 +64,7 @@ KeyframeWorker::~KeyframeWorker() {
 }
 
 void KeyframeWorker::restoreLoaded() {
-  const std::optional<io::SessionState> loaded =
+  const std::optional<session::SessionState> loaded =
       handoff_.continueLoaded(*selector_, config_.selector);
   if (!loaded) return;
   last_stamp_ = loaded->selector.last_stamp;
@@ -193,7 +193,7 @@ StateSnapshot KeyframeWorker::captureState() {
 
 void KeyframeWorker::setMapPoints(Eigen::Matrix3Xd points) {
   std::lock_guard<std::timed_mutex> lock(state_mutex_);
-  auto* map = dynamic_cast<points::MapPointSource*>(&selector_->pointSource());
+  points::MapPointSource* map = points::mapSourceOf(selector_->pointSource());
   if (!map) return;
   map->setMapPoints(std::move(points));
   const std::vector<core::ViewId> rows = selector_->applyPointUpdates();
@@ -377,7 +377,7 @@ void KeyframeWorker::process(const QueuedFrame& queued) {
     // Distortion applied: the core's pinhole model holds for the rectified image only.
     if (wanted && camera.rectify)
       core_frame.image =
-          points::colourImageOf(rectifiedImage(camera, points::matOf(core_frame.image)));
+          images::colourImageOf(rectifiedImage(camera, images::matOf(core_frame.image)));
   } catch (const core::InvalidInput& e) {
     return dropLocked("bad_image", e.what());
   }
@@ -386,7 +386,7 @@ void KeyframeWorker::process(const QueuedFrame& queued) {
     try {
       cv::Mat metres = depthToMetres(*frame.depth, config_.depth_16u_metres_per_unit);
       if (camera.rectify) metres = rectifiedDepth(camera, metres);
-      core_frame.depth = points::depthImageOf(metres);
+      core_frame.depth = images::depthImageOf(metres);
     } catch (const core::InvalidInput& e) {
       return dropLocked("bad_depth", e.what());
     }

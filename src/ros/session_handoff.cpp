@@ -2,6 +2,7 @@
 
 #include "view_selection/core/exceptions.h"
 #include "view_selection/core/parameters.h"
+#include "view_selection/session/capture.h"
 
 #include <ros/console.h>
 
@@ -11,12 +12,12 @@ SessionHandoff::SessionHandoff(const NodeConfig& config, StateKeeper& keeper,
                                InputStatistics& statistics, PairStream* pairs)
     : config_(config), keeper_(keeper), statistics_(statistics), pairs_(pairs) {}
 
-std::optional<io::SessionState> SessionHandoff::continueLoaded(
+std::optional<session::SessionState> SessionHandoff::continueLoaded(
     core::ViewSelector& selector, const core::ViewSelectorConfig& wanted_config) {
-  std::optional<io::SessionState> loaded = keeper_.takeLoaded();
+  std::optional<session::SessionState> loaded = keeper_.takeLoaded();
   if (!loaded) return std::nullopt;
   try {
-    io::restoreSession(selector, *loaded);
+    session::restoreSession(selector, *loaded);
     saved_.markSaved(selector);  // what the file holds; a reconfigure below changes rows
     // The node's parameters win over the saved ones, as a live reconfigure would apply them
     // (compared as they act: the saved ones are the values in force, the gate's preset applied).
@@ -41,7 +42,7 @@ std::optional<io::SessionState> SessionHandoff::continueLoaded(
 StateSnapshot SessionHandoff::captureWhole(const core::ViewSelector& selector) {
   StateSnapshot s;
   s.sequence = ++captures_;
-  s.state = io::captureSession(selector);
+  s.state = session::captureSession(selector);
   s.state.statistics = statistics_.toSaved();
   s.state.saved_at = ros::WallTime::now().toSec();
   if (pairs_) s.state.pair_sequence = pairs_->sequence();

@@ -1,5 +1,8 @@
 #include "view_selection/ros/state_keeper.h"
 
+#include "view_selection/io/file_ops.h"
+#include "view_selection/session/state_file.h"
+
 #include <ros/console.h>
 
 #include <chrono>
@@ -65,8 +68,8 @@ StateKeeper::StateKeeper(const NodeConfig& config, InputStatistics& statistics,
   if (fs::exists(path_, ec)) {
     const auto t0 = std::chrono::steady_clock::now();
     try {
-      io::JournalReplay replay;
-      loaded_ = io::readSession(path_, &replay);
+      session::JournalReplay replay;
+      loaded_ = session::readSession(path_, &replay);
       const double ms =
           1e3 * std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       if (!replay.error.empty())
@@ -113,8 +116,8 @@ StateKeeper::~StateKeeper() {
   if (aside_) writeAside(*aside_);  // a session a time jump ended is not lost on shutdown
 }
 
-std::optional<io::SessionState> StateKeeper::takeLoaded() {
-  std::optional<io::SessionState> out = std::move(loaded_);
+std::optional<session::SessionState> StateKeeper::takeLoaded() {
+  std::optional<session::SessionState> out = std::move(loaded_);
   loaded_.reset();
   return out;
 }
@@ -131,8 +134,8 @@ void StateKeeper::refuseLoaded(const std::string& why) {
     // Its journal with it (a new base would make its records stale).
     std::error_code ec;
     if (fs::exists(journalPath(), ec)) {
-      fs::rename(journalPath(), io::journalPath(aside), ec);
-      if (!ec) kept += " (its journal as " + io::journalPath(aside) + ")";
+      fs::rename(journalPath(), session::journalPath(aside), ec);
+      if (!ec) kept += " (its journal as " + session::journalPath(aside) + ")";
     }
   } catch (const core::IoError& e) {
     // Without the rename the next save would replace it: saving is off for this run then.
@@ -172,7 +175,7 @@ void StateKeeper::appendLater(JournalSnapshot record) {
     if (waiting_record_ && waiting_record_->sequence == record.follows) {
       // One record for both: what the first follows, what the second leads to.
       const uint64_t follows = waiting_record_->follows;
-      io::mergeDelta(waiting_record_->delta, std::move(record.delta));
+      session::mergeDelta(waiting_record_->delta, std::move(record.delta));
       waiting_record_->sequence = record.sequence;
       waiting_record_->follows = follows;
     } else {
@@ -192,7 +195,7 @@ SaveResult StateKeeper::appendNow(JournalSnapshot record) {
   }
   if (earlier && earlier->sequence == record.follows) {
     const uint64_t follows = earlier->follows;
-    io::mergeDelta(earlier->delta, std::move(record.delta));
+    session::mergeDelta(earlier->delta, std::move(record.delta));
     earlier->sequence = record.sequence;
     earlier->follows = follows;
     return append(*earlier);
@@ -238,7 +241,7 @@ void StateKeeper::writeAside(StateSnapshot& snapshot) {
     std::error_code ec;
     const fs::path folder = fs::path(path).parent_path();
     if (!folder.empty()) fs::create_directories(folder, ec);
-    const size_t bytes = io::writeStateFile(path, snapshot.state);
+    const size_t bytes = session::writeStateFile(path, snapshot.state);
     ROS_INFO_STREAM("view_selection: the session before the time jump ("
                     << snapshot.state.selector.keyframes.size() << " keyframes, "
                     << megabytes(bytes) << ") is kept in " << path);
@@ -257,7 +260,7 @@ SaveResult StateKeeper::write(StateSnapshot& snapshot) {
     return result;
   }
   const auto t0 = std::chrono::steady_clock::now();
-  io::SessionState& state = snapshot.state;
+  session::SessionState& state = snapshot.state;
   state.producer = producer_;
   const uint64_t base_id = newBaseId();
   state.base_id = base_id;
@@ -266,7 +269,7 @@ SaveResult StateKeeper::write(StateSnapshot& snapshot) {
     const fs::path folder = fs::path(path_).parent_path();
     if (!folder.empty()) fs::create_directories(folder, ec);
     if (ec) throw core::IoError("cannot create folder '" + folder.string() + "': " + ec.message());
-    result.bytes = io::writeStateFile(path_, state);
+    result.bytes = session::writeStateFile(path_, state);
     // The base is on disk first: the journal's records name the old one, so a crash before the
     // journal is emptied leaves records a reader ignores.
     startJournalLocked(base_id, result.bytes);
@@ -326,7 +329,7 @@ SaveResult StateKeeper::append(JournalSnapshot& record) {
   }
   const auto t0 = std::chrono::steady_clock::now();
   record.delta.rest.producer = producer_;
-  const std::vector<uint8_t> bytes = io::encodeJournalRecord(*base_id_, journal_index_, record.delta);
+  const std::vector<uint8_t> bytes = session::encodeJournalRecord(*base_id_, journal_index_, record.delta);
   try {
     io::appendToFile(journalPath(), bytes);
   } catch (const std::exception& e) {
@@ -346,7 +349,7 @@ SaveResult StateKeeper::append(JournalSnapshot& record) {
   result.ok = true;
   result.bytes = bytes.size();
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  const io::SessionDelta& d = record.delta;
+  const session::SessionDelta& d = record.delta;
   std::ostringstream s;
   s.precision(1);
   s << std::fixed << "appended " << d.keyframes.size() << " keyframes and " << d.rows.size()
@@ -364,8 +367,8 @@ SaveResult StateKeeper::append(JournalSnapshot& record) {
 void StateKeeper::compactLocked() {
   const auto t0 = std::chrono::steady_clock::now();
   try {
-    io::JournalReplay replay;
-    io::SessionState state = io::readSession(path_, &replay);
+    session::JournalReplay replay;
+    session::SessionState state = session::readSession(path_, &replay);
     if (!replay.error.empty() || replay.records != journal_index_)
       throw core::IoError("the journal read back is not what was written (" +
                           (replay.error.empty() ? std::to_string(replay.records) + " records"
@@ -373,7 +376,7 @@ void StateKeeper::compactLocked() {
                           ")");
     const uint64_t base_id = newBaseId();
     state.base_id = base_id;
-    const size_t bytes = io::writeStateFile(path_, state);
+    const size_t bytes = session::writeStateFile(path_, state);
     startJournalLocked(base_id, bytes);
     ROS_DEBUG_STREAM("view_selection: state journal compacted into "
                      << path_ << " (" << megabytes(bytes) << ") in "

@@ -10,9 +10,10 @@
 #include "view_selection/io/params_json.h"
 #include "view_selection/io/points_file.h"
 #include "view_selection/io/selection_io.h"
-#include "view_selection/io/state_file.h"
 #include "view_selection/io/tum_frames.h"
 #include "view_selection/points/point_source_factory.h"
+#include "view_selection/session/capture.h"
+#include "view_selection/session/journal.h"
 
 #include <sys/resource.h>
 #include <unistd.h>
@@ -33,6 +34,7 @@ using namespace view_selection::core;
 using namespace view_selection::eval;
 using namespace view_selection::io;
 using namespace view_selection::points;
+using namespace view_selection::session;
 using view_selection::tools::CommandLine;
 using view_selection::tools::UsageError;
 
@@ -449,8 +451,10 @@ void printSummary(const Options& o, const TumDataset& dataset, const ViewSelecto
   std::printf("keyframes   %zu (%s), %zu sample points each (median), source: %s\n", n,
               describeKeyframeRule(o.config.keyframes).c_str(), median_points,
               selector.pointSource().name().c_str());
-  if (const auto* fs = dynamic_cast<const FeaturePointSource*>(&selector.pointSource()))
-    printFeatureStats(*fs, t.rows_updated);
+  // The feature source's own line: --points features (auto takes most keyframes from depth).
+  if (selector.pointSource().name() == "features")
+    if (const FeaturePointSource* fs = featureSourceOf(selector.pointSource()))
+      printFeatureStats(*fs, t.rows_updated);
   std::printf("matrix      %zu x %zu, %zu finite entries of %.0f off-diagonal (%s)\n", n, n,
               matrix.table().finiteCount(), offdiag,
               percent(static_cast<double>(matrix.table().finiteCount()), offdiag).c_str());

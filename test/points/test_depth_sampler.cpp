@@ -3,7 +3,7 @@
 
 #include "view_selection/core/exceptions.h"
 #include "view_selection/core/occlusion_map.h"
-#include "view_selection/points/image_conversion.h"
+#include "view_selection/images/image_conversion.h"
 
 #include "support/box_depth.h"
 #include "support/test_support.h"

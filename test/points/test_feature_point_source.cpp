@@ -20,7 +20,7 @@
 #include <random>
 #include "support/layers.h"
 #include "view_selection/io/params_json.h"
-#include "view_selection/points/image_conversion.h"
+#include "view_selection/images/image_conversion.h"
 
 namespace view_selection {
 namespace {

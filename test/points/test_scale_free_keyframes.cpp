@@ -3,7 +3,7 @@
 // as the motion policy on a handheld 30 Hz RGB-D sequence.
 #include "view_selection/core/view_selector.h"
 #include "view_selection/io/tum_frames.h"
-#include "view_selection/points/image_conversion.h"
+#include "view_selection/images/image_conversion.h"
 #include "view_selection/points/point_source_factory.h"
 #include "view_selection/sim/synthetic_sequence.h"
 

@@ -5,7 +5,7 @@
 #include "view_selection/core/exceptions.h"
 #include "view_selection/io/params_json.h"
 #include "view_selection/points/depth_point_source.h"
-#include "view_selection/points/image_conversion.h"
+#include "view_selection/images/image_conversion.h"
 
 #include "support/box_depth.h"
 #include "support/layers.h"

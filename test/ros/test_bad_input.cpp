@@ -18,7 +18,7 @@
 
 #include <cv_bridge/cv_bridge.h>
 #include <opencv2/imgcodecs.hpp>
-#include "view_selection/points/image_conversion.h"
+#include "view_selection/images/image_conversion.h"
 #include "view_selection/points/map_point_source.h"
 #include "view_selection/points/point_source_factory.h"
 
@@ -48,6 +48,7 @@
 
 namespace fs = std::filesystem;
 using namespace view_selection;
+using namespace view_selection::images;
 using namespace view_selection::io;
 using namespace view_selection::points;
 
@@ -379,7 +380,7 @@ TEST_F(BadInputTest, DropsEachBadFrameKeepsAnsweringAndKeepsExactlyTheGoodFrames
     f.image_name = ros_node::keyframeImageName(f.stamp);
     f.intrinsics = expected[i].intrinsics;
     f.pose = expected[i].pose;
-    f.depth = depthImageOf(points::depthToMetres(
+    f.depth = depthImageOf(images::depthToMetres(
         expected[i].depth, expected[i].depth.type() == CV_16UC1 ? 0.001 : 1.0));
     ASSERT_EQ(selector.addFrame(f).outcome, core::FrameOutcome::kKeyframe);
   }

@@ -27,7 +27,7 @@
 #include <string>
 #include <tuple>
 #include "support/layers.h"
-#include "view_selection/points/image_conversion.h"
+#include "view_selection/images/image_conversion.h"
 #include "view_selection/points/point_source_factory.h"
 
 namespace view_selection {

@@ -5,13 +5,17 @@
 
 namespace view_selection {
 namespace core {}
+namespace images {}
 namespace points {}
 namespace io {}
+namespace session {}
 namespace sim {}
 namespace eval {}
 using namespace core;
+using namespace images;
 using namespace points;
 using namespace io;
+using namespace session;
 using namespace sim;
 using namespace eval;
 }  // namespace view_selection

@@ -1,6 +1,6 @@
 // Images as the core reads them, without OpenCV: a read-only view of rows of pixels, with an
 // owner that keeps the pixels alive (a cv::Mat, a ROS message, a vector). Conversions from and
-// to cv::Mat are in points/image_conversion.h; no pixel is copied by either.
+// to cv::Mat are in images/image_conversion.h; no pixel is copied by either.
 #pragma once
 
 #include <cstddef>

@@ -43,6 +43,17 @@ class AutoPointSource : public core::PointSource {
   FeaturePointSource features_;
 };
 
+/// The parts only some sources have, found without the caller naming a concrete source: this
+/// file is the one place that knows which source is which (test_layers fails on a dynamic_cast
+/// to a concrete source anywhere else). Null when `source` has no such part, also for a source
+/// not made by makePointSource (e.g. a test's own, or one that wraps a source made here).
+/// The map input and map state of "map".
+MapPointSource* mapSourceOf(core::PointSource& source);
+const MapPointSource* mapSourceOf(const core::PointSource& source);
+/// The feature tracks of "features", and of "auto" (its frames without depth).
+FeaturePointSource* featureSourceOf(core::PointSource& source);
+const FeaturePointSource* featureSourceOf(const core::PointSource& source);
+
 /// The names makePointSource accepts.
 const std::vector<std::string>& pointSourceNames();
 

@@ -4,7 +4,7 @@
 // not counted in the current one, so frames_offered + frame drops never exceed frames_received.
 #pragma once
 
-#include "view_selection/io/state_file.h"
+#include "view_selection/session/session_state.h"
 
 #include <ros/time.h>
 #include <view_selection/InputStatistics.h>
@@ -70,9 +70,9 @@ class InputStatistics {
 
   /// The counts as a saved session keeps them: frames_received counts only the frames handled
   /// (offered or dropped), so that a replay after last_frame_stamp re-sends exactly the others.
-  io::SessionStatistics toSaved() const;
+  session::SessionStatistics toSaved() const;
   /// Continues from saved counts (a new session) of a session with `keyframes` keyframes.
-  void restore(const io::SessionStatistics& saved, uint64_t keyframes);
+  void restore(const session::SessionStatistics& saved, uint64_t keyframes);
   /// ~state_file: the last state written had `keyframes` keyframes and its last frame handled
   /// at `frame_stamp`.
   void stateSaved(uint32_t keyframes, const ros::Time& frame_stamp);

@@ -1,13 +1,14 @@
 // The worker's persistence hand-off (~state_file): what of the session the worker gives the
 // state keeper, and when. Under the worker's state lock it copies the session, whole or only
-// what changed since the last save (io::DeltaTracker), and hands the copy to the keeper, whose
+// what changed since the last save (session::DeltaTracker), and hands the copy to the keeper, whose
 // thread writes it; the worker goes on at once. It writes on the calling thread only on
 // shutdown, when the worker's thread is gone. A time jump's old session waits here, under the
 // aside lock, until the worker clears it and hands it to the keeper.
 #pragma once
 
 #include "view_selection/core/view_selector.h"
-#include "view_selection/io/state_file.h"
+#include "view_selection/session/delta_tracker.h"
+#include "view_selection/session/session_state.h"
 #include "view_selection/ros/input_statistics.h"
 #include "view_selection/ros/node_config.h"
 #include "view_selection/ros/pair_stream.h"
@@ -37,7 +38,7 @@ class SessionHandoff {
   /// (the node's method parameters) over the saved ones. Returns the session continued; nullopt
   /// without one, or when it cannot continue (the keeper keeps the file aside; `selector` is
   /// empty then).
-  std::optional<io::SessionState> continueLoaded(core::ViewSelector& selector,
+  std::optional<session::SessionState> continueLoaded(core::ViewSelector& selector,
                                                  const core::ViewSelectorConfig& wanted);
   /// The whole session now (it counts as saved from here on).
   StateSnapshot captureWhole(const core::ViewSelector& selector);
@@ -73,14 +74,14 @@ class SessionHandoff {
   // Under the worker's state lock.
   uint64_t captures_ = 0;         // state snapshots taken (their sequence)
   int keyframes_since_save_ = 0;  // towards ~autosave_keyframes
-  io::DeltaTracker saved_;        // what the last capture held
+  session::DeltaTracker saved_;        // what the last capture held
   std::atomic<bool> changed_since_save_{false};  // anything a saved session would differ in
 
   // A time jump's old session, to be kept in <state_file>.previous when the worker clears it:
   // the generation it belonged to and its statistics at the jump.
   struct Aside {
     uint64_t generation = 0;
-    io::SessionStatistics statistics;
+    session::SessionStatistics statistics;
   };
   std::mutex aside_mutex_;  // the aside lock
   std::optional<Aside> aside_;

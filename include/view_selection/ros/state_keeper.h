@@ -3,7 +3,8 @@
 // frames: the worker copies its state under its lock and hands the copy over.
 #pragma once
 
-#include "view_selection/io/state_file.h"
+#include "view_selection/session/journal.h"
+#include "view_selection/session/session_state.h"
 #include "view_selection/ros/input_statistics.h"
 #include "view_selection/ros/node_config.h"
 
@@ -21,7 +22,7 @@ namespace view_selection::ros_node {
 /// earlier one on disk).
 struct StateSnapshot {
   uint64_t sequence = 0;
-  io::SessionState state;
+  session::SessionState state;
 };
 
 /// What changed since the capture `follows` (a snapshot or a journal record), as one record of
@@ -29,7 +30,7 @@ struct StateSnapshot {
 struct JournalSnapshot {
   uint64_t sequence = 0;
   uint64_t follows = 0;
-  io::SessionDelta delta;
+  session::SessionDelta delta;
 };
 
 /// What a save did.
@@ -54,7 +55,7 @@ class StateKeeper {
   bool enabled() const { return !path_.empty(); }
   const std::string& path() const { return path_; }
   /// The session read at start (once; empty afterwards, without a file or when it was bad).
-  std::optional<io::SessionState> takeLoaded();
+  std::optional<session::SessionState> takeLoaded();
   /// The loaded session cannot continue here (another point source, inconsistent content): logs
   /// `why` once, keeps the file aside (it is never overwritten) and the node starts empty.
   void refuseLoaded(const std::string& why);
@@ -91,13 +92,13 @@ class StateKeeper {
   void compactLocked();
   /// After a new base is on disk: the journal emptied (its records name the old base).
   void startJournalLocked(uint64_t base_id, size_t base_bytes);
-  std::string journalPath() const { return io::journalPath(path_); }
+  std::string journalPath() const { return session::journalPath(path_); }
   void writeAside(StateSnapshot& snapshot);
 
   std::string path_;
   InputStatistics& statistics_;
   std::string producer_;
-  std::optional<io::SessionState> loaded_;
+  std::optional<session::SessionState> loaded_;
 
   std::mutex write_mutex_;  // one write at a time; guards written_
   uint64_t written_ = 0;    // sequence of the last snapshot or record on disk

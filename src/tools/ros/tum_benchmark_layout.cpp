@@ -4,7 +4,7 @@
 
 #include "view_selection/core/pose_interpolation.h"
 #include "view_selection/io/tum_frames.h"
-#include "view_selection/points/image_conversion.h"
+#include "view_selection/images/image_conversion.h"
 #include "view_selection/ros/conversions.h"
 
 #include <geometry_msgs/PoseStamped.h>
@@ -174,7 +174,7 @@ WrittenFrames writeBenchmarkLayout(rosbag::Bag& bag, const io::TumDataset& datas
         header.seq = depth_seq++;
         header.stamp = rosTime(depth_stamps[e.index], what + " depth");
         const core::Frame frame = io::loadTumFrame(dataset, tum, {true, false});
-        cv::Mat depth = points::matOf(frame.depth).clone();
+        cv::Mat depth = images::matOf(frame.depth).clone();
         depth.setTo(nan, depth == 0.0f);
         bag.write("/camera/depth/camera_info", bag_time, cameraInfo(dataset.intrinsics, header));
         o.images.writeDepth(bag, bag_time, depth, header);
@@ -183,7 +183,7 @@ WrittenFrames writeBenchmarkLayout(rosbag::Bag& bag, const io::TumDataset& datas
       header.seq = colour_seq++;
       header.stamp = rosTime(tum.stamp, what);
       const core::Frame frame = io::loadTumFrame(dataset, tum, {false, true});
-      const cv::Mat image = points::matOf(frame.image);
+      const cv::Mat image = images::matOf(frame.image);
       if (image.channels() != 3)
         throw core::InvalidInput(what + ": expected a colour image, got " +
                                  std::to_string(image.channels()) + " channel(s)");

@@ -9,7 +9,7 @@
 
 #include "view_selection/core/exceptions.h"
 #include "view_selection/io/tum_frames.h"
-#include "view_selection/points/image_conversion.h"
+#include "view_selection/images/image_conversion.h"
 #include "view_selection/ros/conversions.h"
 
 #include <geometry_msgs/PoseStamped.h>
@@ -34,7 +34,7 @@
 
 namespace fs = std::filesystem;
 using namespace view_selection::io;
-namespace points = view_selection::points;
+namespace images = view_selection::images;
 namespace ros_node = view_selection::ros_node;
 namespace core = view_selection::core;
 using view_selection::tools::CommandLine;
@@ -194,7 +194,7 @@ WrittenFrames writeSimpleLayout(rosbag::Bag& bag, const TumDataset& dataset,
   for (const size_t q : frames) {
     const TumFrame& tum = dataset.frames[q];
     const core::Frame frame = loadTumFrame(dataset, tum, {true, true});
-    const cv::Mat image = points::matOf(frame.image), depth_m = points::matOf(frame.depth);
+    const cv::Mat image = images::matOf(frame.image), depth_m = images::matOf(frame.depth);
     const std::string what = "frame " + std::to_string(q) + " (" + tum.rgb_path + ")";
     if (image.cols != dataset.intrinsics.width || image.rows != dataset.intrinsics.height)
       throw core::InvalidInput(what + ": image is " + std::to_string(image.cols) + "x" +

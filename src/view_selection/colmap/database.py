@@ -170,6 +170,12 @@ class Database:
         row = self.con.execute("SELECT rows, cols, data FROM descriptors WHERE image_id = ?", (image_id,)).fetchone()
         return _array(row[2], row[0], row[1], np.uint8) if row else np.zeros((0, 128), np.uint8)
 
+    def images_without_keypoints(self):
+        """Names of the images extracted with no feature at all (a blank or featureless image)."""
+        return {name for (name,) in self.con.execute(
+            "SELECT images.name FROM images JOIN descriptors ON descriptors.image_id = images.image_id "
+            "WHERE descriptors.rows = 0")}
+
     def images_with_features(self):
         """Names of the images with descriptors (an image with zero features counts: it was
         extracted, and extracting it again would give nothing)."""

@@ -10,10 +10,13 @@ Threads: rospy's for ~pairs and ~finish; one worker (`loop`) for the batches. `l
 stream's state; `work` serialises COLMAP's work on the project (a batch, or the finish).
 """
 import os
+import sqlite3
 import threading
 import time
 
 import rospy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from std_msgs.msg import Header
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Path
 from std_srvs.srv import Trigger, TriggerResponse
@@ -24,7 +27,7 @@ from view_selection.srv import GetPairs, GetSelection, WriteKeyframeImages
 from .. import geometry
 from ..colmap import model as colmap_model
 from ..colmap.database import DatabaseError
-from ..colmap.project import ColmapProject, ProjectError, write_json_atomically
+from ..colmap.project import ColmapProject, ProjectError, Timeouts, write_json_atomically
 from ..keyframes import Keyframe
 from ..refinement.refiner import ModelRefinement, RefinementOptions
 from ..features.sift import SiftExtractor
@@ -45,7 +48,8 @@ PARAMETERS = """Parameters (private, ~name):
   max_backlog        pairs kept waiting; more wait for the finish, counted (2000)
   max_batch_pairs    pairs per matching run while the recording goes on (24)
   max_attempts       tries of an image or pair that fails before it is skipped (3)
-  finish_after_idle  [s] build the model once no keyframe came for this long (0: off)
+  finish_after_idle  [s] build the model once no keyframe came for this long, again after more
+                     (1.0; 0: off, only on ~finish and at shutdown; with the mapper model, 0)
   shutdown_budget    [s] the finish at shutdown must be done within this (12; roslaunch waits 15)
   model              known_poses (the keyframes at the node's poses) or mapper (COLMAP's own)
   matcher            guided (OpenCV SIFT here, matches guided by the node's poses; COLMAP's matcher
@@ -57,6 +61,9 @@ PARAMETERS = """Parameters (private, ~name):
                      colmap (COLMAP's point_triangulator over the whole model at the finish) (live)
   node_timeout       [s] how long the finish waits for the node's ~get_selection (10)
   continuity_pairs   also match each keyframe with the one before it (true)
+  colmap_timeout     [s] a COLMAP command may take this long, plus colmap_timeout_per_image for
+                     each image and colmap_timeout_per_pair for each pair it works on; then it
+                     is killed, and what it worked on is retried (120, 10, 5)
   refine             known_poses: refine the model (true): keyframe poses and points bundle-adjusted
                      with the intrinsics fixed, outliers filtered, points re-triangulated at the refined
                      poses (refine_model); DIR/sparse/0 is the refined model, DIR/sparse/unrefined the
@@ -84,7 +91,8 @@ class Bridge:
         self.node = _param("node", "").rstrip("/")
         self.batch_period = float(_param("batch_period", 1.0))
         self.poll_period = float(_param("poll_period", 2.0))
-        self.finish_after_idle = float(_param("finish_after_idle", 0.0))
+        self.finish_after_idle = float(_param("finish_after_idle", 1.0 if _param("model", "known_poses") == "known_poses"
+                                              else 0.0))
         self.shutdown_budget = float(_param("shutdown_budget", 12.0))
         self.model = _param("model", "known_poses")
         if self.model not in ("known_poses", "mapper"):
@@ -96,7 +104,10 @@ class Bridge:
         self.matcher = _param("matcher", "guided")
         if self.matcher not in ("guided", "colmap"):
             raise ProjectError("~matcher is '%s': guided or colmap" % self.matcher)
-        self.project = ColmapProject(self.project_dir, _param("colmap", "colmap"), _param("threads", -1))
+        timeouts = Timeouts(float(_param("colmap_timeout", 120.0)), float(_param("colmap_timeout_per_image", 10.0)),
+                            float(_param("colmap_timeout_per_pair", 5.0)))
+        self.project = ColmapProject(self.project_dir, _param("colmap", "colmap"), _param("threads", -1),
+                                     timeouts=timeouts)
         self.project.open()
         self.backend = None
         if self.matcher == "guided":
@@ -131,6 +142,8 @@ class Bridge:
         self.last_report = None
         self.sub = None
 
+        self.diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
+        self.diagnostics_timer = rospy.Timer(rospy.Duration(1.0), self.publish_diagnostics)
         self.finish_service = rospy.Service("~finish", Trigger, self.on_finish)
         self.thread = threading.Thread(target=self.loop, name="colmap_bridge", daemon=True)
         self.thread.start()
@@ -253,7 +266,7 @@ class Bridge:
                     with self.work_state.clock.measure("triangulation", 1):
                         self.work_state.feed_model(keyframes)
                 return more
-            except (ProjectError, DatabaseError, OSError, ValueError) as e:
+            except (ProjectError, DatabaseError, sqlite3.Error, OSError, ValueError) as e:
                 self.work_state.error("project %s: %s" % (self.project.root, e))
                 return False
 
@@ -285,10 +298,12 @@ class Bridge:
             change = self.stream.last_change_time
             last_keyframe = self.stream.last_keyframe_time
         try:
-            start = time.monotonic()
+            start, cpu_start = time.monotonic(), time.process_time()
             if not shutting_down:
                 self.sync()
+            synced = time.monotonic()
             keyframes, pairs, source = self.final_state(ask_node=not shutting_down)
+            asked = time.monotonic()
             if len(keyframes) < 2:
                 return False, "%d keyframes: a model needs at least 2" % len(keyframes)
             rospy.loginfo("colmap_bridge: finishing (%s): %d keyframes, %d pairs from %s", why, len(keyframes),
@@ -302,6 +317,8 @@ class Bridge:
                 finally:
                     self.project.deadline = None
             done = time.monotonic()
+            report["finish_phases"].update(sync=round(synced - start, 3), selection=round(asked - synced, 3),
+                                           cpu=round(time.process_time() - cpu_start, 3))
             report.update({
                 "project": self.project.root, "node": self.node, "why": why, "pairs_source": source,
                 "seconds": dict(self.project.seconds, finish=done - start),
@@ -343,13 +360,45 @@ class Bridge:
             else:
                 rospy.loginfo("colmap_bridge: %s", msg)
             return True, msg
-        except (ProjectError, DatabaseError, OSError) as e:
-            self.work_state.error(str(e))
+        except (ProjectError, DatabaseError, sqlite3.Error, OSError, ValueError) as e:
+            self.work_state.error("project %s: %s" % (self.project.root, e))
             return False, str(e)
         finally:
             with self.lock:
                 self.finishing = False
 
+    def publish_diagnostics(self, _event=None):
+        """/diagnostics once a second: what the project holds, the backlog, the CPU per stage,
+        what was skipped (WARN) and the last error within a minute (ERROR)."""
+        w = self.work_state
+        with self.lock:
+            announced, keyframes = len(self.stream.announced), len(self.stream.keyframes)
+            sequence = self.stream.sequence
+        status = DiagnosticStatus(name="colmap_bridge: %s" % self.project.root, hardware_id=self.node or "")
+        skipped = w.skipped()
+        recent = [e for e in w.errors if time.time() - e["at"] < 60.0]
+        if recent:
+            status.level, status.message = DiagnosticStatus.ERROR, recent[-1]["error"][:200]
+        elif skipped["images"] or skipped["pairs"]:
+            status.level, status.message = DiagnosticStatus.WARN, "%d images, %d pairs skipped" % (
+                len(skipped["images"]), len(skipped["pairs"]))
+        else:
+            status.level, status.message = DiagnosticStatus.OK, "backlog %d pairs" % w.status.get("backlog_pairs", 0)
+        values = {"keyframes": keyframes, "pairs announced": announced, "stream sequence": sequence,
+                  "matcher": self.matcher}
+        values.update({k.replace("_", " "): v for k, v in w.status.items()})
+        stages = w.clock.summary()
+        if self.backend:
+            stages.update(self.backend.clock.summary())
+            values.update({"pairs guided": self.backend.path_counts()["guided"],
+                           "pairs fallback": self.backend.path_counts()["fallback"]})
+        for stage, figures in stages.items():
+            values["%s cpu [s]" % stage] = figures["cpu_seconds"]
+        if self.last_report:
+            values["last model"] = "%s points, %.1f s after the last keyframe" % (
+                self.last_report.get("points"), self.last_report.get("seconds_from_last_keyframe") or 0.0)
+        status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+        self.diagnostics.publish(DiagnosticArray(header=Header(stamp=rospy.Time.now()), status=[status]))
     def publish_refined_path(self, keyframes, model_path):
         """~refined_path: every keyframe of the model at its refined pose (camera-to-world, the
         optical frame), stamped with its image's stamp, in the node's world frame: the shape of a

@@ -37,6 +37,7 @@ class LiveWork:
         self.model = LiveModel() if triangulation == "live" else None
         self.fed_poses = {}        # name -> the pose the model has for it
         self.backlog_max = 0
+        self.status = {}  # the last batch's figures: keyframes, images extracted and waiting, pairs
         self.deferred = 0  # pairs beyond ~max_backlog at some point, left for the finish
         self.errors = []   # the last few, for the report
 
@@ -93,11 +94,14 @@ class LiveWork:
         self.backend.register(keyframes)
         done = self.backend.extracted()
         todo = [k for k in keyframes if k.name not in done and self.backend.has_image(k.name) and self.images.due(k.name)]
+        self.status.update(keyframes=len(keyframes), images_extracted=len(done), images_waiting=len(todo))
         if not todo:
             return 0
         by_name = {k.name: k for k in todo}
         self._attempt([k.name for k in todo], lambda names: self.backend.extract([by_name[n] for n in names]),
                       self.backend.extracted, self.images, "image", "skipped-image")
+        for warning in getattr(self.backend, "warnings", None) or []:
+            self.log("warn", warning)
         return len(todo)
 
     # -- matches -----------------------------------------------------------------------------
@@ -116,6 +120,7 @@ class LiveWork:
         have = self.backend.extracted()
         backlog = [p for p in backlog if p[0] in have and p[1] in have and not self.pairs.given_up(p)]
         self.backlog_max = max(self.backlog_max, len(backlog))
+        self.status.update(backlog_pairs=len(backlog), pairs_matched=len(self.backend.matched()))
         if len(backlog) > self.max_backlog:
             self.deferred = max(self.deferred, len(backlog) - self.max_backlog)
             self.log("warn", "%d pairs wait (~max_backlog %d): the rest are matched at the finish"
@@ -155,7 +160,9 @@ class LiveWork:
             for (a, b), n in d.inlier_counts().items():
                 if n > 0 and (a, b) not in m.matched_pairs and a in m.images and b in m.images:
                     m.add_matches(a, b, d.matches(a, b, "two_view_geometries"))
-        return m.update()
+        changed = m.update()
+        self.status.update(points=len(m.points), tracks=len(m.members))
+        return changed
 
     def skipped(self, all_failed=False):
         """What was given up (with all_failed: also what failed and was not retried yet)."""
@@ -182,23 +189,31 @@ class LiveWork:
         # wait for backoffs, and what fails now is reported as skipped.
         for attempts in (self.images, self.pairs):
             attempts.not_before.clear()
+        import time
+        phases, t0 = {}, time.monotonic()
+        made = None  # the live model written, when it is
         self.extract(keyframes)
+        phases["extraction"], t0 = time.monotonic() - t0, time.monotonic()
         self.match(keyframes, final, limit=len(final) + len(extra) + 1)
+        phases["matching"], t0 = time.monotonic() - t0, time.monotonic()
         missing = [k.name for k in keyframes if not project.has_image(k.name)]
         extracted = project.extracted()
         matched = project.matched()
+        with project.db() as d:
+            featureless = sorted(d.images_without_keypoints())
         wanted = set(final) | set(extra)
         out = {"keyframes": len(keyframes), "images_missing": missing,
                "images_without_features": [k.name for k in keyframes if k.name not in extracted and k.name not in missing],
+               "images_with_no_features": featureless,
                "final_pairs": len(final), "continuity_pairs": len(extra), "pairs_matched": len(matched),
                "final_pairs_matched": len(set(final) & matched), "pairs_wasted": len(matched - wanted),
                "pairs_verified": project.verified_count(), "model": model, "skipped": self.skipped(all_failed=True)}
         if model == "mapper":
             path = project.mapper_model(seed)
-            made = colmap_model.read_model(path).image_by_name()
+            mapped = colmap_model.read_model(path).image_by_name()
             by_name = {k.name: k for k in keyframes}
-            common = [n for n in made if n in by_name]
-            out["ate_rmse"] = ate_rmse([geometry.centre_of(made[n].qvec, made[n].tvec) for n in common],
+            common = [n for n in mapped if n in by_name]
+            out["ate_rmse"] = ate_rmse([geometry.centre_of(mapped[n].qvec, mapped[n].tvec) for n in common],
                                        [by_name[n].position for n in common])
             out["ate_images"] = len(common)
         else:
@@ -210,9 +225,12 @@ class LiveWork:
             if self.model is not None:
                 with self.clock.measure("triangulation", 1):
                     out["tracks_triangulated_at_finish"] = self.feed_model(keyframes)
+                phases["triangulation"], t0 = time.monotonic() - t0, time.monotonic()
                 with project.db() as d:
                     ids = d.image_ids()
-                path = project.write_model(self.model.to_model([ids[k.name] for k in have if k.name in ids]))
+                made = self.model.to_model([ids[k.name] for k in have if k.name in ids])
+                path = project.write_model(made)
+                phases["writing"], t0 = time.monotonic() - t0, time.monotonic()
                 if out["pairs_verified"] == 0:
                     out["model_error"] = "no pair verified: the model holds the keyframes' poses and no points"
                     self.error(out["model_error"])
@@ -232,6 +250,8 @@ class LiveWork:
         if self.refinement is not None and model != "mapper" and "model_error" not in out:
             out["refinement"] = self.refinement.apply(project, path)  # issue 29
         out["model_path"] = path
-        out.update(colmap_model.read_model(path).statistics())
+        out.update((made if made is not None else colmap_model.read_model(path)).statistics())
+        phases["statistics"] = time.monotonic() - t0
+        out["finish_phases"] = {k: round(v, 3) for k, v in phases.items()}
         out["waste_ratio"] = out["pairs_wasted"] / out["pairs_matched"] if out["pairs_matched"] else 0.0
         return out

@@ -47,9 +47,11 @@ class StageClock:
         return Scope()
 
     def summary(self):
-        return {s: {"items": self.items[s], "wall_seconds": round(self.wall[s], 3), "cpu_seconds": round(self.cpu[s], 3),
-                    "cpu_seconds_per_item": round(self.cpu[s] / self.items[s], 4) if self.items[s] else None}
-                for s in sorted(self.wall)}
+        wall, cpu, items = dict(self.wall), dict(self.cpu), dict(self.items)
+        return {s: {"items": items.get(s, 0), "wall_seconds": round(wall[s], 3),
+                    "cpu_seconds": round(cpu.get(s, 0.0), 3),
+                    "cpu_seconds_per_item": round(cpu.get(s, 0.0) / items[s], 4) if items.get(s) else None}
+                for s in sorted(wall)}
 
 
 class PoseGuidedBackend:
@@ -61,6 +63,7 @@ class PoseGuidedBackend:
         self.cache = collections.OrderedDict()  # name -> Features (the last few used)
         self.cache_images = int(cache_images)
         self.errors = {}              # item -> why it failed in the last run
+        self.warnings = []            # what the last run did that a user should know
         self.paths = {}               # pair -> PairResult.summary()
         self.clock = StageClock()
 
@@ -84,7 +87,7 @@ class PoseGuidedBackend:
         """Features of the keyframes (their images are there): read, extracted and written in
         one transaction; an image that cannot be read is left out, with its reason in errors."""
         self.register(keyframes)
-        self.errors = {}
+        self.errors, self.warnings = {}, []
         made = {}
         with self.clock.measure("extraction", len(keyframes)):
             for k in keyframes:
@@ -94,6 +97,10 @@ class PoseGuidedBackend:
                     made[k.name] = self.extractor.extract_file(os.path.join(self.project.images, k.name))
                 except (ValueError, OSError) as e:
                     self.errors[k.name] = str(e)
+                    continue
+                if not len(made[k.name]):
+                    self.warnings.append("no features in %s (a blank image?): it stays in the model without points"
+                                         % k.name)
             with self.project.db() as d:
                 ids = d.image_ids()
                 for name, features in made.items():
@@ -155,14 +162,15 @@ class PoseGuidedBackend:
         """Which path the pairs matched so far took: {'guided': n, 'fallback': n}, the fallbacks'
         reasons, the bands of the guided ones (median, 90th percentile, max [px]), and each
         pair's summary."""
-        counts = collections.Counter(s["path"] for s in self.paths.values())
-        bands = [s["band_px"] for s in self.paths.values() if s["path"] == guided.GUIDED]
+        paths = dict(self.paths)  # a copy taken at once: the diagnostics timer reads it beside the work
+        counts = collections.Counter(s["path"] for s in paths.values())
+        bands = [s["band_px"] for s in paths.values() if s["path"] == guided.GUIDED]
         return {"guided": counts.get(guided.GUIDED, 0), "fallback": counts.get(guided.FALLBACK, 0),
-                "fallback_pairs": {"%s %s" % p: s.get("why", "") for p, s in sorted(self.paths.items())
+                "fallback_pairs": {"%s %s" % p: s.get("why", "") for p, s in sorted(paths.items())
                                    if s["path"] == guided.FALLBACK},
                 "band_px": {"median": float(np.median(bands)), "p90": float(np.percentile(bands, 90)),
                             "max": float(max(bands))} if bands else None,
-                "pairs": {"%s %s" % p: s for p, s in sorted(self.paths.items())}}
+                "pairs": {"%s %s" % p: s for p, s in sorted(paths.items())}}
 
 
 def _quaternion(r):

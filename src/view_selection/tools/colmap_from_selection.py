@@ -29,9 +29,11 @@ OUT/report.json.
 import argparse
 import os
 import shutil
+import sqlite3
 import sys
 import time
 
+from ..colmap.database import DatabaseError
 from ..colmap.project import ColmapProject, ProjectError, write_json_atomically
 from ..export_folder import ExportError, ExportFolder
 from ..live.work import LiveWork
@@ -136,6 +138,6 @@ def main(argv=None):
                                        report.get("reprojection_error", 0.0), report["model_path"],
                                        report["pairs_verified"], len(export.pairs), os.path.join(out, "report.json")))
         return 0
-    except (ExportError, ProjectError, OSError) as e:
+    except (ExportError, ProjectError, DatabaseError, sqlite3.Error, OSError) as e:
         print("colmap_from_selection: error: %s" % e, file=sys.stderr)
         return 1

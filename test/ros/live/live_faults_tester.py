@@ -9,7 +9,6 @@ import shutil
 import stat
 import sys
 import tempfile
-import time
 import unittest
 
 import rospy

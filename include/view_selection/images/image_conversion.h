@@ -6,7 +6,7 @@
 
 #include <opencv2/core.hpp>
 
-namespace view_selection::points {
+namespace view_selection::images {
 
 /// A view of `depth_m` (CV_32FC1 metres) that keeps the Mat's pixels alive. Throws InvalidInput
 /// for another type. An empty Mat gives an empty view.
@@ -24,4 +24,4 @@ cv::Mat matOf(const core::ColourImage& image);
 /// Throws InvalidInput for any other type or an empty image.
 cv::Mat depthToMetres(const cv::Mat& depth, double metres_per_unit);
 
-}  // namespace view_selection::points
+}  // namespace view_selection::images

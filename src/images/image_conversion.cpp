@@ -1,4 +1,4 @@
-#include "view_selection/points/image_conversion.h"
+#include "view_selection/images/image_conversion.h"
 
 #include "view_selection/core/exceptions.h"
 
@@ -6,7 +6,7 @@
 #include <memory>
 #include <string>
 
-namespace view_selection::points {
+namespace view_selection::images {
 
 namespace {
 
@@ -79,4 +79,4 @@ cv::Mat depthToMetres(const cv::Mat& depth, double metres_per_unit) {
       std::to_string(depth.depth()));
 }
 
-}  // namespace view_selection::points
+}  // namespace view_selection::images

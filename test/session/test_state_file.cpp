@@ -1,12 +1,17 @@
 // The state file: a session saved half way and continued in a fresh selector ends exactly where
 // the uninterrupted session ends, for every point source; a truncated, corrupted, foreign or
 // newer file is refused with one clear error; bad files are kept aside, never overwritten.
-#include "view_selection/io/state_file.h"
+#include "view_selection/session/state_file.h"
 
 #include "view_selection/core/exceptions.h"
 #include "view_selection/core/view_selector.h"
-#include "view_selection/points/image_conversion.h"
+#include "view_selection/images/image_conversion.h"
+#include "view_selection/io/crc32.h"
+#include "view_selection/io/file_ops.h"
 #include "view_selection/points/point_source_factory.h"
+#include "view_selection/session/capture.h"
+#include "view_selection/session/delta_tracker.h"
+#include "view_selection/session/journal.h"
 
 #include "support/layers.h"
 #include "support/test_support.h"

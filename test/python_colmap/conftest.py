@@ -1,0 +1,50 @@
+# The Python module against the real COLMAP 3.8 and the package's built tools (no ROS master):
+# pose-guided matching against COLMAP's own on the shared kitchen, and bad input through
+# colmap_from_selection. Run by scripts/test (run_tests_view_selection_pytest_python_colmap), or
+# alone with VIEW_SELECTION_TOOLS_DIR set to the build's devel/lib/view_selection.
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+REPO = os.path.abspath(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", ".."))
+sys.path.insert(0, os.path.join(REPO, "src"))
+DATA = os.path.join(os.path.dirname(REPO), "shared", "data")
+
+
+def tool(name):
+    folder = os.environ.get("VIEW_SELECTION_TOOLS_DIR", "")
+    path = os.path.join(folder, name)
+    if not (folder and os.access(path, os.X_OK)):
+        pytest.fail("VIEW_SELECTION_TOOLS_DIR does not hold %s (build the package)" % name)
+    return path
+
+
+def run(cmd, timeout=1800):
+    env = dict(os.environ, PYTHONPATH=os.path.join(REPO, "src") + ":" + os.environ.get("PYTHONPATH", ""),
+               OPENBLAS_NUM_THREADS="1", QT_QPA_PLATFORM="offscreen")
+    done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, universal_newlines=True,
+                          timeout=timeout, env=env)
+    assert done.returncode == 0, "%s failed (exit %d):\n%s" % (" ".join(cmd), done.returncode, done.stdout[-4000:])
+    return done.stdout
+
+
+def colmap_from_selection(*args):
+    return run([sys.executable, os.path.join(REPO, "scripts", "colmap_from_selection")] + [str(a) for a in args])
+
+
+def without_real_data(test, folder):
+    """Skips, and says so in $VIEW_SELECTION_SKIP_LOG (scripts/test fails when the data is there)."""
+    log = os.environ.get("VIEW_SELECTION_SKIP_LOG")
+    if log:
+        with open(log, "a") as f:
+            f.write("%s: no real data (%s absent)\n" % (test, folder))
+    pytest.skip("no real data (%s absent)" % folder)
+
+
+@pytest.fixture(autouse=True)
+def needs_colmap():
+    if shutil.which("colmap") is None:
+        pytest.fail("COLMAP is not installed (scripts/install_deps colmap)")

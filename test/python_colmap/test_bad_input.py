@@ -1,0 +1,57 @@
+"""Bad input through the bridge's code (colmap_from_selection --model known_poses, the guided
+matcher, the real COLMAP for the fallback): an image that cannot be read, a blank image, a
+keyframe whose pose is wrong. Each is reported, and the rest of the model is built (issue 28)."""
+import json
+import math
+import shutil
+
+import numpy as np
+
+from conftest import colmap_from_selection, run, tool
+from view_selection import geometry
+from view_selection.colmap.model import read_model
+
+
+def test_bad_images_and_a_wrong_pose_are_reported_and_the_rest_is_built(tmp_path):
+    sequence = tmp_path / "walk"
+    run([tool("generate_sequence"), "--out", str(sequence), "--frames", "90", "--width", "320", "--height", "240",
+         "--quiet"])
+    selection = tmp_path / "selection"
+    run([tool("select_views"), "--dataset", str(sequence), "--every", "6", "--out", str(selection), "--quiet",
+         "--print-sets", "0"])
+    doc = json.load(open(str(selection / "selection.json")))
+    keyframes = doc["keyframes"]
+    assert len(keyframes) == 15
+    images = tmp_path / "images"
+    shutil.copytree(str(sequence / doc["params"].get("image_path", "rgb")), str(images))  # names are relative to it
+    unreadable, blank, moved = keyframes[4]["image"], keyframes[9]["image"], keyframes[12]
+    (images / unreadable).write_bytes(b"\x89PNG\r\n\x1a\n but not an image")
+    import cv2
+    cv2.imwrite(str(images / blank), np.full((240, 320, 3), 128, np.uint8))
+    # keyframe 12 turned by 8 degrees about its x axis: its pairs disagree with the images
+    x, y, z, w = moved["orientation_xyzw"]
+    turned = geometry.rotation_of((w, x, y, z)) @ geometry.rotation_of((math.cos(0.07), math.sin(0.07), 0, 0))
+    qw, qx, qy, qz = geometry.quaternion_of(turned)
+    moved["orientation_xyzw"] = [qx, qy, qz, qw]
+    json.dump(doc, open(str(selection / "selection.json"), "w"))
+
+    colmap_from_selection(selection, "--model", "known_poses", "--image-path", images, "--out", tmp_path / "model",
+                          "--threads", "2")
+    report = json.load(open(str(tmp_path / "model" / "report.json")))
+    skipped = {s["item"]: s["error"] for s in report["skipped"]["images"]}
+    assert unreadable in skipped and "cannot read" in skipped[unreadable]
+    assert blank in report["images_with_no_features"]
+    turned_pairs = {key: why for key, why in report["matching"]["fallback_pairs"].items() if moved["image"] in key.split()}
+    assert turned_pairs, "the pairs of the keyframe with the wrong pose did not fall back"
+    assert all(why for why in turned_pairs.values())
+    ledger = open(str(tmp_path / "model" / "ledger.txt")).read()
+    assert "matched %s" % next(iter(turned_pairs)) in ledger or report["skipped"]["pairs"]  # matched by COLMAP, or reported
+    # Every keyframe is in the model at the pose it was given; the good ones have points.
+    model = read_model(str(tmp_path / "model" / "sparse" / "0"))
+    by_name = model.image_by_name()
+    assert sorted(by_name) == sorted(k["image"] for k in keyframes)
+    with_points = {im.name for im in model.images.values() if (im.point3D_ids >= 0).any()}
+    good = {k["image"] for k in keyframes} - {unreadable, blank}
+    assert len(with_points & good) >= len(good) - 1
+    assert unreadable not in with_points and blank not in with_points
+    assert report["points"] > 500
