@@ -61,7 +61,7 @@ Cameras must be PINHOLE or SIMPLE_PINHOLE.
   --min-angle DEG    points with a smaller triangulation angle are removed (default 1.5)
   --rounds N         adjust-and-filter rounds at most (default 4)
   --iterations N     Ceres iterations per round at most (default 100)
-  --function-tolerance F  a solve stops when the cost changes by less than F, relative (default 1e-6)
+  --function-tolerance F  a solve stops when the cost changes by less than F, relative (default 1e-5)
   --min-observations N  images with fewer keep their pose (default 15)
   --max-correction-depth-ratio R  (default 0.5)
   --max-correction-deg DEG        (default 15)
