@@ -248,7 +248,9 @@ class LiveWork:
                     self.error(out["model_error"])
                     path = project.poses_only_model(have)
         if self.refinement is not None and model != "mapper" and "model_error" not in out:
-            out["refinement"] = self.refinement.apply(project, path)  # issue 29
+            out["refinement"] = self.refinement.apply(project, path)  # issue 29: sparse/0 refined
+            made = None  # the statistics are the refined model's, read from sparse/0
+            phases["refinement"], t0 = time.monotonic() - t0, time.monotonic()
         out["model_path"] = path
         out.update((made if made is not None else colmap_model.read_model(path)).statistics())
         phases["statistics"] = time.monotonic() - t0

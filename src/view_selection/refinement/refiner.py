@@ -203,8 +203,12 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
             matches = os.path.join(work, "matches.bin")
             count = write_matches(database, matches)
         made = os.path.join(work, "refined")
+        import resource
+        children = resource.getrusage(resource.RUSAGE_CHILDREN)
         report = run_refine_model(tool, os.path.abspath(model_dir), made, made + ".json", options, fixed,
                                   log_path=log_path, timeout=timeout, matches=matches)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = (after.ru_utime + after.ru_stime) - (children.ru_utime + children.ru_stime)
         log("refinement: %s" % report["message"])
         from ..colmap.project import replace_folder
         replace_folder(made, os.path.abspath(output))
@@ -233,6 +237,7 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
             "retriangulations": report.get("retriangulations", 0), "matches": count,
             "tracks": report.get("tracks", 0), "aligned": report["aligned"],
             "alignment_scale": report["alignment_scale"], "adjustment_seconds": report["seconds"],
+            "cpu_seconds": cpu,
             "seconds": time.monotonic() - start, "options": options.to_json()}
     finally:
         shutil.rmtree(work, ignore_errors=True)
