@@ -720,6 +720,17 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
     c.median_depth = depth.at(id);
     rep.images.push_back(c);
   }
+  if (movable.empty() && with_tracks) {
+    // Nothing may move: the matches are triangulated at the given poses, nothing adjusted (what
+    // the model's points would be at these poses with these matches).
+    State s = initial;
+    retriangulate(s, tracks, {}, config, config.triangulation_max_error);
+    filter(s, config, {});
+    rep.status = "triangulated";
+    rep.retriangulations = 1;
+    rep.message = "no image may move: the matches triangulated at the given poses";
+    return finish(modelOf(input, s), s);
+  }
   if (movable.empty() || initial.observations() == 0) {
     rep.status = "nothing_to_refine";
     rep.message = movable.empty() ? "no image may move" : "the model has no observations";

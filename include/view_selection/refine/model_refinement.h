@@ -109,7 +109,8 @@ struct ImageCorrection {
 struct RefinementReport {
   /// converged | no_convergence (iterations ran out; the result is still better) | diverged
   /// (the solve failed, raised the cost, or left more than max_filtered_ratio of the
-  /// observations as outliers: the input model is returned) | nothing_to_refine
+  /// observations as outliers: the input model is returned) | nothing_to_refine | triangulated
+  /// (no image may move, matches given: their tracks triangulated at the given poses)
   std::string status = "nothing_to_refine";
   bool refined = false;  ///< the returned model differs from the input
   int rounds = 0;
