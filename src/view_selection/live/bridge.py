@@ -74,9 +74,15 @@ PARAMETERS = """Parameters (private, ~name):
   refine_max_correction_deg  ... or turn further than this [deg] (15)
   refine_tool        the refine_model executable ("": beside this node)
 Publishes ~refined_path (nav_msgs/Path, latched): the refined keyframe poses (optical frame, in the
-node's world frame, at the keyframes' stamps) after each refined model; a view_selection node takes
-them with ~use_path_corrections and path:=/colmap_bridge/refined_path (docs/live.md, "Refinement").
+node's world frame, at the keyframes' stamps) after each refined model that moved a keyframe by more
+than 1 mm or 0.05 deg; a view_selection node takes them with ~use_path_corrections and
+path:=/colmap_bridge/refined_path (docs/live.md, "Refinement").
 """
+
+
+# ~refined_path is published when a keyframe moved more than this [m, deg]: half the node's
+# ~correction_min_translation and ~correction_min_rotation_deg defaults.
+PATH_MIN_TRANSLATION, PATH_MIN_ROTATION_DEG = 0.001, 0.05
 
 
 def _param(name, default):
@@ -333,7 +339,12 @@ class Bridge:
             report["stages"] = stages
             write_json_atomically(os.path.join(self.project.root, "report.json"), report)
             self.last_report = report
-            if report.get("refinement", {}).get("refined"):
+            refined = report.get("refinement", {})
+            # Only corrections a node would apply (its defaults: 2 mm, 0.1 deg) are sent back: a
+            # path that moves nothing would only make a node that takes it announce again, and
+            # the bridge finish again, for nothing.
+            if refined.get("refined") and (refined["translation_max"] > PATH_MIN_TRANSLATION or
+                                           refined["rotation_max_deg"] > PATH_MIN_ROTATION_DEG):
                 self.publish_refined_path(keyframes, report["model_path"])
             with self.lock:
                 self.finished_at_change = change
