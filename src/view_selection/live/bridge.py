@@ -149,7 +149,10 @@ class Bridge:
         self.sub = None
 
         self.diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
-        self.diagnostics_timer = rospy.Timer(rospy.Duration(1.0), self.publish_diagnostics)
+        # On wall time: with /use_sim_time a bag's clock stops at its end, and the report
+        # matters most after that.
+        self.diagnostics_thread = threading.Thread(target=self.diagnostics_loop, name="diagnostics", daemon=True)
+        self.diagnostics_thread.start()
         self.finish_service = rospy.Service("~finish", Trigger, self.on_finish)
         self.thread = threading.Thread(target=self.loop, name="colmap_bridge", daemon=True)
         self.thread.start()
@@ -160,10 +163,10 @@ class Bridge:
 
     @staticmethod
     def _log(level, text):
-        if level == "error":
-            rospy.logerr_throttle(5.0, "colmap_bridge: %s" % text)
+        if level == "error":  # each distinct message shown, the same one again at most every 10 s
+            rospy.logerr_throttle_identical(10.0, "colmap_bridge: %s" % text)
         elif level == "warn":
-            rospy.logwarn_throttle(10.0, "colmap_bridge: %s" % text)
+            rospy.logwarn_throttle_identical(10.0, "colmap_bridge: %s" % text)
         else:
             rospy.loginfo("colmap_bridge: %s", text)
 
@@ -377,6 +380,14 @@ class Bridge:
         finally:
             with self.lock:
                 self.finishing = False
+
+    def diagnostics_loop(self):
+        while not self.stopping and not rospy.is_shutdown():
+            try:
+                self.publish_diagnostics()
+            except rospy.ROSException:
+                return  # shutting down
+            time.sleep(1.0)
 
     def publish_diagnostics(self, _event=None):
         """/diagnostics once a second: what the project holds, the backlog, the CPU per stage,

@@ -6,6 +6,7 @@ clear error, and the view selection node keeps running and answering."""
 import json
 import os
 import shutil
+import signal
 import stat
 import sys
 import tempfile
@@ -160,6 +161,34 @@ class LiveFaults(unittest.TestCase):
             # The node writes no more images there.
             call(NODE + '/write_keyframe_images', WriteKeyframeImages, WriteKeyframeImagesRequest(directory=''), 10.0)
             umount(folder)
+
+    def test_the_model_is_written_when_the_bridge_is_stopped(self):
+        """SIGINT (roslaunch stopping it, or Ctrl-C) while it has work: the model is written from
+        what was announced, and the bridge exits by itself before roslaunch would escalate to
+        SIGTERM (15 s). ~finish_after_idle 0: a user who wants the model only on ~finish and at
+        shutdown."""
+        folder = os.path.join(self.tmp, 'stopped')
+        bridge = self.start_bridge('/bridge_stopped', {'project': folder, 'finish_after_idle': 0.0})
+        try:
+            rospy.wait_for_service(bridge.name + '/finish', timeout=60)
+            wait_until(lambda: call(NODE + '/get_pairs', GetPairs, GetPairsRequest(since=0), 10.0).keyframe_image_dir
+                       == os.path.join(folder, 'images'), 30, 'the node writes images into the project')
+            self.publish(30)  # keyframes, their images and pairs: work for the bridge
+            ledger = os.path.join(folder, 'ledger.txt')
+            wait_until(lambda: os.path.exists(ledger) and ' extracted ' in open(ledger).read(), 60,
+                       'the bridge at work')
+            self.assertFalse(os.path.exists(os.path.join(folder, 'report.json')))
+            bridge.signal(signal.SIGINT)
+            code = bridge.wait(15.0)  # roslaunch's SIGINT timeout (then SIGTERM, then SIGKILL)
+            self.assertEqual(0, code, bridge.output()[-3000:])
+            report = json.load(open(os.path.join(folder, 'report.json')))
+            self.assertEqual('shutdown', report['why'])
+            self.assertGreaterEqual(report['registered'], 2)
+            self.assertTrue(os.path.isdir(os.path.join(folder, 'sparse', '0')))
+            self.assert_node_serves()
+        finally:
+            if bridge.alive():
+                bridge.kill()
 
     def test_z_the_sequence_continues_after_a_restart(self):
         before = call(NODE + '/get_pairs', GetPairs, GetPairsRequest(since=0), 10.0)
