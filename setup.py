@@ -4,5 +4,5 @@ from catkin_pkg.python_setup import generate_distutils_setup
 
 setup(**generate_distutils_setup(
     packages=["view_selection", "view_selection.colmap", "view_selection.evaluation", "view_selection.features",
-              "view_selection.live", "view_selection.matching", "view_selection.tools"],
+              "view_selection.live", "view_selection.matching", "view_selection.refinement", "view_selection.tools"],
     package_dir={"": "src"}))

@@ -75,19 +75,24 @@ TEST(CoreIsRosFree, NoRosIncludeInCoreOrTools) {
 const std::map<std::string, std::string>& includeRules() {
   static const std::map<std::string, std::string> rules = {
       {"core",
-       R"((opencv2|ceres|nlohmann|yaml-cpp|view_selection/(images|points|io|session|sim|eval|ros)/)|)" +
+       R"((opencv2|ceres|nlohmann|yaml-cpp|view_selection/(images|points|io|session|sim|eval|refine|odometry|ros)/)|)" +
            kRosHeaders},
       {"images", R"((ceres|nlohmann|yaml-cpp|opencv2/(features2d|calib3d|imgcodecs)|)"
-                 R"(view_selection/(points|io|session|sim|eval|ros)/)|)" +
+                 R"(view_selection/(points|io|session|sim|eval|refine|odometry|ros)/)|)" +
                      kRosHeaders},
-      {"points", R"((nlohmann|yaml-cpp|view_selection/(io|session|sim|eval|ros)/)|)" + kRosHeaders},
+      {"points", R"((nlohmann|yaml-cpp|view_selection/(io|session|sim|eval|refine|odometry|ros)/)|)" + kRosHeaders},
       // The file formats need neither the point sources nor Ceres: the point sources' state in
       // the state file is session's.
-      {"io", R"((ceres|opencv2/features2d|view_selection/(points|session|sim|eval|ros)/)|)" +
+      {"io", R"((ceres|opencv2/features2d|view_selection/(points|session|sim|eval|refine|odometry|ros)/)|)" +
                  kRosHeaders},
-      {"session", R"((view_selection/(sim|eval|ros)/)|)" + kRosHeaders},
-      {"sim", R"((view_selection/(session|eval|ros)/)|)" + kRosHeaders},
-      {"eval", R"((view_selection/(session|sim|ros)/)|)" + kRosHeaders},
+      {"session", R"((view_selection/(sim|eval|refine|odometry|ros)/)|)" + kRosHeaders},
+      {"sim", R"((view_selection/(session|eval|refine|odometry|ros)/)|)" + kRosHeaders},
+      {"eval", R"((view_selection/(session|sim|refine|odometry|ros)/)|)" + kRosHeaders},
+      // refine: a known-pose COLMAP model bundle-adjusted (Ceres) on io's model files, for the tools
+      {"refine", R"((opencv2|view_selection/(images|points|session|sim|odometry|ros)/)|)" + kRosHeaders},
+      // odometry: OpenCV's RGB-D odometry as a drifting SLAM stand-in, on the core's types
+      {"odometry", R"((ceres|nlohmann|yaml-cpp|view_selection/(points|io|session|sim|eval|refine|ros)/)|)" +
+                       kRosHeaders},
   };
   return rules;
 }

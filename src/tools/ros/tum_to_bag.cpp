@@ -92,6 +92,8 @@ options:
   --pose-topics             tum: also the motion capture (/kinect in the world frame) as
                             /mocap/pose (PoseStamped), /mocap/odometry (Odometry) and
                             /mocap/pose_with_covariance, for the node's topic pose sources
+  --no-poses                simple: no /tf and no /camera/pose, only images, depth and camera_info
+                            (a bag recorded without a pose source: rgbd_odometry tracks it)
   --quiet                   no progress lines
   --help                    this text
 )";
@@ -111,6 +113,7 @@ struct Options {
   std::string compression = "lz4";
   std::string layout = "simple";
   bool stamp_offset_given = false;
+  bool no_poses = false;  ///< simple: images and depth only (a pose source must track them)
   BenchmarkLayoutOptions tum;
   bool quiet = false;
 };
@@ -121,7 +124,7 @@ Options parse(int argc, char** argv) {
       {"dataset", "out", "layout", "max-frames", "every", "max-time-difference", "world-frame",
        "camera-frame", "compression", "stamp-offset", "depth-offset", "depth-jitter", "mocap-rate",
        "mocap-lead", "static-period", "jpeg-quality"},
-      {"quiet", "help", "pose-topics", "compressed"});
+      {"quiet", "help", "pose-topics", "compressed", "no-poses"});
   if (cli.flag("help")) {
     std::cout << kUsage;
     std::exit(0);
@@ -157,6 +160,8 @@ Options parse(int argc, char** argv) {
   if (cli.flag("pose-topics") && o.layout != "tum")
     throw UsageError("--pose-topics is an option of --layout tum");
   o.tum.pose_topics = cli.flag("pose-topics");
+  o.no_poses = cli.flag("no-poses");
+  if (o.no_poses && o.layout != "simple") throw UsageError("--no-poses is an option of --layout simple");
   o.tum.images.compressed = cli.flag("compressed");
   if (cli.has("jpeg-quality") && !o.tum.images.compressed)
     throw UsageError("--jpeg-quality is an option of --compressed");
@@ -204,20 +209,22 @@ WrittenFrames writeSimpleLayout(rosbag::Bag& bag, const TumDataset& dataset,
     header.frame_id = o.camera_frame;
 
     // Ground truth first, so that a pose is in the tf buffer when its image arrives.
-    geometry_msgs::TransformStamped t;
-    t.header.seq = header.seq;
-    t.header.stamp = stamp;
-    t.header.frame_id = o.world_frame;
-    t.child_frame_id = o.camera_frame;
-    t.transform = ros_node::transformToMsg(tum.pose);
-    tf2_msgs::TFMessage tf;
-    tf.transforms.push_back(t);
-    bag.write("/tf", stamp, tf);
+    if (!o.no_poses) {
+      geometry_msgs::TransformStamped t;
+      t.header.seq = header.seq;
+      t.header.stamp = stamp;
+      t.header.frame_id = o.world_frame;
+      t.child_frame_id = o.camera_frame;
+      t.transform = ros_node::transformToMsg(tum.pose);
+      tf2_msgs::TFMessage tf;
+      tf.transforms.push_back(t);
+      bag.write("/tf", stamp, tf);
 
-    geometry_msgs::PoseStamped pose;
-    pose.header = t.header;
-    pose.pose = ros_node::poseToMsg(tum.pose);
-    bag.write("/camera/pose", stamp, pose);
+      geometry_msgs::PoseStamped pose;
+      pose.header = t.header;
+      pose.pose = ros_node::poseToMsg(tum.pose);
+      bag.write("/camera/pose", stamp, pose);
+    }
 
     if (!depth_m.empty()) {
       std_msgs::Header depth_header = header;

@@ -17,14 +17,19 @@ import time
 import rospy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from std_msgs.msg import Header
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Path
 from std_srvs.srv import Trigger, TriggerResponse
 
 from view_selection.msg import PairChanges
 from view_selection.srv import GetPairs, GetSelection, WriteKeyframeImages
 
+from .. import geometry
+from ..colmap import model as colmap_model
 from ..colmap.database import DatabaseError
 from ..colmap.project import ColmapProject, ProjectError, Timeouts, write_json_atomically
 from ..keyframes import Keyframe
+from ..refinement.refiner import ModelRefinement, RefinementOptions
 from ..features.sift import SiftExtractor
 from ..matching.backend import PoseGuidedBackend
 from ..matching.guided import GuidedOptions
@@ -59,7 +64,25 @@ PARAMETERS = """Parameters (private, ~name):
   colmap_timeout     [s] a COLMAP command may take this long, plus colmap_timeout_per_image for
                      each image and colmap_timeout_per_pair for each pair it works on; then it
                      is killed, and what it worked on is retried (120, 10, 5)
+  refine             known_poses: refine the model (true): keyframe poses and points bundle-adjusted
+                     with the intrinsics fixed, outliers filtered, points re-triangulated at the refined
+                     poses (refine_model); DIR/sparse/0 is the refined model, DIR/sparse/unrefined the
+                     model at the node's poses; false: sparse/0 at the node's poses
+  refine_retriangulations  re-triangulations at the refined poses, each refined again (1)
+  refine_max_correction_depth_ratio  a keyframe the refinement would move further than this x the
+                     median depth of its points keeps the node's pose, reported (0.5)
+  refine_max_correction_deg  ... or turn further than this [deg] (15)
+  refine_tool        the refine_model executable ("": beside this node)
+Publishes ~refined_path (nav_msgs/Path, latched): the refined keyframe poses (optical frame, in the
+node's world frame, at the keyframes' stamps) after each refined model that moved a keyframe by more
+than 1 mm or 0.05 deg; a view_selection node takes them with ~use_path_corrections and
+path:=/colmap_bridge/refined_path (docs/live.md, "Refinement").
 """
+
+
+# ~refined_path is published when a keyframe moved more than this [m, deg]: half the node's
+# ~correction_min_translation and ~correction_min_rotation_deg defaults.
+PATH_MIN_TRANSLATION, PATH_MIN_ROTATION_DEG = 0.001, 0.05
 
 
 def _param(name, default):
@@ -97,11 +120,23 @@ class Bridge:
             self.backend = PoseGuidedBackend(
                 self.project, SiftExtractor(max_features=int(_param("max_features", 2048))),
                 GuidedOptions(window_deg=float(_param("guided_window_deg", 1.5))))
+        refinement = None
+        if self.model == "known_poses" and bool(_param("refine", True)):
+            defaults = RefinementOptions()
+            refinement = ModelRefinement(
+                RefinementOptions(retriangulations=int(_param("refine_retriangulations", defaults.retriangulations)),
+                                  max_correction_depth_ratio=float(_param("refine_max_correction_depth_ratio",
+                                                                          defaults.max_correction_depth_ratio)),
+                                  max_correction_deg=float(_param("refine_max_correction_deg", defaults.max_correction_deg)),
+                                  threads=int(_param("threads", -1))),
+                tool=_param("refine_tool", "") or None, log=self._log)
         self.work_state = LiveWork(self.project, continuity=bool(_param("continuity_pairs", True)),
                                    max_backlog=_param("max_backlog", 2000),
                                    max_batch_pairs=_param("max_batch_pairs", 24),
                                    max_attempts=_param("max_attempts", 3), log=self._log, backend=self.backend,
-                                   triangulation=_param("triangulation", "live"))
+                                   triangulation=_param("triangulation", "live"), refinement=refinement)
+        self.world_frame = ""  # the node's, from its messages
+        self.refined_path = rospy.Publisher("~refined_path", Path, queue_size=1, latch=True)
 
         self.lock = threading.Lock()        # the stream's state
         self.wake = threading.Condition(self.lock)
@@ -161,6 +196,7 @@ class Bridge:
 
     def on_pairs(self, msg):
         with self.lock:
+            self.world_frame = msg.header.frame_id or self.world_frame
             self.stream.receive(msg)
             self.wake.notify_all()
 
@@ -251,6 +287,8 @@ class Bridge:
             try:
                 rospy.wait_for_service(name, timeout=self.node_timeout)
                 s = rospy.ServiceProxy(name, GetSelection)().selection
+                with self.lock:
+                    self.world_frame = s.header.frame_id or self.world_frame
                 keyframes = [Keyframe.from_msg(k) for k in s.keyframes]
                 names = {k.id: k.name for k in keyframes}
                 pairs = [(names[p.first], names[p.second]) for p in s.pairs if p.first in names and p.second in names]
@@ -304,6 +342,13 @@ class Bridge:
             report["stages"] = stages
             write_json_atomically(os.path.join(self.project.root, "report.json"), report)
             self.last_report = report
+            refined = report.get("refinement", {})
+            # Only corrections a node would apply (its defaults: 2 mm, 0.1 deg) are sent back: a
+            # path that moves nothing would only make a node that takes it announce again, and
+            # the bridge finish again, for nothing.
+            if refined.get("refined") and (refined["translation_max"] > PATH_MIN_TRANSLATION or
+                                           refined["rotation_max_deg"] > PATH_MIN_ROTATION_DEG):
+                self.publish_refined_path(keyframes, report["model_path"])
             with self.lock:
                 self.finished_at_change = change
             msg = ("model in %s: %s of %d keyframes, %s points, %d pairs matched (%d wasted), %.1f s after the "
@@ -311,6 +356,14 @@ class Bridge:
                                       report.get("points", 0), report["pairs_matched"], report["pairs_wasted"],
                                       report["seconds_from_last_keyframe"] or 0.0))
             skipped = report["skipped"]
+            refinement = report.get("refinement")
+            if refinement and refinement.get("refined"):
+                msg += "; refined: %d keyframes moved (median %.3g, max %.3g; %.2g / %.2g deg), %d kept their pose" % (
+                    refinement["keyframes_refined"], refinement["translation_median"], refinement["translation_max"],
+                    refinement["rotation_median_deg"], refinement["rotation_max_deg"],
+                    len(refinement["keyframes_kept"]))
+            elif refinement:
+                msg += "; not refined: %s" % (refinement.get("error") or refinement.get("message"))
             if report.get("model_error"):
                 msg += "; " + report["model_error"]
             if skipped["images"] or skipped["pairs"]:
@@ -368,6 +421,33 @@ class Bridge:
                 self.last_report.get("points"), self.last_report.get("seconds_from_last_keyframe") or 0.0)
         status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
         self.diagnostics.publish(DiagnosticArray(header=Header(stamp=rospy.Time.now()), status=[status]))
+    def publish_refined_path(self, keyframes, model_path):
+        """~refined_path: every keyframe of the model at its refined pose (camera-to-world, the
+        optical frame), stamped with its image's stamp, in the node's world frame: the shape of a
+        SLAM system's corrected path, which the node takes with ~use_path_corrections."""
+        try:
+            images = colmap_model.read_model(model_path).image_by_name()
+        except colmap_model.ModelError as e:
+            self.work_state.error("no refined path: %s" % e)
+            return
+        with self.lock:
+            frame = self.world_frame
+        msg = Path()
+        msg.header.frame_id = frame
+        for k in sorted(keyframes, key=lambda k: k.id):
+            im = images.get(k.name)
+            if im is None:
+                continue
+            centre, (w, x, y, z) = geometry.camera_to_world(im.qvec, im.tvec)
+            p = PoseStamped()
+            p.header.frame_id = frame
+            p.header.stamp = rospy.Time.from_sec(k.stamp)
+            p.pose.position.x, p.pose.position.y, p.pose.position.z = centre
+            p.pose.orientation.w, p.pose.orientation.x, p.pose.orientation.y, p.pose.orientation.z = w, x, y, z
+            msg.poses.append(p)
+        if msg.poses:
+            msg.header.stamp = msg.poses[-1].header.stamp
+            self.refined_path.publish(msg)
 
     def on_finish(self, _req):
         ok, msg = self.finish("~finish called")

@@ -13,14 +13,17 @@ from .attempts import Attempts
 
 class LiveWork:
     def __init__(self, project: ColmapProject, continuity=True, max_backlog=2000, max_batch_pairs=24,
-                 max_attempts=3, log=None, backend=None, triangulation="live"):
+                 max_attempts=3, log=None, backend=None, triangulation="live", refinement=None):
         """backend: what extracts and matches (register, extract, match, extracted, matched,
         has_image): the project itself (COLMAP's commands) or matching.backend's pose-guided
         one. triangulation: "live" (live/model.py: points as pairs verify, the finish writes
-        them) or "colmap" (point_triangulator over the whole model at the finish)."""
+        them) or "colmap" (point_triangulator over the whole model at the finish).
+        refinement: refinement.refiner.ModelRefinement (issue 29: the known-pose model refined,
+        DIR/sparse/0 refined, DIR/sparse/unrefined kept), or None."""
         from ..matching.backend import StageClock
         from .model import LiveModel
         self.project = project
+        self.refinement = refinement
         self.backend = backend or project
         if triangulation not in ("live", "colmap"):
             raise ValueError("triangulation: live or colmap, not %r" % triangulation)
@@ -244,6 +247,10 @@ class LiveWork:
                     out["model_error"] = "%s: the model holds the keyframes' poses and no points" % e
                     self.error(out["model_error"])
                     path = project.poses_only_model(have)
+        if self.refinement is not None and model != "mapper" and "model_error" not in out:
+            out["refinement"] = self.refinement.apply(project, path)  # issue 29: sparse/0 refined
+            made = None  # the statistics are the refined model's, read from sparse/0
+            phases["refinement"], t0 = time.monotonic() - t0, time.monotonic()
         out["model_path"] = path
         out.update((made if made is not None else colmap_model.read_model(path)).statistics())
         phases["statistics"] = time.monotonic() - t0

@@ -13,8 +13,10 @@ With --model known_poses it builds instead the model a user with SLAM poses asks
 as colmap_bridge does online (the same code): the project laid out as the bridge keeps it
 (OUT/images with the keyframe images, linked where the file system allows, OUT/database.db,
 OUT/sparse/0, OUT/report.json), the keyframes at their selection.json poses and 3D points from
-point_triangulator with the cameras held fixed. On the same frames, offline and online give the
-same model.
+point_triangulator with the cameras held fixed, then refined (issue 29: poses and points
+bundle-adjusted with the intrinsics fixed, outliers filtered, points re-triangulated at the
+refined poses, the model as triangulated kept in OUT/sparse/unrefined; --refine off keeps the
+keyframes at their given poses). On the same frames, offline and online give the same model.
 
 The images are found through selection.json's params: "image_path" relative to the export
 folder (the node with ~save_keyframe_images writes them there), or to params "dataset" (a
@@ -35,6 +37,7 @@ from ..colmap.database import DatabaseError
 from ..colmap.project import ColmapProject, ProjectError, write_json_atomically
 from ..export_folder import ExportError, ExportFolder
 from ..live.work import LiveWork
+from ..refinement.refiner import ModelRefinement, RefinementOptions
 from ..matching.backend import PoseGuidedBackend
 
 
@@ -65,6 +68,12 @@ def parse_args(argv):
                    help="known_poses: live (default; colmap_bridge's ~triangulation): the points triangulated and "
                         "filtered by the package, as the bridge does while pairs verify; colmap: COLMAP's "
                         "point_triangulator over the whole model")
+    p.add_argument("--refine", choices=["on", "off"], default="on",
+                   help="known_poses: refine the model (default on, as colmap_bridge's ~refine): poses and points "
+                        "bundle-adjusted, the SLAM poses' drift corrected; off: the keyframes stay at their poses")
+    p.add_argument("--refine-retriangulations", type=int, default=RefinementOptions().retriangulations,
+                   help="known_poses: re-triangulations at the refined poses (default %(default)s)")
+    p.add_argument("--refine-tool", help="the refine_model executable (default: found beside this tool)")
     p.add_argument("--no-continuity", action="store_true",
                    help="known_poses: match only the selection's pairs, not also each keyframe with the "
                         "one before it (colmap_bridge's ~continuity_pairs)")
@@ -102,9 +111,14 @@ def main(argv=None):
         known = args.model == "known_poses"
         matcher = args.matcher or ("guided" if known else "colmap")
         backend = PoseGuidedBackend(project) if matcher == "guided" else None
+        refinement = None
+        if known and args.refine == "on":
+            refinement = ModelRefinement(RefinementOptions(retriangulations=args.refine_retriangulations,
+                                                           threads=args.threads),
+                                         tool=args.refine_tool, log=lambda level, text: log(text))
         work = LiveWork(project, continuity=known and not args.no_continuity, max_batch_pairs=len(export.pairs) + 1,
                         log=lambda level, text: log(text), backend=backend,
-                        triangulation=args.triangulation if known else "colmap")
+                        triangulation=args.triangulation if known else "colmap", refinement=refinement)
         log("%s model of %d keyframes, %d pairs" % ("known-pose" if known else "mapper", len(export.keyframes),
                                                     len(export.pairs)))
         if not known:

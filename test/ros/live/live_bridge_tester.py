@@ -10,7 +10,8 @@ Two pair-stream consumers of the tester's own follow ~pairs: one drops every thi
 catches up through ~get_pairs, one joins halfway. After the bag: both consumers hold exactly the
 node's final pairs; each bridge's ~finish builds the known-pose model; A's database equals B's
 (features, matches, verified pairs); nothing was extracted or matched twice (the ledger); every
-final pair is in the database; every keyframe is in the model at its node pose within 1e-6.
+final pair is in the database; every keyframe is in the model at its node pose within 1e-6
+(sparse/unrefined), and in the refined model (sparse/0) within the refinement's precision.
 """
 import json
 import math
@@ -24,6 +25,7 @@ import threading
 import time
 import unittest
 
+import numpy as np
 import rospy
 import rostest
 from std_srvs.srv import Trigger
@@ -118,6 +120,15 @@ def database_content(path):
                 'matches': by_pair('matches'), 'verified': by_pair('two_view_geometries')}
     finally:
         con.close()
+
+
+def quaternion_matrix(q):
+    w, x, y, z = q
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w / n, x / n, y / n, z / n
+    return [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
 
 
 def model_poses(colmap, model, work):
@@ -271,9 +282,14 @@ class LiveBridge(unittest.TestCase):
             self.assertEqual(set(), set(names.values()) - set(content['descriptors']), project)
 
     def test_model_has_every_keyframe_at_its_pose(self):
-        poses = model_poses(self.colmap, os.path.join(self.a, 'sparse', '0'), os.path.join(self.tmp, 'model_txt'))
+        """sparse/unrefined: every keyframe at its node pose. sparse/0, the refined model (issue
+        29): every keyframe, and since this node's poses are exact, corrections within what the
+        refinement's own precision allows (measured: 1-3 mm of ATE on the built-in sequence)."""
+        poses = model_poses(self.colmap, os.path.join(self.a, 'sparse', 'unrefined'), os.path.join(self.tmp, 'model_txt'))
+        refined = model_poses(self.colmap, os.path.join(self.a, 'sparse', '0'), os.path.join(self.tmp, 'refined_txt'))
         for k in self.selection.keyframes:
             self.assertIn(k.image_name, poses, 'keyframe %d is not in the model' % k.id)
+            self.assertIn(k.image_name, refined, 'keyframe %d is not in the refined model' % k.id)
             want, got = expected_pose(k), poses[k.image_name]
             for q in range(7):
                 self.assertAlmostEqual(want[q], got[q], delta=1e-6, msg='keyframe %d: %s vs %s' % (k.id, want, got))
@@ -281,6 +297,12 @@ class LiveBridge(unittest.TestCase):
         self.assertEqual(len(self.selection.keyframes), report['registered'])
         self.assertGreater(report['points'], 100)
         self.assertEqual(len(self.final), report['final_pairs_matched'])
+        r = report['refinement']
+        self.assertTrue(r['refined'], r)
+        self.assertEqual({k.image_name for k in self.selection.keyframes}, {k['name'] for k in r['keyframes']})
+        for k in r['keyframes']:
+            self.assertLess(k['translation'], 0.02, k)
+            self.assertLess(k['rotation_deg'], 1.0, k)
 
     def test_offline_gives_the_same_model(self):
         """colmap_from_selection --model known_poses on the node's ~export of the same keyframes
@@ -293,12 +315,23 @@ class LiveBridge(unittest.TestCase):
              os.path.join(self.a, 'images'), '--out', offline], 900, 'colmap_from_selection')
         for part in ('database.db', 'images', 'report.json', os.path.join('sparse', '0')):
             self.assertTrue(os.path.exists(os.path.join(offline, part)), part)
-        online_poses = model_poses(self.colmap, os.path.join(self.a, 'sparse', '0'), os.path.join(self.tmp, 'on'))
-        offline_poses = model_poses(self.colmap, os.path.join(offline, 'sparse', '0'), os.path.join(self.tmp, 'off'))
+        online_poses = model_poses(self.colmap, os.path.join(self.a, 'sparse', 'unrefined'), os.path.join(self.tmp, 'on'))
+        offline_poses = model_poses(self.colmap, os.path.join(offline, 'sparse', 'unrefined'),
+                                    os.path.join(self.tmp, 'off'))
         self.assertEqual(sorted(online_poses), sorted(offline_poses))
         for name in online_poses:
             for a, b in zip(online_poses[name], offline_poses[name]):
                 self.assertAlmostEqual(a, b, delta=1e-9, msg=name)
+        # The refined models: the same keyframes, centres within 2 mm RMS (the refinement's own
+        # precision here; the databases differ by the pairs the bridge matched and the node took
+        # back, so the points differ a little).
+        on = model_poses(self.colmap, os.path.join(self.a, 'sparse', '0'), os.path.join(self.tmp, 'on_refined'))
+        off = model_poses(self.colmap, os.path.join(offline, 'sparse', '0'), os.path.join(self.tmp, 'off_refined'))
+        self.assertEqual(sorted(on), sorted(off))
+        centre = lambda p: -np.array(quaternion_matrix(p[:4])).T @ np.array(p[4:7])
+        rms = math.sqrt(sum(float(np.sum((centre(on[n]) - centre(off[n])) ** 2)) for n in on) / len(on))
+        rospy.loginfo('online vs offline refined keyframes: RMS %.5f m', rms)
+        self.assertLess(rms, 0.002)
         online = json.load(open(os.path.join(self.a, 'report.json')))
         off = json.load(open(os.path.join(offline, 'report.json')))
         self.assertEqual(online['registered'], off['registered'])

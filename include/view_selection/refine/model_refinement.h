@@ -1,0 +1,152 @@
+// Refining a known-pose model (issue 29): the keyframe poses and the 3D points of a COLMAP model
+// triangulated at SLAM poses are bundle-adjusted with the intrinsics fixed, under a robust loss,
+// and observations that stay far from their points are filtered, round after round. The SLAM's
+// relative motion between consecutive keyframes is a soft constraint (drift is an accumulation
+// of small relative errors): where the images connect keyframes they decide, where they do not
+// (a keyframe without points, a break in the tracks) the keyframes move with their neighbours.
+// A keyframe the adjustment would move implausibly far keeps the pose it came with, and the
+// report says which and why. A solve that fails, raises the cost or runs away (most
+// observations left as outliers) keeps the whole model as it came.
+//
+// Gauge: when every image may move, the best-observed one is held during the solve and the
+// result is then aligned to the input poses by a similarity (Umeyama on the camera centres), so
+// the refined model stays in the SLAM world frame, as close to the input poses as the refined
+// shape allows. When some images are held fixed, they define the frame and no alignment is made.
+#pragma once
+
+#include "view_selection/io/colmap_model.h"
+#include "view_selection/refine/tracks.h"
+
+#include <set>
+#include <string>
+#include <vector>
+
+namespace view_selection::refine {
+
+struct RefinementConfig {
+  /// Robust loss on the reprojection error: cauchy, huber, soft_l1, or trivial (plain squares).
+  std::string loss = "cauchy";
+  double loss_scale = 1.0;  ///< [px] where the loss starts to discount an observation
+  /// [px] after each adjustment, observations reprojecting further than this are removed
+  /// (COLMAP's Mapper.filter_max_reproj_error).
+  double max_reprojection_error = 4.0;
+  /// [deg] points whose widest pair of rays meets at a smaller angle are removed (COLMAP's
+  /// Mapper.filter_min_tri_angle): their depth is not determined.
+  double min_triangulation_angle_deg = 1.5;
+  /// With the project's matches: after the first adjustment, the points are triangulated anew
+  /// from the tracks of the matches at the refined poses this many times, each followed by
+  /// adjust-then-filter rounds. Matches the drifting poses rejected become observations now
+  /// (points triangulated at wrong poses are outliers at the right ones).
+  int retriangulations = 1;
+  /// [px] an observation further than this from its new point is dropped (the worst first);
+  /// tighter than the filter's 4 px, as the live model measured (live/model.py).
+  double triangulation_max_error = 3.0;
+  /// With triangulate_first the matches are also triangulated before the first adjustment, at
+  /// the input poses, admitting triangulation_max_error x growth^retriangulations (9 px): the
+  /// drifting poses put far-apart views' observations a few pixels off, and those are what
+  /// corrects the drift; the robust loss weighs them as the poses improve, and the last
+  /// triangulation holds to triangulation_max_error. Measured on DTU scan24 and the ring with a
+  /// 2% drift (dev/benchmark_drift): 4.0 mm and 1.97 mm without, 0.97 mm and 1.18 mm with, in
+  /// less time. In general the k-th of n triangulations admits max_error x growth^(n - k).
+  double triangulation_growth = 3.0;
+  bool triangulate_first = true;
+  /// Adjust-then-filter rounds; stops earlier when a round filters (almost) nothing.
+  int max_rounds = 4;
+  int max_iterations = 100;  ///< Ceres iterations per adjustment
+  /// Ceres stops when the cost changes by less than this, relative: 1e-5 halves the iterations
+  /// of 1e-6 for the same ATE within 1% (DTU, the ring, the walk; dev/benchmark_drift).
+  double function_tolerance = 1e-5;
+  /// A round that leaves more than this fraction of its observations beyond
+  /// max_reprojection_error has run away (diverged): the input model is kept.
+  double max_filtered_ratio = 0.5;
+  /// Without priors, a movable image with fewer observations than this keeps its input pose:
+  /// it cannot be held by so few points. With priors it moves with its neighbours (`weak`).
+  int min_observations = 15;
+  /// A movable image that the adjustment would move further than this fraction of the median
+  /// depth of its points, or turn by more than max_correction_deg, keeps its input pose.
+  double max_correction_depth_ratio = 0.5;
+  double max_correction_deg = 15.0;
+  /// The SLAM's relative motion between consecutive images (by id) as soft constraints: a
+  /// step's translation may change by this fraction of its length (1 sigma; at least this
+  /// fraction of a tenth of the median step), its rotation by prior_rotation_deg, under a
+  /// Cauchy loss at prior_loss_scale sigmas (a tracking jump is not believed). 0: no priors
+  /// (the scale is then held by one translation coordinate, as COLMAP does). They hold what the
+  /// images do not connect (a keyframe without points, a break in the tracks) and must not
+  /// fight the images where they see: 20% and 3 degrees, chosen on the walk with the odometry
+  /// stand-in's poses (3.54 mm at 5% and 1 degree, 3.31 mm at 20% and 3, 3.30 mm without) and
+  /// no worse on DTU and the ring (dev/benchmark_drift).
+  double prior_translation_ratio = 0.2;
+  double prior_rotation_deg = 3.0;
+  double prior_loss_scale = 3.0;
+  /// With every image movable: align the result to the input poses (Sim(3)); see above.
+  bool align_to_input = true;
+  int threads = 0;  ///< Ceres threads; 0: one per core
+  /// Ceres' dense Schur solver up to this many images, the sparse one above.
+  size_t dense_up_to = 50;
+  bool verbose = false;  ///< Ceres' report of each solve on stderr
+
+  /// Throws core::InvalidArgument naming the bad value.
+  void validate() const;
+};
+
+/// What happened to one image.
+struct ImageCorrection {
+  int image_id = 0;
+  std::string name;
+  bool movable = false;   ///< asked to move
+  bool refined = false;   ///< moved by the refinement (false: kept its input pose)
+  std::string kept;       ///< why it kept its input pose ("" when refined or not movable)
+  double translation = 0.0;   ///< |refined centre - input centre| [model units]
+  double rotation_deg = 0.0;  ///< angle of R_refined R_input^T [deg]
+  Eigen::Vector3d centre_input = Eigen::Vector3d::Zero();
+  Eigen::Vector3d centre_refined = Eigen::Vector3d::Zero();
+  int observations_input = 0;
+  int observations_refined = 0;
+  bool weak = false;  ///< refined with fewer than min_observations: held mostly by the priors
+  double median_depth = 0.0;  ///< of its observed points, in the input model [model units]
+};
+
+struct RefinementReport {
+  /// converged | no_convergence (iterations ran out; the result is still better) | diverged
+  /// (the solve failed, raised the cost, or left more than max_filtered_ratio of the
+  /// observations as outliers: the input model is returned) | nothing_to_refine | triangulated
+  /// (no image may move, matches given: their tracks triangulated at the given poses)
+  std::string status = "nothing_to_refine";
+  bool refined = false;  ///< the returned model differs from the input
+  int rounds = 0;
+  int iterations = 0;  ///< Ceres iterations, all rounds
+  int passes = 1;      ///< 2 when implausible corrections made it start again with them held
+  int retriangulations = 0;  ///< times the points were triangulated anew from the matches
+  size_t tracks = 0, track_conflicts = 0;  ///< of the matches given, and matches left out
+  double initial_cost = 0.0, final_cost = 0.0;  ///< of the last solve [px^2, robust]
+  size_t points_input = 0, points_refined = 0;
+  size_t observations_input = 0, observations_refined = 0;
+  size_t observations_filtered = 0;  ///< removed as outliers, all rounds
+  size_t points_filtered = 0;        ///< removed (track too short or angle too small)
+  double reprojection_error_input = 0.0;    ///< mean over points of their mean error [px]
+  double reprojection_error_refined = 0.0;  ///< the same after refinement [px]
+  bool aligned = false;     ///< the result was aligned to the input (every image movable)
+  double alignment_scale = 1.0;
+  std::string message;      ///< a sentence for the log
+  std::vector<ImageCorrection> images;
+  double seconds = 0.0;     ///< wall time of refineModel
+};
+
+/// The refined model; `movable` are the image ids that may move (others are held fixed).
+/// Cameras (intrinsics) are never changed. `reference`, when given, holds the poses that
+/// corrections are measured against, the result is aligned to and kept images return to (by
+/// image id; e.g. the SLAM poses when `input` was already refined once and re-triangulated);
+/// by default the input's. Throws core::InvalidArgument for a camera model other than
+/// SIMPLE_PINHOLE or PINHOLE, or non-finite input. `matches` (verified matches of the project
+/// as (image id, 2D point index) pairs, the 2D points of the model's images): the points are
+/// triangulated anew from them at the refined poses (config.retriangulations); without them
+/// the input's points and tracks are refined as they are.
+io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& movable,
+                            const RefinementConfig& config, RefinementReport* report,
+                            const io::ColmapModel* reference = nullptr,
+                            const std::vector<Match>* matches = nullptr);
+
+/// Every image id of `model`.
+std::set<int> allImages(const io::ColmapModel& model);
+
+}  // namespace view_selection::refine

@@ -1,0 +1,855 @@
+#include "view_selection/refine/model_refinement.h"
+
+#include "view_selection/core/exceptions.h"
+#include "view_selection/eval/trajectory_alignment.h"
+#include "view_selection/refine/tracks.h"
+
+#include <ceres/ceres.h>
+#include <ceres/product_manifold.h>
+#include <ceres/rotation.h>
+#include <Eigen/Eigenvalues>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <memory>
+#include <sstream>
+#include <cstdio>
+#include <thread>
+
+namespace view_selection::refine {
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+double degrees(double rad) { return rad * 180.0 / kPi; }
+
+/// fx, fy, cx, cy of a SIMPLE_PINHOLE (f cx cy) or PINHOLE (fx fy cx cy) camera.
+Eigen::Vector4d pinhole(const io::ColmapCamera& c) {
+  if (c.model_id == 0 && c.params.size() == 3) return {c.params[0], c.params[0], c.params[1], c.params[2]};
+  if (c.model_id == 1 && c.params.size() == 4) return {c.params[0], c.params[1], c.params[2], c.params[3]};
+  throw core::InvalidArgument("camera " + std::to_string(c.id) +
+                              ": refinement supports SIMPLE_PINHOLE and PINHOLE cameras (model id " +
+                              std::to_string(c.model_id) + ")");
+}
+
+/// The reprojection error of one observation, in pixels; pose as Eigen's quaternion (x, y, z,
+/// w in memory) and translation, world to camera.
+struct ReprojectionError {
+  ReprojectionError(const Eigen::Vector2d& observed, const Eigen::Vector4d& k) : xy(observed), k(k) {}
+
+  /// pose: Eigen's quaternion (x, y, z, w) then the translation, world to camera.
+  template <typename T>
+  bool operator()(const T* pose, const T* x, T* residual) const {
+    const Eigen::Map<const Eigen::Quaternion<T>> rotation(pose);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> translation(pose + 4), point(x);
+    const Eigen::Matrix<T, 3, 1> p = rotation * point + translation;
+    residual[0] = T(k[0]) * p.x() / p.z() + T(k[2]) - T(xy.x());
+    residual[1] = T(k[1]) * p.y() / p.z() + T(k[3]) - T(xy.y());
+    return true;
+  }
+
+  Eigen::Vector2d xy;
+  Eigen::Vector4d k;
+};
+
+/// The SLAM system's relative motion between two keyframes as a soft constraint: the
+/// rotation (angle-axis, [rad] / sigma_r) and translation (/ sigma_t) of b relative to a, both
+/// world -> camera, against the reference's. Drift is an accumulation of small relative errors,
+/// so these priors let the shape bend where the images say so, and hold the parts the images
+/// do not connect (a keyframe without points, a break in the tracks) where the SLAM put them.
+struct RelativePosePrior {
+  RelativePosePrior(const Eigen::Quaterniond& rotation_ba, const Eigen::Vector3d& translation_ba,
+                    double sigma_r, double sigma_t)
+      : r(rotation_ba), t(translation_ba), sigma_r(sigma_r), sigma_t(sigma_t) {}
+
+  template <typename T>
+  bool operator()(const T* a, const T* b, T* residual) const {
+    const Eigen::Map<const Eigen::Quaternion<T>> ra(a), rb(b);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> pa(a + 4), pb(b + 4);
+    const Eigen::Quaternion<T> rba = rb * ra.conjugate();
+    const Eigen::Matrix<T, 3, 1> tba = pb - rba * pa;
+    const Eigen::Quaternion<T> d = rba * r.cast<T>().conjugate();
+    const T wxyz[4] = {d.w(), d.x(), d.y(), d.z()};
+    T aa[3];
+    ceres::QuaternionToAngleAxis(wxyz, aa);
+    for (int k = 0; k < 3; ++k) {
+      residual[k] = aa[k] / T(sigma_r);
+      residual[3 + k] = (tba[k] - T(t[k])) / T(sigma_t);
+    }
+    return true;
+  }
+
+  Eigen::Quaterniond r;
+  Eigen::Vector3d t;
+  double sigma_r, sigma_t;
+};
+
+/// The state being refined: poses by image id, points by point id, tracks as lists of
+/// (image id, 2D index). Images and points of the input are never added to.
+struct State {
+  struct Pose {
+    Eigen::Quaterniond rotation;  ///< world -> camera
+    Eigen::Vector3d translation;
+    Eigen::Vector3d centre() const { return -(rotation.conjugate() * translation); }
+  };
+  std::map<int, Pose> poses;
+  std::map<int, Eigen::Vector4d> intrinsics;  ///< by image id
+  std::map<int, const io::ColmapImage*> images;
+  std::map<int64_t, Eigen::Vector3d> points;
+  std::map<int64_t, std::vector<io::ColmapTrackElement>> tracks;
+  std::map<int64_t, std::array<uint8_t, 3>> colours;
+
+  Eigen::Vector2d observed(const io::ColmapTrackElement& e) const {
+    return images.at(e.image_id)->points2D[static_cast<size_t>(e.point2D_idx)].xy;
+  }
+  /// Reprojection error [px] and depth of point `x` seen by image `image_id`.
+  std::pair<double, double> reproject(int image_id, const Eigen::Vector3d& x,
+                                      const Eigen::Vector2d& xy) const {
+    const Pose& pose = poses.at(image_id);
+    const Eigen::Vector4d& k = intrinsics.at(image_id);
+    const Eigen::Vector3d p = pose.rotation * x + pose.translation;
+    if (!(p.z() > 0.0)) return {std::numeric_limits<double>::infinity(), p.z()};
+    const Eigen::Vector2d px(k[0] * p.x() / p.z() + k[2], k[1] * p.y() / p.z() + k[3]);
+    return {(px - xy).norm(), p.z()};
+  }
+  size_t observations() const {
+    size_t n = 0;
+    for (const auto& [id, t] : tracks) n += t.size();
+    return n;
+  }
+  std::map<int, int> observationsPerImage() const {
+    std::map<int, int> n;
+    for (const auto& [id, pose] : poses) n[id] = 0;
+    for (const auto& [id, t] : tracks)
+      for (const auto& e : t) ++n[e.image_id];
+    return n;
+  }
+  double meanError() const {
+    double sum = 0.0;
+    size_t n = 0;
+    for (const auto& [id, t] : tracks) {
+      if (t.empty()) continue;
+      double e = 0.0;
+      for (const auto& o : t) e += reproject(o.image_id, points.at(id), observed(o)).first;
+      sum += e / static_cast<double>(t.size());
+      ++n;
+    }
+    return n ? sum / static_cast<double>(n) : 0.0;
+  }
+};
+
+State stateOf(const io::ColmapModel& model) {
+  State s;
+  for (const auto& [id, im] : model.images) {
+    if (!im.rotation.coeffs().allFinite() || !im.translation.allFinite())
+      throw core::InvalidArgument("image " + im.name + " has a non-finite pose");
+    s.poses[id] = {im.rotation.normalized(), im.translation};
+    s.intrinsics[id] = pinhole(model.cameras.at(im.camera_id));
+    s.images[id] = &im;
+  }
+  for (const auto& [id, p] : model.points) {
+    if (!p.xyz.allFinite()) throw core::InvalidArgument("point " + std::to_string(id) + " is not finite");
+    s.points[id] = p.xyz;
+    s.tracks[id] = p.track;
+    s.colours[id] = p.rgb;
+  }
+  return s;
+}
+
+/// Removes observations that reproject further than the limit (unless `by_error` is false) or
+/// lie behind their camera, observations of images in `excluded`, then points left with fewer
+/// than two observations or a too small triangulation angle. Returns (observations removed,
+/// points removed).
+std::pair<size_t, size_t> filter(State& s, const RefinementConfig& config, const std::set<int>& excluded,
+                                 bool by_error = true) {
+  size_t observations = 0, points = 0;
+  const double min_angle = config.min_triangulation_angle_deg * kPi / 180.0;
+  for (auto it = s.tracks.begin(); it != s.tracks.end();) {
+    auto& track = it->second;
+    const Eigen::Vector3d& x = s.points.at(it->first);
+    const size_t before = track.size();
+    track.erase(std::remove_if(track.begin(), track.end(),
+                               [&](const io::ColmapTrackElement& e) {
+                                 if (excluded.count(e.image_id)) return true;
+                                 const auto [error, depth] = s.reproject(e.image_id, x, s.observed(e));
+                                 return !(depth > 0.0) || (by_error && !(error <= config.max_reprojection_error));
+                               }),
+                track.end());
+    observations += before - track.size();
+    bool keep = track.size() >= 2;
+    if (keep && min_angle > 0.0) {
+      double widest = 0.0;
+      for (size_t a = 0; a < track.size() && widest < min_angle; ++a)
+        for (size_t b = a + 1; b < track.size() && widest < min_angle; ++b) {
+          const Eigen::Vector3d ra = s.poses.at(track[a].image_id).centre() - x;
+          const Eigen::Vector3d rb = s.poses.at(track[b].image_id).centre() - x;
+          const double c = ra.normalized().dot(rb.normalized());
+          widest = std::max(widest, std::acos(std::clamp(c, -1.0, 1.0)));
+        }
+      keep = widest >= min_angle;
+    }
+    if (!keep) {
+      observations += track.size();
+      s.points.erase(it->first);
+      s.colours.erase(it->first);
+      it = s.tracks.erase(it);
+      ++points;
+    } else {
+      ++it;
+    }
+  }
+  return {observations, points};
+}
+
+std::unique_ptr<ceres::LossFunction> lossOf(const RefinementConfig& c) {
+  if (c.loss == "cauchy") return std::make_unique<ceres::CauchyLoss>(c.loss_scale);
+  if (c.loss == "huber") return std::make_unique<ceres::HuberLoss>(c.loss_scale);
+  if (c.loss == "soft_l1") return std::make_unique<ceres::SoftLOneLoss>(c.loss_scale);
+  return nullptr;
+}
+
+/// The gauge of a solve: poses of `moving` images change, the others are held; with
+/// `scale_image` >= 0 one coordinate (`scale_axis`) of that image's translation is held too,
+/// which fixes the scale (COLMAP holds the second image's x the same way).
+struct Prior {
+  int a = 0, b = 0;
+  Eigen::Quaterniond rotation_ba;
+  Eigen::Vector3d translation_ba;
+  double sigma_r = 0.0, sigma_t = 0.0;
+};
+
+struct Gauge {
+  std::set<int> moving;
+  int scale_image = -1;
+  int scale_axis = 0;
+  std::vector<Prior> priors;
+};
+
+/// One bundle adjustment of the poses the gauge lets move, and every point.
+ceres::Solver::Summary adjust(State& s, const Gauge& gauge, const RefinementConfig& config) {
+  const std::set<int>& moving = gauge.moving;
+  ceres::Problem::Options problem_options;
+  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  ceres::Problem problem(problem_options);
+  const std::unique_ptr<ceres::LossFunction> loss = lossOf(config);
+  // One block a pose: Eigen's quaternion (x, y, z, w) and the translation, so that Ceres' Schur
+  // eliminator runs its fixed-size <2, 3, 6> kernels.
+  std::map<int, std::array<double, 7>> pose;
+  for (const auto& [id, p] : s.poses)
+    pose[id] = {p.rotation.x(), p.rotation.y(), p.rotation.z(), p.rotation.w(),
+                p.translation.x(), p.translation.y(), p.translation.z()};
+  std::set<int> used;
+  for (auto& [id, track] : s.tracks)
+    for (const auto& e : track) {
+      auto* cost = new ceres::AutoDiffCostFunction<ReprojectionError, 2, 7, 3>(
+          new ReprojectionError(s.observed(e), s.intrinsics.at(e.image_id)));
+      problem.AddResidualBlock(cost, loss.get(), pose[e.image_id].data(), s.points[id].data());
+      used.insert(e.image_id);
+    }
+  ceres::CauchyLoss prior_loss(config.prior_loss_scale);
+  for (const Prior& p : gauge.priors) {
+    auto* cost = new ceres::AutoDiffCostFunction<RelativePosePrior, 6, 7, 7>(
+        new RelativePosePrior(p.rotation_ba, p.translation_ba, p.sigma_r, p.sigma_t));
+    problem.AddResidualBlock(cost, &prior_loss, pose[p.a].data(), pose[p.b].data());
+    used.insert(p.a);
+    used.insert(p.b);
+  }
+  using PoseManifold = ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>;
+  using ScaleHeldManifold = ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::SubsetManifold>;
+  for (int id : used) {
+    if (!moving.count(id)) {
+      problem.SetManifold(pose[id].data(), new PoseManifold);
+      problem.SetParameterBlockConstant(pose[id].data());
+    } else if (id == gauge.scale_image) {
+      problem.SetManifold(pose[id].data(), new ScaleHeldManifold(ceres::EigenQuaternionManifold(),
+                                                                 ceres::SubsetManifold(3, {gauge.scale_axis})));
+    } else {
+      problem.SetManifold(pose[id].data(), new PoseManifold);
+    }
+  }
+  ceres::Solver::Options options;
+  options.linear_solver_type = used.size() <= config.dense_up_to ? ceres::DENSE_SCHUR : ceres::SPARSE_SCHUR;
+  options.max_num_iterations = config.max_iterations;
+  options.function_tolerance = config.function_tolerance;
+  options.num_threads = config.threads > 0 ? config.threads
+                                           : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  options.logging_type = ceres::SILENT;
+  ceres::Solver::Summary summary;
+  if (problem.NumResidualBlocks() == 0) return summary;
+  ceres::Solve(options, &problem, &summary);
+  if (config.verbose) std::fprintf(stderr, "%s\n", summary.FullReport().c_str());
+  for (int id : used) {
+    const auto& v = pose[id];
+    s.poses[id].rotation = Eigen::Quaterniond(v[3], v[0], v[1], v[2]).normalized();
+    s.poses[id].translation = Eigen::Vector3d(v[4], v[5], v[6]);
+  }
+  return summary;
+}
+
+/// Median depth of the points each image observes in `s`, by image id.
+std::map<int, double> medianDepths(const State& s) {
+  std::map<int, std::vector<double>> depths;
+  for (const auto& [id, pose] : s.poses) depths[id];
+  for (const auto& [pid, track] : s.tracks)
+    for (const auto& e : track)
+      depths[e.image_id].push_back(s.reproject(e.image_id, s.points.at(pid), s.observed(e)).second);
+  std::map<int, double> out;
+  std::vector<double> all;
+  for (auto& [id, d] : depths) {
+    if (d.empty()) continue;
+    std::nth_element(d.begin(), d.begin() + static_cast<long>(d.size() / 2), d.end());
+    out[id] = d[d.size() / 2];
+    all.push_back(out[id]);
+  }
+  // An image without points takes the median over the images (the scene's depth).
+  std::sort(all.begin(), all.end());
+  for (const auto& [id, d] : depths)
+    if (d.empty()) out[id] = all.empty() ? 0.0 : all[all.size() / 2];
+  return out;
+}
+
+double rotationBetweenDeg(const Eigen::Quaterniond& a, const Eigen::Quaterniond& b) {
+  return degrees(a.angularDistance(b));
+}
+
+/// Applies x -> scale R x + t to every pose and point of `s`.
+void transform(State& s, const eval::SimilarityTransform& sim) {
+  const Eigen::Quaterniond r(sim.rotation);
+  for (auto& [id, pose] : s.poses) {
+    const Eigen::Vector3d centre = sim.apply(pose.centre());
+    pose.rotation = (pose.rotation * r.conjugate()).normalized();
+    pose.translation = -(pose.rotation * centre);
+  }
+  for (auto& [id, x] : s.points) x = sim.apply(x);
+}
+
+/// The gauge: the caller's fixed images are held. With fewer than two of them observed, the
+/// best-observed moving image is held too (when none is fixed), and one translation
+/// coordinate of the moving image that shares the most points with a held one, along the
+/// baseline's largest component in its own frame, fixes the scale.
+Gauge gaugeOf(const State& s, const std::map<int, State::Pose>& reference, const std::set<int>& movable,
+              const std::set<int>& kept, const RefinementConfig& config) {
+  Gauge g;
+  for (int id : movable)
+    if (!kept.count(id) && s.poses.count(id)) g.moving.insert(id);
+  const std::map<int, int> observations = s.observationsPerImage();
+  // Priors between consecutive images (by id: the order keyframes were accepted, or photos taken)
+  // that take part, from the reference poses. A step's translation sigma is a fraction of its
+  // length, but not below that fraction of a tenth of the median step (a camera standing still).
+  if (config.prior_translation_ratio > 0.0) {
+    std::vector<int> chain;
+    for (const auto& [id, pose] : s.poses)
+      if (!kept.count(id)) chain.push_back(id);
+    std::vector<double> steps;
+    for (size_t k = 1; k < chain.size(); ++k)
+      steps.push_back((reference.at(chain[k]).centre() - reference.at(chain[k - 1]).centre()).norm());
+    std::vector<double> sorted = steps;
+    std::sort(sorted.begin(), sorted.end());
+    const double median_step = sorted.empty() ? 0.0 : sorted[sorted.size() / 2];
+    for (size_t k = 1; k < chain.size(); ++k) {
+      const double length = std::max(steps[k - 1], 0.1 * median_step);
+      if (!(length > 0.0)) continue;
+      Prior p;
+      p.a = chain[k - 1];
+      p.b = chain[k];
+      const State::Pose& a = reference.at(p.a);
+      const State::Pose& b = reference.at(p.b);
+      p.rotation_ba = (b.rotation * a.rotation.conjugate()).normalized();
+      p.translation_ba = b.translation - p.rotation_ba * a.translation;
+      p.sigma_r = config.prior_rotation_deg * kPi / 180.0;
+      p.sigma_t = config.prior_translation_ratio * length;
+      g.priors.push_back(p);
+    }
+  }
+  std::set<int> held;
+  for (const auto& [id, n] : observations)
+    if (n > 0 && !movable.count(id)) held.insert(id);
+  if (held.size() >= 2 || g.moving.empty()) return g;
+  if (held.empty()) {
+    int best = *g.moving.begin();
+    for (int id : g.moving)
+      if (observations.at(id) > observations.at(best)) best = id;
+    g.moving.erase(best);
+    held.insert(best);
+  }
+  if (!g.priors.empty()) return g;  // the priors' step lengths fix the scale
+  const int anchor = *held.begin();
+  std::map<int, int> shared;
+  for (const auto& [pid, track] : s.tracks) {
+    const bool seen = std::any_of(track.begin(), track.end(), [&](const auto& e) { return e.image_id == anchor; });
+    if (!seen) continue;
+    for (const auto& e : track)
+      if (g.moving.count(e.image_id)) ++shared[e.image_id];
+  }
+  int second = -1, most = 0;
+  for (const auto& [id, n] : shared)
+    if (n > most) {
+      most = n;
+      second = id;
+    }
+  if (second < 0) return g;
+  const State::Pose& a = s.poses.at(anchor);
+  const State::Pose& b = s.poses.at(second);
+  const Eigen::Vector3d baseline = b.rotation * (a.centre() - b.centre());  // in the second's frame
+  if (!(baseline.norm() > 0.0)) return g;
+  baseline.cwiseAbs().maxCoeff(&g.scale_axis);
+  g.scale_image = second;
+  return g;
+}
+
+/// The points of `tracks` triangulated anew at the poses of `s` (images in `excluded` and their
+/// observations left out), replacing its points: a linear (DLT) point from the rays, three
+/// Gauss-Newton steps on the pixel error, and the worst observation dropped while it is further
+/// than triangulation_max_error (the point again from the rest); kept when it has two
+/// observations left, lies in front of them and is seen at min_triangulation_angle_deg at
+/// least. A point takes the colour of an old point that shared an observation.
+void retriangulate(State& s, const Tracks& tracks, const std::set<int>& excluded, const RefinementConfig& config,
+                   double max_error) {
+  std::map<std::pair<int, int>, int64_t> old_point;  // (image, 2D index) -> old point id
+  for (const auto& [id, track] : s.tracks)
+    for (const auto& e : track) old_point[{e.image_id, e.point2D_idx}] = id;
+  std::map<int64_t, Eigen::Vector3d> points;
+  std::map<int64_t, std::vector<io::ColmapTrackElement>> new_tracks;
+  std::map<int64_t, std::array<uint8_t, 3>> colours;
+  const double min_angle = config.min_triangulation_angle_deg * kPi / 180.0;
+  int64_t next = 1;
+  for (const auto& track : tracks.tracks) {
+    std::vector<io::ColmapTrackElement> obs;
+    for (const Observation& o : track) {
+      const auto im = s.images.find(o.image_id);
+      if (im == s.images.end() || excluded.count(o.image_id) || o.point2D_idx < 0 ||
+          static_cast<size_t>(o.point2D_idx) >= im->second->points2D.size())
+        continue;
+      obs.push_back({o.image_id, o.point2D_idx});
+    }
+    Eigen::Vector3d x = Eigen::Vector3d::Zero();
+    bool ok = false;
+    while (obs.size() >= 2) {
+      Eigen::Matrix4d a = Eigen::Matrix4d::Zero();
+      for (const auto& e : obs) {
+        const State::Pose& pose = s.poses.at(e.image_id);
+        const Eigen::Vector4d& k = s.intrinsics.at(e.image_id);
+        const Eigen::Vector2d xy = s.observed(e);
+        const Eigen::Vector2d n((xy.x() - k[2]) / k[0], (xy.y() - k[3]) / k[1]);
+        Eigen::Matrix<double, 3, 4> pm;
+        pm << pose.rotation.toRotationMatrix(), pose.translation;
+        const Eigen::RowVector4d r0 = n.x() * pm.row(2) - pm.row(0);
+        const Eigen::RowVector4d r1 = n.y() * pm.row(2) - pm.row(1);
+        a += r0.transpose() * r0 + r1.transpose() * r1;
+      }
+      const Eigen::Vector4d h = Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d>(a).eigenvectors().col(0);
+      if (!(std::abs(h.w()) > 1e-12 * h.head<3>().norm())) break;  // at infinity
+      x = h.head<3>() / h.w();
+      for (int step = 0; step < 3; ++step) {  // Gauss-Newton, the poses held
+        Eigen::Matrix3d jtj = Eigen::Matrix3d::Zero();
+        Eigen::Vector3d jtr = Eigen::Vector3d::Zero();
+        for (const auto& e : obs) {
+          const State::Pose& pose = s.poses.at(e.image_id);
+          const Eigen::Vector4d& k = s.intrinsics.at(e.image_id);
+          const Eigen::Matrix3d r = pose.rotation.toRotationMatrix();
+          const Eigen::Vector3d p = r * x + pose.translation;
+          if (!(p.z() > 0.0)) continue;
+          const Eigen::Vector2d res(k[0] * p.x() / p.z() + k[2] - s.observed(e).x(),
+                                    k[1] * p.y() / p.z() + k[3] - s.observed(e).y());
+          Eigen::Matrix<double, 2, 3> d;
+          d << k[0] / p.z(), 0.0, -k[0] * p.x() / (p.z() * p.z()), 0.0, k[1] / p.z(), -k[1] * p.y() / (p.z() * p.z());
+          const Eigen::Matrix<double, 2, 3> j = d * r;
+          jtj += j.transpose() * j;
+          jtr += j.transpose() * res;
+        }
+        const Eigen::Vector3d dx = (jtj + 1e-12 * Eigen::Matrix3d::Identity()).ldlt().solve(-jtr);
+        if (!dx.allFinite()) break;
+        x += dx;
+      }
+      size_t worst = 0;
+      double worst_error = -1.0;
+      bool behind = false;
+      for (size_t q = 0; q < obs.size(); ++q) {
+        const auto [error, depth] = s.reproject(obs[q].image_id, x, s.observed(obs[q]));
+        if (!(depth > 0.0)) behind = true;
+        const double e = std::isfinite(error) ? error : std::numeric_limits<double>::max();
+        if (e > worst_error) {
+          worst_error = e;
+          worst = q;
+        }
+      }
+      if (!behind && worst_error <= max_error) {
+        ok = true;
+        break;
+      }
+      obs.erase(obs.begin() + static_cast<long>(worst));
+    }
+    if (!ok || !x.allFinite()) continue;
+    double widest = 0.0;
+    for (size_t p = 0; p < obs.size() && widest < min_angle; ++p)
+      for (size_t q = p + 1; q < obs.size() && widest < min_angle; ++q) {
+        const Eigen::Vector3d ra = (s.poses.at(obs[p].image_id).centre() - x).normalized();
+        const Eigen::Vector3d rb = (s.poses.at(obs[q].image_id).centre() - x).normalized();
+        widest = std::max(widest, std::acos(std::clamp(ra.dot(rb), -1.0, 1.0)));
+      }
+    if (widest < min_angle) continue;
+    const int64_t id = next++;
+    points[id] = x;
+    colours[id] = {{128, 128, 128}};
+    for (const auto& e : obs) {
+      const auto old = old_point.find({e.image_id, e.point2D_idx});
+      if (old != old_point.end() && s.colours.count(old->second)) {
+        colours[id] = s.colours.at(old->second);
+        break;
+      }
+    }
+    new_tracks[id] = std::move(obs);
+  }
+  s.points = std::move(points);
+  s.tracks = std::move(new_tracks);
+  s.colours = std::move(colours);
+}
+
+struct PassResult {
+  State state;
+  bool diverged = false;
+  std::string why;
+  int rounds = 0, iterations = 0;
+  double initial_cost = 0.0, final_cost = 0.0;
+  bool converged = true;
+  size_t observations_filtered = 0, points_filtered = 0;
+  bool aligned = false;
+  double scale = 1.0;
+  int retriangulations = 0;
+};
+
+/// Rounds of adjust-then-filter on `input` with the images in `kept` left out (their
+/// observations too) and those not in `movable` held; aligned to the input when the caller held
+/// nothing.
+PassResult pass(const State& input, const std::map<int, State::Pose>& reference, const std::set<int>& movable,
+                const std::set<int>& kept, const RefinementConfig& config, const Tracks* tracks) {
+  PassResult r;
+  r.state = input;
+  State& s = r.state;
+  const bool caller_fixed = std::any_of(s.poses.begin(), s.poses.end(),
+                                        [&](const auto& p) { return !movable.count(p.first); });
+  // Before the first solve only what cannot take part goes (kept images, points behind a
+  // camera): the input was triangulated at these poses, and what it left far from its points is
+  // for the robust loss and the filter after the solve to judge.
+  auto [obs, pts] = filter(s, config, kept, false);
+  r.observations_filtered += obs;
+  r.points_filtered += pts;
+  const Gauge gauge = gaugeOf(s, reference, movable, kept, config);
+  const int stages = tracks ? 1 + config.retriangulations : 1;
+  for (int stage = 0; stage < stages; ++stage) {
+  if (stage > 0 || (tracks && config.triangulate_first)) {
+    // Earlier triangulations admit more (the poses are still off), the last one the final limit.
+    const int later = config.retriangulations - stage;
+    retriangulate(s, *tracks, kept, config,
+                  config.triangulation_max_error * std::pow(config.triangulation_growth, std::max(0, later)));
+    ++r.retriangulations;
+  }
+  for (int round = 0; round < config.max_rounds; ++round) {
+    const size_t before = s.observations();
+    if (before == 0) break;
+    const ceres::Solver::Summary summary = adjust(s, gauge, config);
+    ++r.rounds;
+    r.iterations += static_cast<int>(summary.iterations.size());
+    if (stage == 0 && round == 0) r.initial_cost = summary.initial_cost;
+    r.final_cost = summary.final_cost;
+    if (summary.termination_type == ceres::FAILURE || summary.termination_type == ceres::USER_FAILURE ||
+        !std::isfinite(summary.final_cost) || summary.final_cost > summary.initial_cost * (1.0 + 1e-9)) {
+      r.diverged = true;
+      std::ostringstream why;
+      why << "the adjustment failed in round " << r.rounds << " (" << summary.message << "; cost "
+          << summary.initial_cost << " -> " << summary.final_cost << ")";
+      r.why = why.str();
+      return r;
+    }
+    if (summary.termination_type == ceres::NO_CONVERGENCE) r.converged = false;
+    std::tie(obs, pts) = filter(s, config, kept);
+    r.observations_filtered += obs;
+    r.points_filtered += pts;
+    // A solve that leaves most observations far from their points has run away (points behind
+    // the cameras, a degenerate minimum): that is not a correction of drift.
+    if (static_cast<double>(obs) > config.max_filtered_ratio * static_cast<double>(before)) {
+      r.diverged = true;
+      std::ostringstream why;
+      why << "the adjustment ran away in round " << r.rounds << ": " << obs << " of " << before
+          << " observations left more than " << config.max_reprojection_error << " px from their points";
+      r.why = why.str();
+      return r;
+    }
+    if (static_cast<double>(obs) < 1e-3 * static_cast<double>(before)) break;
+  }
+  }
+  if (!caller_fixed && config.align_to_input) {
+    std::vector<int> ids;
+    for (int id : movable)
+      if (!kept.count(id) && s.poses.count(id)) ids.push_back(id);
+    if (ids.size() >= 3) {
+      Eigen::Matrix3Xd from(3, static_cast<long>(ids.size())), to(3, static_cast<long>(ids.size()));
+      for (size_t q = 0; q < ids.size(); ++q) {
+        from.col(static_cast<long>(q)) = s.poses.at(ids[q]).centre();
+        to.col(static_cast<long>(q)) = reference.at(ids[q]).centre();
+      }
+      try {
+        const eval::SimilarityTransform sim = eval::alignUmeyama(from, to);
+        transform(s, sim);
+        r.aligned = true;
+        r.scale = sim.scale;
+      } catch (const core::InvalidArgument&) {
+        // collinear or coincident centres: the held first image defines the frame
+      }
+    }
+  }
+  return r;
+}
+
+io::ColmapModel modelOf(const io::ColmapModel& input, const State& s) {
+  io::ColmapModel out;
+  out.cameras = input.cameras;
+  out.images = input.images;
+  for (auto& [id, im] : out.images) {
+    im.rotation = s.poses.at(id).rotation;
+    im.translation = s.poses.at(id).translation;
+    for (auto& p : im.points2D) p.point3D_id = -1;
+  }
+  for (const auto& [id, track] : s.tracks) {
+    io::ColmapPoint3D p;
+    p.id = id;
+    p.rgb = s.colours.count(id) ? s.colours.at(id) : std::array<uint8_t, 3>{{128, 128, 128}};
+    p.xyz = s.points.at(id);
+    p.track = track;
+    double e = 0.0;
+    for (const auto& o : track) {
+      e += s.reproject(o.image_id, p.xyz, s.observed(o)).first;
+      out.images.at(o.image_id).points2D[static_cast<size_t>(o.point2D_idx)].point3D_id = id;
+    }
+    p.error = track.empty() ? -1.0 : e / static_cast<double>(track.size());
+    out.points[id] = std::move(p);
+  }
+  return out;
+}
+
+}  // namespace
+
+void RefinementConfig::validate() const {
+  if (loss != "cauchy" && loss != "huber" && loss != "soft_l1" && loss != "trivial")
+    throw core::InvalidArgument("loss must be cauchy, huber, soft_l1 or trivial, not '" + loss + "'");
+  if (!(loss_scale > 0.0)) throw core::InvalidArgument("loss_scale must be positive [px]");
+  if (!(max_reprojection_error > 0.0)) throw core::InvalidArgument("max_reprojection_error must be positive [px]");
+  if (!(min_triangulation_angle_deg >= 0.0 && min_triangulation_angle_deg < 90.0))
+    throw core::InvalidArgument("min_triangulation_angle_deg must be in [0, 90)");
+  if (max_rounds < 1 || max_iterations < 1) throw core::InvalidArgument("max_rounds and max_iterations must be >= 1");
+  if (!(function_tolerance > 0.0 && function_tolerance < 1.0))
+    throw core::InvalidArgument("function_tolerance must be in (0, 1)");
+  if (min_observations < 0) throw core::InvalidArgument("min_observations must be >= 0");
+  if (!(max_correction_depth_ratio > 0.0)) throw core::InvalidArgument("max_correction_depth_ratio must be positive");
+  if (!(max_correction_deg > 0.0 && max_correction_deg <= 180.0))
+    throw core::InvalidArgument("max_correction_deg must be in (0, 180]");
+  if (threads < 0) throw core::InvalidArgument("threads must be >= 0");
+  if (!(triangulation_max_error > 0.0)) throw core::InvalidArgument("triangulation_max_error must be positive [px]");
+  if (retriangulations < 0) throw core::InvalidArgument("retriangulations must be >= 0");
+  if (!(max_filtered_ratio > 0.0 && max_filtered_ratio <= 1.0))
+    throw core::InvalidArgument("max_filtered_ratio must be in (0, 1]");
+  if (!(prior_translation_ratio >= 0.0)) throw core::InvalidArgument("prior_translation_ratio must be >= 0");
+  if (!(prior_rotation_deg > 0.0)) throw core::InvalidArgument("prior_rotation_deg must be positive");
+  if (!(prior_loss_scale > 0.0)) throw core::InvalidArgument("prior_loss_scale must be positive");
+}
+
+std::set<int> allImages(const io::ColmapModel& model) {
+  std::set<int> ids;
+  for (const auto& [id, im] : model.images) ids.insert(id);
+  return ids;
+}
+
+io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& movable_in,
+                            const RefinementConfig& config, RefinementReport* report,
+                            const io::ColmapModel* reference_model, const std::vector<Match>* matches) {
+  const auto start = std::chrono::steady_clock::now();
+  config.validate();
+  RefinementReport local;
+  RefinementReport& rep = report ? *report : local;
+  rep = RefinementReport{};
+  const State initial = stateOf(input);
+  // The poses corrections are measured against (and the result aligned to): the reference's
+  // where it has the image, else the input's.
+  std::map<int, State::Pose> reference = initial.poses;
+  if (reference_model)
+    for (const auto& [id, im] : reference_model->images)
+      if (reference.count(id)) {
+        if (!im.rotation.coeffs().allFinite() || !im.translation.allFinite())
+          throw core::InvalidArgument("reference image " + im.name + " has a non-finite pose");
+        reference[id] = {im.rotation.normalized(), im.translation};
+      }
+  std::set<int> movable;
+  for (int id : movable_in)
+    if (initial.poses.count(id)) movable.insert(id);
+  Tracks tracks;
+  if (matches) tracks = buildTracks(*matches);
+  const Tracks* with_tracks = matches ? &tracks : nullptr;
+  rep.tracks = tracks.tracks.size();
+  rep.track_conflicts = tracks.conflicts;
+  rep.points_input = initial.points.size();
+  rep.observations_input = initial.observations();
+  rep.reprojection_error_input = initial.meanError();
+
+  const std::map<int, int> observations_input = initial.observationsPerImage();
+  const std::map<int, double> depth = medianDepths(initial);
+  const auto finish = [&](const io::ColmapModel& model, const State& s) {
+    rep.points_refined = s.points.size();
+    rep.observations_refined = s.observations();
+    rep.reprojection_error_refined = s.meanError();
+    const std::map<int, int> observations = s.observationsPerImage();
+    for (auto& c : rep.images) {
+      c.observations_refined = observations.count(c.image_id) ? observations.at(c.image_id) : 0;
+      c.weak = c.refined && c.observations_refined < config.min_observations;
+      c.centre_refined = s.poses.at(c.image_id).centre();
+      c.translation = (c.centre_refined - c.centre_input).norm();
+      c.rotation_deg = rotationBetweenDeg(s.poses.at(c.image_id).rotation, reference.at(c.image_id).rotation);
+    }
+    rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return model;
+  };
+  for (const auto& [id, pose] : initial.poses) {
+    ImageCorrection c;
+    c.image_id = id;
+    c.name = initial.images.at(id)->name;
+    c.movable = movable.count(id) > 0;
+    c.centre_input = reference.at(id).centre();
+    c.observations_input = observations_input.at(id);
+    c.median_depth = depth.at(id);
+    rep.images.push_back(c);
+  }
+  if (movable.empty() && with_tracks) {
+    // Nothing may move: the matches are triangulated at the given poses, nothing adjusted (what
+    // the model's points would be at these poses with these matches).
+    State s = initial;
+    retriangulate(s, tracks, {}, config, config.triangulation_max_error);
+    filter(s, config, {});
+    rep.status = "triangulated";
+    rep.retriangulations = 1;
+    rep.message = "no image may move: the matches triangulated at the given poses";
+    return finish(modelOf(input, s), s);
+  }
+  if (movable.empty() || initial.observations() == 0) {
+    rep.status = "nothing_to_refine";
+    rep.message = movable.empty() ? "no image may move" : "the model has no observations";
+    return finish(input, initial);
+  }
+
+  // Images too weakly held to be refined keep their input poses from the start.
+  std::map<int, std::string> kept;
+  const bool priors = config.prior_translation_ratio > 0.0;
+  for (int id : movable)
+    if (!priors && observations_input.at(id) < config.min_observations)
+      kept[id] = "too few observations (" + std::to_string(observations_input.at(id)) + " < " +
+                 std::to_string(config.min_observations) + ")";
+
+  const auto keptIds = [&]() {
+    std::set<int> ids;
+    for (const auto& [id, why] : kept) ids.insert(id);
+    return ids;
+  };
+  PassResult result = pass(initial, reference, movable, keptIds(), config, with_tracks);
+  // Implausible corrections, or images left without enough observations: start again with them
+  // kept at their input poses (once; what the second pass still moves too far is put back).
+  const auto offenders = [&](const State& s, bool record) {
+    std::map<int, std::string> found;
+    const std::map<int, int> observations = s.observationsPerImage();
+    for (int id : movable) {
+      if (kept.count(id)) continue;
+      const double moved = (s.poses.at(id).centre() - reference.at(id).centre()).norm();
+      const double turned = rotationBetweenDeg(s.poses.at(id).rotation, reference.at(id).rotation);
+      std::ostringstream why;
+      if (moved > config.max_correction_depth_ratio * depth.at(id))
+        why << "implausible correction: moved " << moved << " (more than " << config.max_correction_depth_ratio
+            << " x its median depth " << depth.at(id) << ")";
+      else if (turned > config.max_correction_deg)
+        why << "implausible correction: turned " << turned << " deg (more than " << config.max_correction_deg
+            << ")";
+      else if (!priors && observations.at(id) < config.min_observations)
+        why << "too few observations after filtering (" << observations.at(id) << " < "
+            << config.min_observations << ")";
+      if (!why.str().empty()) found[id] = why.str();
+    }
+    if (record)
+      for (const auto& [id, why] : found) kept[id] = why;
+    return found;
+  };
+  if (!result.diverged && !offenders(result.state, true).empty()) {
+    rep.passes = 2;
+    result = pass(initial, reference, movable, keptIds(), config, with_tracks);
+  }
+  if (result.diverged) {
+    rep.status = "diverged";
+    rep.refined = false;
+    rep.message = result.why + ": every keyframe keeps its input pose";
+    for (auto& c : rep.images)
+      if (c.movable) c.kept = "the adjustment diverged";
+    rep.rounds = result.rounds;
+    rep.iterations = result.iterations;
+    rep.initial_cost = result.initial_cost;
+    rep.final_cost = result.final_cost;
+    return finish(input, initial);
+  }
+  State& s = result.state;
+  if (rep.passes == 2) {
+    const std::map<int, std::string> late = offenders(s, false);
+    for (const auto& [id, why] : late) kept[id] = why + " (second pass)";
+  }
+  // Kept images sit at their input poses; their observations that fit the refined points stay.
+  std::set<int> none;
+  for (const auto& [id, why] : kept) s.poses[id] = reference.at(id);
+  if (!kept.empty() && with_tracks) {
+    // Kept images at their input poses take part again: the tracks triangulated once more.
+    retriangulate(s, tracks, {}, config, config.triangulation_max_error);
+    ++result.retriangulations;
+    const auto [obs, pts] = filter(s, config, none);
+    result.observations_filtered += obs;
+    result.points_filtered += pts;
+  } else if (!kept.empty()) {
+    State with_kept = s;
+    for (const auto& [pid, x] : initial.points)
+      if (with_kept.points.count(pid)) {
+        auto& track = with_kept.tracks[pid];
+        for (const auto& e : initial.tracks.at(pid))
+          if (kept.count(e.image_id) &&
+              std::none_of(track.begin(), track.end(), [&](const io::ColmapTrackElement& t) {
+                return t.image_id == e.image_id && t.point2D_idx == e.point2D_idx;
+              }))
+            track.push_back(e);
+      }
+    const auto [obs, pts] = filter(with_kept, config, none);
+    result.observations_filtered += obs;
+    result.points_filtered += pts;
+    s = std::move(with_kept);
+  }
+  rep.status = result.converged ? "converged" : "no_convergence";
+  rep.refined = true;
+  rep.rounds = result.rounds;
+  rep.iterations = result.iterations;
+  rep.initial_cost = result.initial_cost;
+  rep.final_cost = result.final_cost;
+  rep.observations_filtered = result.observations_filtered;
+  rep.points_filtered = result.points_filtered;
+  rep.aligned = result.aligned;
+  rep.retriangulations = result.retriangulations;
+  rep.alignment_scale = result.scale;
+  for (auto& c : rep.images) {
+    if (!c.movable) continue;
+    const auto k = kept.find(c.image_id);
+    c.refined = k == kept.end();
+    c.kept = c.refined ? "" : k->second;
+  }
+  const io::ColmapModel out = modelOf(input, s);
+  std::ostringstream msg;
+  const size_t moved = static_cast<size_t>(std::count_if(rep.images.begin(), rep.images.end(),
+                                                         [](const ImageCorrection& c) { return c.refined; }));
+  msg << "refined " << moved << " of " << movable.size() << " movable images in " << rep.rounds
+      << " rounds (" << rep.iterations << " iterations, " << rep.status << "); " << kept.size()
+      << " kept their input pose";
+  rep.message = msg.str();
+  return finish(out, s);
+}
+
+}  // namespace view_selection::refine

@@ -1,0 +1,280 @@
+"""The known-pose model refined: refine_model (C++/Ceres) run as a process on a COLMAP model
+folder, as the project runs COLMAP (a timeout, a clear error naming the stage, killed with its
+parent), with the project's verified matches:
+
+  1. the poses and points adjusted with the intrinsics fixed, a robust (Cauchy) loss, the SLAM's
+     relative motion between consecutive keyframes as soft priors, observations beyond 4 px
+     filtered, round after round;
+  2. the points triangulated anew from the tracks of the matches at the refined poses: matches
+     that the drifting poses rejected become points now;
+  3. adjusted and filtered again; corrections measured against the SLAM poses, implausible ones
+     kept at the SLAM pose; the result aligned to the SLAM poses.
+
+Points triangulated at wrong poses are outlier observations at the right ones: an adjustment
+without filtering and re-triangulation follows them (issue 29: COLMAP's bundle_adjuster made a
+drifted DTU set 7.3x worse). The seam: `refine(model folder, which images stay fixed, the
+database) -> the refined folder + the report's section`, with the per-keyframe corrections.
+"""
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from .. import geometry
+from ..colmap import model as colmap_model
+from ..colmap.process import Colmap, _death_signal_prefix
+
+
+class RefinementError(Exception):
+    """The refinement could not run (tool missing, failed, timed out); the unrefined model stays."""
+
+
+class RefinementOptions:
+    """What refine_model is given (its --help says more) and how the steps run.
+
+    retriangulations: how many times the points are triangulated anew from the matches at the
+    refined poses and refined again (0: the model's own points only)."""
+
+    def __init__(self, loss="cauchy", loss_scale=1.0, max_error=4.0, min_angle=1.5, rounds=4, iterations=100,
+                 min_observations=15, max_correction_depth_ratio=0.5, max_correction_deg=15.0,
+                 retriangulations=1, threads=-1, timeout=120.0):
+        self.loss, self.loss_scale, self.max_error, self.min_angle = loss, float(loss_scale), float(max_error), float(min_angle)
+        self.rounds, self.iterations, self.min_observations = int(rounds), int(iterations), int(min_observations)
+        self.max_correction_depth_ratio, self.max_correction_deg = float(max_correction_depth_ratio), float(max_correction_deg)
+        self.retriangulations, self.threads, self.timeout = int(retriangulations), int(threads), float(timeout)
+
+    def arguments(self):
+        return ["--loss", self.loss, "--loss-scale", repr(self.loss_scale), "--max-error", repr(self.max_error),
+                "--min-angle", repr(self.min_angle), "--rounds", str(self.rounds), "--iterations", str(self.iterations),
+                "--min-observations", str(self.min_observations),
+                "--max-correction-depth-ratio", repr(self.max_correction_depth_ratio),
+                "--max-correction-deg", repr(self.max_correction_deg),
+                "--retriangulations", str(self.retriangulations),
+                "--threads", str(max(0, self.threads))]
+
+    def to_json(self):
+        return dict(vars(self))
+
+
+def find_refine_tool(explicit=None):
+    """The refine_model executable: `explicit`, beside the running script (rosrun's devel relay
+    or the install space put the C++ tools there), the build folder beside a checkout, rosrun's
+    search, or PATH."""
+    candidates = [explicit] if explicit else []
+    candidates.append(os.path.join(os.path.dirname(os.path.abspath(sys.argv[0])), "refine_model"))
+    from ..ros_session import DEFAULT_BUILD_DIR
+    candidates.append(os.path.join(DEFAULT_BUILD_DIR, "devel", "lib", "view_selection", "refine_model"))
+    for c in candidates:
+        if c and os.path.isfile(c) and os.access(c, os.X_OK):
+            return os.path.abspath(c)
+    try:
+        import roslib.packages
+        found = roslib.packages.find_node("view_selection", "refine_model")
+        if isinstance(found, (list, tuple)):
+            found = found[0] if found else None
+        if found:
+            return found
+    except Exception:  # no ROS, or no package path: try PATH
+        pass
+    found = shutil.which("refine_model")
+    if found:
+        return found
+    raise RefinementError("cannot find the refine_model tool (build the package; or give its path)")
+
+
+def run_refine_model(tool, model, output, report, options, fixed=(), reference=None, log_path=None, timeout=None,
+                     matches=None):
+    """One refine_model process; returns its report (dict). RefinementError when it cannot run,
+    fails or exceeds the timeout (then it is killed)."""
+    args = [tool, "--input", model, "--output", output, "--report", report, "--quiet"] + options.arguments()
+    if reference:
+        args += ["--reference", reference]
+    if matches:
+        args += ["--matches", matches]
+    args += os.environ.get("VS_REFINE_EXTRA", "").split()  # development: more refine_model options
+    if fixed:
+        listing = output.rstrip("/") + ".fixed.txt"
+        with open(listing, "w") as f:
+            f.write("".join(n + "\n" for n in fixed))
+        args += ["--fixed", listing]
+    timeout = options.timeout if timeout is None else timeout
+    log = open(log_path, "a") if log_path else None
+    try:
+        if log:
+            log.write("$ %s\n" % " ".join(args))
+            log.flush()
+        try:
+            proc = subprocess.Popen(_death_signal_prefix() + args, stdout=log or subprocess.DEVNULL,
+                                    stderr=subprocess.PIPE, universal_newlines=True, start_new_session=True)
+        except OSError as e:
+            raise RefinementError("cannot run %s: %s" % (tool, e.strerror or e))
+        try:
+            _, err = proc.communicate(timeout=max(1.0, timeout))
+        except subprocess.TimeoutExpired:
+            Colmap._kill(proc)
+            raise RefinementError("refine_model did not finish within %.0f s and was killed" % timeout)
+        except BaseException:
+            Colmap._kill(proc)
+            raise
+        if log:
+            log.write(err or "")
+            log.write("# exit %d\n" % proc.returncode)
+    finally:
+        if log:
+            log.close()
+    if proc.returncode != 0:
+        raise RefinementError("refine_model failed (exit %d): %s" % (proc.returncode, (err or "").strip()[-500:]))
+    try:
+        with open(report) as f:
+            return json.load(f)
+    except (OSError, ValueError) as e:
+        raise RefinementError("refine_model wrote no readable report (%s)" % e)
+
+
+def poses_only(model):
+    """The same images at the same poses, without points or 2D points: what point_triangulator
+    starts from."""
+    out = colmap_model.Model(dict(model.cameras))
+    for iid, im in model.images.items():
+        out.images[iid] = colmap_model.Image(iid, im.qvec, im.tvec, im.camera_id, im.name)
+    return out
+
+
+def corrections(before, after):
+    """Per image name present in both: the centre's move [model units] and the turn [deg]."""
+    out = {}
+    b = before.image_by_name()
+    for name, im in after.image_by_name().items():
+        if name not in b:
+            continue
+        c0 = np.array(geometry.centre_of(b[name].qvec, b[name].tvec))
+        c1 = np.array(geometry.centre_of(im.qvec, im.tvec))
+        out[name] = (float(np.linalg.norm(c1 - c0)), geometry.rotation_angle_deg(b[name].qvec, im.qvec))
+    return out
+
+
+def write_matches(database_path, path):
+    """The database's verified matches (two-view geometries' inliers) as refine_model's VSMATCH1
+    file: image id and keypoint index of both sides, the ids the model's images have. Returns
+    how many."""
+    import struct
+    from ..colmap import database as cdb
+    rows = []
+    with cdb.open_database(database_path) as d:
+        for (a, b), n in sorted(d.inlier_counts().items()):
+            if n <= 0:
+                continue
+            m = np.asarray(d.matches(a, b, "two_view_geometries"), np.int64).reshape(-1, 2)
+            if len(m):
+                rows.append(np.stack([np.full(len(m), a), m[:, 0], np.full(len(m), b), m[:, 1]], axis=1))
+    data = np.concatenate(rows).astype("<i4") if rows else np.zeros((0, 4), "<i4")
+    with open(path, "wb") as f:
+        f.write(b"VSMATCH1" + struct.pack("<Q", len(data)) + data.tobytes())
+    return len(data)
+
+
+def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, log_path=None, deadline=None,
+           log=None):
+    """Refines the model in `model_dir` into `output` (replaced only at the end; on any error
+    `output` is untouched and RefinementError says why). `fixed`: image names that must not
+    move. `database`: the project's database, whose verified matches the points are
+    triangulated anew from (None: the model's own points only). `deadline`: time.monotonic()
+    by which it must be done. Returns the report's `refinement` section (dict)."""
+    options = options or RefinementOptions()
+    log = log or (lambda text: None)
+    tool = find_refine_tool(tool)
+    start = time.monotonic()
+    parent = os.path.dirname(os.path.abspath(output))
+    os.makedirs(parent, exist_ok=True)
+    work = tempfile.mkdtemp(prefix=".refine_", dir=parent)
+    timeout = options.timeout
+    if deadline is not None:
+        timeout = min(timeout, deadline - time.monotonic())
+        if timeout <= 1.0:
+            raise RefinementError("no time left for the refinement")
+    try:
+        matches, count = None, 0
+        if database and options.retriangulations > 0:
+            matches = os.path.join(work, "matches.bin")
+            count = write_matches(database, matches)
+        made = os.path.join(work, "refined")
+        import resource
+        children = resource.getrusage(resource.RUSAGE_CHILDREN)
+        report = run_refine_model(tool, os.path.abspath(model_dir), made, made + ".json", options, fixed,
+                                  log_path=log_path, timeout=timeout, matches=matches)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = (after.ru_utime + after.ru_stime) - (children.ru_utime + children.ru_stime)
+        log("refinement: %s" % report["message"])
+        from ..colmap.project import replace_folder
+        replace_folder(made, os.path.abspath(output))
+        keyframes = []
+        for im in report["images"]:
+            keyframes.append({"name": im["name"], "refined": im["refined"], "kept": im["kept"] or None,
+                              "weak": im.get("weak", False),
+                              "translation": im["translation"], "rotation_deg": im["rotation_deg"],
+                              "observations": [im["observations_input"], im["observations_refined"]]})
+        moved = [k for k in keyframes if k["refined"]]
+        translations = sorted(k["translation"] for k in moved)
+        rotations = sorted(k["rotation_deg"] for k in moved)
+        return {
+            "status": report["status"], "refined": report["refined"], "message": report["message"],
+            "keyframes": keyframes, "keyframes_refined": len(moved),
+            "keyframes_kept": [{"name": k["name"], "why": k["kept"]} for k in keyframes if k["kept"]],
+            "translation_median": translations[len(translations) // 2] if translations else 0.0,
+            "translation_max": translations[-1] if translations else 0.0,
+            "rotation_median_deg": rotations[len(rotations) // 2] if rotations else 0.0,
+            "rotation_max_deg": rotations[-1] if rotations else 0.0,
+            "points": [report["points_input"], report["points_refined"]],
+            "observations": [report["observations_input"], report["observations_refined"]],
+            "observations_filtered": report["observations_filtered"],
+            "reprojection_error": [report["reprojection_error_input"], report["reprojection_error_refined"]],
+            "rounds": report["rounds"], "iterations": report["iterations"], "passes": report["passes"],
+            "retriangulations": report.get("retriangulations", 0), "matches": count,
+            "tracks": report.get("tracks", 0), "aligned": report["aligned"],
+            "alignment_scale": report["alignment_scale"], "adjustment_seconds": report["seconds"],
+            "cpu_seconds": cpu,
+            "seconds": time.monotonic() - start, "options": options.to_json()}
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+class ModelRefinement:
+    """What colmap_bridge and colmap_from_selection do with the known-pose model: keep it as
+    DIR/sparse/unrefined, refine it into DIR/sparse/0 (re-triangulating with the project's
+    matches), and give the report's `refinement` section. Whatever fails, the unrefined model
+    stays in DIR/sparse/0 and the section says why."""
+
+    def __init__(self, options=None, tool=None, log=None):
+        self.options = options or RefinementOptions()
+        self.tool = tool
+        self.log = log or (lambda level, text: None)
+
+    def apply(self, project, model_path):
+        from ..colmap.database import DatabaseError
+        from ..colmap.project import ProjectError
+        unrefined = os.path.join(os.path.dirname(model_path), "unrefined")
+        start = time.monotonic()
+        try:
+            if os.path.exists(unrefined):
+                shutil.rmtree(unrefined)
+            shutil.copytree(model_path, unrefined)
+            section = refine(model_path, model_path, self.options, database=project.database, tool=self.tool,
+                             log_path=project.log_path, deadline=project.deadline,
+                             log=lambda text: self.log("info", text))
+        except (RefinementError, ProjectError, DatabaseError, colmap_model.ModelError, OSError, KeyError,
+                ValueError) as e:
+            message = "refinement failed, the unrefined model stays in %s: %s" % (model_path, e)
+            self.log("error", message)
+            return {"refined": False, "status": "error", "error": message, "unrefined_path": unrefined,
+                    "seconds": time.monotonic() - start, "options": self.options.to_json()}
+        section["unrefined_path"] = unrefined
+        if section["keyframes_kept"]:
+            self.log("warn", "refinement: %d keyframes kept their input pose (%s: %s)" % (
+                len(section["keyframes_kept"]), section["keyframes_kept"][0]["name"],
+                section["keyframes_kept"][0]["why"]))
+        return section

@@ -1,0 +1,223 @@
+"""The refinement's Python side (issue 29): the seeded drift, refine_model run as a process on a
+model folder, and what happens to the model when the refinement cannot run."""
+import json
+import math
+import os
+import stat
+import time
+
+import numpy as np
+import pytest
+
+from view_selection import geometry
+from view_selection.colmap import model as cm
+from view_selection.evaluation.trajectory import ate_rmse
+from view_selection.refinement import drift, refiner
+
+
+def refine_tool():
+    tools = os.environ.get("VIEW_SELECTION_TOOLS_DIR")
+    if tools and os.path.isfile(os.path.join(tools, "refine_model")):
+        return os.path.join(tools, "refine_model")
+    try:
+        return refiner.find_refine_tool()
+    except refiner.RefinementError:
+        pytest.skip("refine_model is not built (VIEW_SELECTION_TOOLS_DIR)")
+
+
+def arc_poses(n=30):
+    """Cameras on a 100-degree arc, 3 m from the origin, looking at it (centre, c2w quaternion)."""
+    poses = []
+    for i in range(n):
+        a = math.radians(-50 + 100.0 * i / (n - 1))
+        eye = np.array([3 * math.sin(a), -1.0, -3 * math.cos(a)])
+        z = -eye / np.linalg.norm(eye)
+        x = np.cross([0, 1, 0], z)
+        x /= np.linalg.norm(x)
+        y = np.cross(z, x)
+        poses.append((tuple(eye), geometry.quaternion_of(np.stack([x, y, z], axis=1))))
+    return poses
+
+
+def known_pose_model(exact, given, rng, k=(525.0, 525.0, 319.5, 239.5), database=None):
+    """Observations of 500 points at the exact poses (0.5 px noise), points triangulated at the
+    `given` poses, observations beyond 4 px of them dropped: point_triangulator's model. With
+    `database` (a path), also the project's database: images, keypoints, and every pair of a
+    point's observations as verified matches."""
+    points = rng.uniform(-1, 1, size=(500, 3))
+    m = cm.Model({1: cm.Camera(1, "PINHOLE", 640, 480, k)})
+    obs = {i: [] for i in range(len(exact))}
+    w2c = [geometry.world_to_camera(c, q) for c, q in given]
+    for i, (c, q) in enumerate(exact):
+        r = geometry.rotation_of(q).T
+        cam = (r @ (points - np.asarray(c)).T).T
+        px = np.stack([k[0] * cam[:, 0] / cam[:, 2] + k[2], k[1] * cam[:, 1] / cam[:, 2] + k[3]], axis=1)
+        px += rng.normal(scale=0.5, size=px.shape)
+        ok = (cam[:, 2] > 0) & (px[:, 0] >= 0) & (px[:, 0] < 640) & (px[:, 1] >= 0) & (px[:, 1] < 480)
+        obs[i] = [(p, px[p]) for p in np.nonzero(ok)[0]]
+    xys = {i: [] for i in obs}
+    ids = {i: [] for i in obs}
+    tracks = {}
+    for i, lst in obs.items():
+        for p, xy in lst:
+            tracks.setdefault(p, []).append((i, len(xys[i])))
+            xys[i].append(xy)
+            ids[i].append(-1)
+    for p, track in tracks.items():
+        if len(track) < 2:
+            continue
+        a = np.zeros((4, 4))
+        for i, idx in track:
+            q, t = w2c[i]
+            proj = np.hstack([geometry.rotation_of(q), np.asarray(t).reshape(3, 1)])
+            u = (xys[i][idx][0] - k[2]) / k[0]
+            v = (xys[i][idx][1] - k[3]) / k[1]
+            for row in (u * proj[2] - proj[0], v * proj[2] - proj[1]):
+                a += np.outer(row, row)
+        h = np.linalg.eigh(a)[1][:, 0]
+        x = h[:3] / h[3]
+        keep = []
+        for i, idx in track:
+            q, t = w2c[i]
+            c = geometry.rotation_of(q) @ x + np.asarray(t)
+            px = np.array([k[0] * c[0] / c[2] + k[2], k[1] * c[1] / c[2] + k[3]])
+            if c[2] > 0 and np.linalg.norm(px - xys[i][idx]) <= 4.0:
+                keep.append((i, idx))
+        if len(keep) < 2:
+            continue
+        pid = int(p) + 1
+        m.points[pid] = cm.Point3D(pid, x, (0, 0, 0), 0.5, [i + 1 for i, _ in keep], [idx for _, idx in keep])
+        for i, idx in keep:
+            ids[i][idx] = pid
+    for i, (q, t) in enumerate(w2c):
+        m.images[i + 1] = cm.Image(i + 1, q, t, 1, "image_%02d.png" % i, xys[i], ids[i])
+    if database:
+        from view_selection.colmap import database as cdb
+        with cdb.open_database(database, create=True) as d:
+            cid = d.camera_id(640, 480, k)
+            for i in range(len(exact)):
+                assert d.add_image("image_%02d.png" % i, cid) == i + 1
+                d.write_features(i + 1, np.asarray(xys[i], np.float32).reshape(-1, 2),
+                                 np.zeros((len(xys[i]), 128), np.uint8))
+            pairs = {}
+            for track in tracks.values():
+                for x in range(len(track)):
+                    for y in range(x + 1, len(track)):
+                        (a, ia), (b, ib) = track[x], track[y]
+                        pairs.setdefault((a + 1, b + 1), []).append((ia, ib))
+            for (a, b), matches in pairs.items():
+                d.write_matches(a, b, matches)
+                d.write_two_view_geometry(a, b, matches)
+    return m
+
+
+def centres(model):
+    return [geometry.centre_of(im.qvec, im.tvec) for _, im in sorted(model.images.items())]
+
+
+def test_drift_is_seeded_starts_exact_and_grows():
+    exact = arc_poses(40)
+    a = drift.add_drift(exact, 0.02, 0.3, seed=7)
+    b = drift.add_drift(exact, 0.02, 0.3, seed=7)
+    c = drift.add_drift(exact, 0.02, 0.3, seed=8)
+    assert a == b and a != c
+    assert np.allclose(a[0][0], exact[0][0]) and np.allclose(a[0][1], exact[0][1])
+    errors = [np.linalg.norm(np.subtract(d[0], e[0])) for d, e in zip(a, exact)]
+    assert np.mean(errors[-10:]) > np.mean(errors[1:11])  # a random walk: the end is further off
+    turned = geometry.rotation_angle_deg(a[-1][1], exact[-1][1])
+    assert 0.3 < turned < 0.3 * 39 + 1e-9
+    assert drift.add_drift(exact, 0.0, 0.0) == [(tuple(map(float, c)), geometry.quaternion_of(geometry.rotation_of(q)))
+                                                for c, q in exact]
+
+
+def test_drifted_tum_folder_keeps_the_exact_poses_beside(tmp_path):
+    src = tmp_path / "src"
+    src.mkdir()
+    rows = [(1000.0 + i, c, q) for i, (c, q) in enumerate(arc_poses(10))]
+    drift.write_groundtruth(str(src / "groundtruth.txt"), rows)
+    (src / "rgb.txt").write_text("# rgb\n")
+    exact, drifted = drift.drifted_tum_folder(str(src), str(tmp_path / "out"), seed=1)
+    assert os.path.islink(tmp_path / "out" / "rgb.txt")
+    back = drift.read_groundtruth(str(tmp_path / "out" / "groundtruth_exact.txt"))
+    assert [s for s, _, _ in back] == [s for s, _, _ in rows]
+    assert np.allclose([c for _, c, _ in back], [c for _, c, _ in rows], atol=1e-8)
+    assert drift.read_groundtruth(str(tmp_path / "out" / "groundtruth.txt"))[5][1] != back[5][1]
+
+
+def test_refine_brings_a_drifted_model_closer(tmp_path):
+    tool = refine_tool()
+    rng = np.random.default_rng(29)
+    exact = arc_poses()
+    given = drift.add_drift(exact, 0.02, 0.3, seed=3)
+    m = known_pose_model(exact, given, rng, database=str(tmp_path / "database.db"))
+    cm.write_model(m, str(tmp_path / "in"))
+    section = refiner.refine(str(tmp_path / "in"), str(tmp_path / "out"), tool=tool,
+                             database=str(tmp_path / "database.db"))
+    out = cm.read_model(str(tmp_path / "out"))
+    truth = [c for c, _ in exact]
+    before, after = ate_rmse(centres(m), truth), ate_rmse(centres(out), truth)
+    assert after < 0.5 * before, (before, after, section["message"])
+    assert section["refined"] and section["status"] == "converged"
+    assert section["retriangulations"] == 2 and section["matches"] > 1000  # the database's matches reached it
+    assert len(section["keyframes"]) == 30 and section["keyframes_refined"] == 30
+    by_name = {k["name"]: k for k in section["keyframes"]}
+    moved = refiner.corrections(m, out)
+    for name, (t, r) in moved.items():
+        assert by_name[name]["translation"] == pytest.approx(t, abs=1e-9)
+        assert by_name[name]["rotation_deg"] == pytest.approx(r, abs=1e-6)
+    assert section["translation_max"] >= section["translation_median"] > 0
+    assert section["reprojection_error"][1] < section["reprojection_error"][0]
+    assert not os.listdir(tmp_path / "out") == []
+    assert not [n for n in os.listdir(tmp_path) if n.startswith(".refine_")]  # its work folder is gone
+
+
+def fake_tool(path, body):
+    path.write_text("#!/bin/sh\n" + body + "\n")
+    path.chmod(path.stat().st_mode | stat.S_IEXEC)
+    return str(path)
+
+
+class FakeProject:
+    def __init__(self, root):
+        self.log_path = os.path.join(root, "colmap.log")
+        self.database = None
+        self.deadline = None
+
+
+def test_a_failing_refinement_leaves_the_unrefined_model(tmp_path):
+    model = tmp_path / "sparse" / "0"
+    m = known_pose_model(arc_poses(5), arc_poses(5), np.random.default_rng(1))
+    cm.write_model(m, str(model))
+    before = {n: open(os.path.join(model, n), "rb").read() for n in os.listdir(model)}
+    tool = fake_tool(tmp_path / "refine_model", "echo 'refine_model: error: it broke' >&2; exit 1")
+    logged = []
+    section = refiner.ModelRefinement(tool=tool, log=lambda level, text: logged.append((level, text))).apply(
+        FakeProject(str(tmp_path)), str(model))
+    assert section["refined"] is False and section["status"] == "error"
+    assert "it broke" in section["error"] and logged and logged[0][0] == "error"
+    assert {n: open(os.path.join(model, n), "rb").read() for n in os.listdir(model)} == before
+    assert sorted(os.listdir(tmp_path / "sparse" / "unrefined")) == sorted(before)
+
+
+def test_a_hung_refinement_is_killed_at_its_timeout(tmp_path):
+    m = known_pose_model(arc_poses(5), arc_poses(5), np.random.default_rng(1))
+    cm.write_model(m, str(tmp_path / "in"))
+    tool = fake_tool(tmp_path / "refine_model", "sleep 60")
+    start = time.monotonic()
+    with pytest.raises(refiner.RefinementError, match="did not finish within"):
+        refiner.refine(str(tmp_path / "in"), str(tmp_path / "out"), refiner.RefinementOptions(timeout=2), tool=tool)
+    assert time.monotonic() - start < 20
+    assert not os.path.exists(tmp_path / "out")
+
+
+def test_options_reach_the_tool(tmp_path):
+    args, fixed = tmp_path / "args.txt", tmp_path / "fixed.txt"
+    tool = fake_tool(tmp_path / "refine_model", 'echo "$@" > %s; while [ $# -gt 0 ]; do [ "$1" = --fixed ] && '
+                     'cat "$2" > %s; shift; done; exit 3' % (args, fixed))
+    with pytest.raises(refiner.RefinementError, match="exit 3"):
+        refiner.refine(str(tmp_path), str(tmp_path / "out"),
+                       refiner.RefinementOptions(loss="huber", max_correction_deg=7.5), fixed=["a.png"], tool=tool)
+    text = args.read_text()
+    assert "--loss huber" in text and "--max-correction-deg 7.5" in text and "--fixed" in text
+    assert fixed.read_text() == "a.png\n"
+    json.dumps(refiner.RefinementOptions().to_json())  # goes into report.json

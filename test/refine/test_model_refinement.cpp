@@ -1,0 +1,344 @@
+// The refinement of a known-pose model (issue 29) on a seeded synthetic scene with exact
+// cameras: poses given a random-walk drift, points triangulated at the drifted poses (as
+// point_triangulator does), observations with pixel noise. Also COLMAP's binary model files.
+#include "view_selection/core/exceptions.h"
+#include "view_selection/eval/trajectory_alignment.h"
+#include "view_selection/io/colmap_model.h"
+#include "view_selection/refine/model_refinement.h"
+#include "view_selection/refine/tracks.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Eigenvalues>
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+namespace {
+
+using namespace view_selection;
+namespace fs = std::filesystem;
+
+constexpr double kPi = 3.14159265358979323846;
+
+struct Scene {
+  std::vector<Eigen::Quaterniond> rotation;  ///< exact, world -> camera
+  std::vector<Eigen::Vector3d> translation;
+  std::vector<Eigen::Vector3d> points;
+  Eigen::Vector4d k{525.0, 525.0, 319.5, 239.5};
+  Eigen::Vector3d centre(size_t i) const { return -(rotation[i].conjugate() * translation[i]); }
+};
+
+/// 30 cameras on a 100-degree arc, 3 m from a cloud of 600 points in a 2 m cube, each looking
+/// at the cube's centre: a photo collection with exact cameras, in acquisition order.
+Scene makeScene(std::mt19937& rng) {
+  Scene s;
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int q = 0; q < 600; ++q) s.points.emplace_back(u(rng), u(rng), u(rng));
+  for (int i = 0; i < 30; ++i) {
+    const double a = (-50.0 + 100.0 * i / 29.0) * kPi / 180.0;
+    const Eigen::Vector3d eye(3.0 * std::sin(a), -1.0, -3.0 * std::cos(a));
+    const Eigen::Vector3d z = (-eye).normalized();
+    const Eigen::Vector3d x = Eigen::Vector3d::UnitY().cross(z).normalized();
+    const Eigen::Vector3d y = z.cross(x);
+    Eigen::Matrix3d c2w;
+    c2w << x, y, z;
+    s.rotation.emplace_back(c2w.transpose());
+    s.translation.push_back(-(c2w.transpose() * eye));
+  }
+  return s;
+}
+
+/// The drift of a SLAM front end: each step's translation off by 2% of its length, each
+/// rotation step off by 0.3 degrees, accumulated.
+void drift(const Scene& exact, std::mt19937& rng, std::vector<Eigen::Quaterniond>* rotation,
+           std::vector<Eigen::Vector3d>* translation) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  const auto unit = [&]() { return Eigen::Vector3d(n(rng), n(rng), n(rng)).normalized(); };
+  Eigen::Matrix3d accumulated = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d previous = exact.centre(0);
+  rotation->assign(1, exact.rotation[0]);
+  translation->assign(1, exact.translation[0]);
+  for (size_t i = 1; i < exact.rotation.size(); ++i) {
+    const Eigen::Vector3d step = exact.centre(i) - exact.centre(i - 1);
+    const Eigen::Vector3d centre = previous + accumulated * step + 0.02 * step.norm() * unit();
+    accumulated = Eigen::AngleAxisd(0.3 * kPi / 180.0, unit()).toRotationMatrix() * accumulated;
+    const Eigen::Matrix3d c2w = accumulated * exact.rotation[i].conjugate().toRotationMatrix();
+    rotation->emplace_back(c2w.transpose());
+    translation->push_back(-(c2w.transpose() * centre));
+    previous = centre;
+  }
+}
+
+Eigen::Vector3d triangulate(const std::vector<Eigen::Matrix<double, 3, 4>>& projections,
+                            const std::vector<Eigen::Vector2d>& normalised) {
+  Eigen::Matrix4d a = Eigen::Matrix4d::Zero();
+  for (size_t q = 0; q < projections.size(); ++q) {
+    const Eigen::RowVector4d r0 = normalised[q].x() * projections[q].row(2) - projections[q].row(0);
+    const Eigen::RowVector4d r1 = normalised[q].y() * projections[q].row(2) - projections[q].row(1);
+    a += r0.transpose() * r0 + r1.transpose() * r1;
+  }
+  const Eigen::Vector4d h = Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d>(a).eigenvectors().col(0);
+  return h.head<3>() / h.w();
+}
+
+/// The known-pose model at the given poses: every visible point observed with 0.5 px of noise,
+/// points triangulated at these poses, observations beyond 4 px of them dropped.
+io::ColmapModel knownPoseModel(const Scene& exact, const std::vector<Eigen::Quaterniond>& rotation,
+                               const std::vector<Eigen::Vector3d>& translation, std::mt19937& rng,
+                               double outlier_ratio = 0.0, double max_error = 4.0,
+                               std::vector<refine::Match>* matches = nullptr) {
+  std::normal_distribution<double> noise(0.0, 0.5);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  io::ColmapModel m;
+  io::ColmapCamera cam;
+  cam.id = 1;
+  cam.model_id = 1;
+  cam.width = 640;
+  cam.height = 480;
+  cam.params = {exact.k[0], exact.k[1], exact.k[2], exact.k[3]};
+  m.cameras[1] = cam;
+  for (size_t i = 0; i < rotation.size(); ++i) {
+    io::ColmapImage im;
+    im.id = static_cast<int>(i) + 1;
+    im.rotation = rotation[i];
+    im.translation = translation[i];
+    im.camera_id = 1;
+    im.name = "image_" + std::to_string(i) + ".png";
+    m.images[im.id] = im;
+  }
+  for (size_t p = 0; p < exact.points.size(); ++p) {
+    std::vector<Eigen::Matrix<double, 3, 4>> projections;
+    std::vector<Eigen::Vector2d> normalised;
+    std::vector<io::ColmapTrackElement> track;
+    for (size_t i = 0; i < rotation.size(); ++i) {
+      const Eigen::Vector3d c = exact.rotation[i] * exact.points[p] + exact.translation[i];
+      Eigen::Vector2d px(exact.k[0] * c.x() / c.z() + exact.k[2], exact.k[1] * c.y() / c.z() + exact.k[3]);
+      if (c.z() <= 0 || px.x() < 0 || px.y() < 0 || px.x() >= 640 || px.y() >= 480) continue;
+      px += Eigen::Vector2d(noise(rng), noise(rng));
+      if (u(rng) < outlier_ratio) px = Eigen::Vector2d(640 * u(rng), 480 * u(rng));
+      io::ColmapImage& im = m.images.at(static_cast<int>(i) + 1);
+      track.push_back({im.id, static_cast<int>(im.points2D.size())});
+      im.points2D.push_back({px, -1});
+      Eigen::Matrix<double, 3, 4> pm;
+      pm << rotation[i].toRotationMatrix(), translation[i];
+      projections.push_back(pm);
+      normalised.emplace_back((px.x() - exact.k[2]) / exact.k[0], (px.y() - exact.k[3]) / exact.k[1]);
+    }
+    if (track.size() < 2) continue;
+    if (matches)  // the matcher found every pair of the point's observations (outliers included)
+      for (size_t a = 0; a < track.size(); ++a)
+        for (size_t b = a + 1; b < track.size(); ++b)
+          matches->push_back({{track[a].image_id, track[a].point2D_idx}, {track[b].image_id, track[b].point2D_idx}});
+    io::ColmapPoint3D point;
+    point.id = static_cast<int64_t>(p) + 1;
+    point.xyz = triangulate(projections, normalised);
+    for (const auto& e : track) {
+      const io::ColmapImage& im = m.images.at(e.image_id);
+      const Eigen::Vector3d c = im.rotation * point.xyz + im.translation;
+      const Eigen::Vector2d px(exact.k[0] * c.x() / c.z() + exact.k[2], exact.k[1] * c.y() / c.z() + exact.k[3]);
+      if (c.z() > 0 && (px - im.points2D[static_cast<size_t>(e.point2D_idx)].xy).norm() <= max_error)
+        point.track.push_back(e);
+    }
+    if (point.track.size() < 2) continue;
+    for (const auto& e : point.track) m.images.at(e.image_id).points2D[static_cast<size_t>(e.point2D_idx)].point3D_id = point.id;
+    m.points[point.id] = point;
+  }
+  return m;
+}
+
+double ate(const io::ColmapModel& m, const Scene& exact) {
+  Eigen::Matrix3Xd est(3, static_cast<long>(m.images.size())), gt(3, static_cast<long>(m.images.size()));
+  long q = 0;
+  for (const auto& [id, im] : m.images) {
+    est.col(q) = im.centre();
+    gt.col(q++) = exact.centre(static_cast<size_t>(id - 1));
+  }
+  return eval::absoluteTrajectoryError(est, gt).rmse;
+}
+
+class Refinement : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    rng.seed(29);
+    exact = makeScene(rng);
+    drift(exact, rng, &rotation, &translation);
+  }
+  std::mt19937 rng;
+  Scene exact;
+  std::vector<Eigen::Quaterniond> rotation;
+  std::vector<Eigen::Vector3d> translation;
+};
+
+TEST_F(Refinement, WithoutTheMatchesTheModelIsNoWorse) {
+  // Only the points triangulated at the drifting poses: their tracks keep what fits those poses,
+  // so little can be corrected, but nothing may get worse.
+  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng);
+  refine::RefinementReport report;
+  const io::ColmapModel out = refine::refineModel(input, refine::allImages(input), {}, &report);
+  EXPECT_TRUE(report.refined) << report.message;
+  EXPECT_EQ(0, report.retriangulations);
+  EXPECT_LT(ate(out, exact), 1.05 * ate(input, exact));
+}
+
+TEST_F(Refinement, DriftedPosesComeCloserToTheExactOnes) {
+  std::vector<refine::Match> matches;
+  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.0, 4.0, &matches);
+  refine::RefinementReport report;
+  const io::ColmapModel out = refine::refineModel(input, refine::allImages(input), {}, &report, nullptr, &matches);
+  const double before = ate(input, exact), after = ate(out, exact);
+  EXPECT_GT(before, 0.003);  // the drift is there: millimetres to centimetres on a 5 m arc
+  EXPECT_LT(after, 0.5 * before) << report.message;
+  EXPECT_EQ("converged", report.status) << report.message;
+  EXPECT_TRUE(report.refined);
+  EXPECT_TRUE(report.aligned);
+  EXPECT_EQ(2, report.retriangulations);  // before the first adjustment, and after it
+  EXPECT_GT(report.observations_refined, report.observations_input);  // what the drift rejected is back
+  EXPECT_EQ(input.images.size(), out.images.size());
+  EXPECT_LT(report.reprojection_error_refined, report.reprojection_error_input);
+  EXPECT_LT(report.reprojection_error_refined, 0.8);  // 0.5 px noise
+  // The cameras are unchanged, and every image reports a correction that matches its move.
+  EXPECT_EQ(input.cameras.at(1).params, out.cameras.at(1).params);
+  ASSERT_EQ(input.images.size(), report.images.size());
+  for (const auto& c : report.images) {
+    EXPECT_TRUE(c.refined) << c.name << ": " << c.kept;
+    EXPECT_NEAR((out.images.at(c.image_id).centre() - input.images.at(c.image_id).centre()).norm(), c.translation, 1e-9);
+  }
+  // Every track names 2D points that point back at it (a model COLMAP reads).
+  for (const auto& [id, p] : out.points)
+    for (const auto& e : p.track) EXPECT_EQ(id, out.images.at(e.image_id).points2D[static_cast<size_t>(e.point2D_idx)].point3D_id);
+}
+
+TEST_F(Refinement, OutlierObservationsAreFiltered) {
+  // 5% of the observations anywhere in the image, in the tracks and in the matches: the robust
+  // loss, the triangulation's limit and the filter must keep them out.
+  std::vector<refine::Match> matches;
+  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.05, 1e9, &matches);
+  refine::RefinementReport report;
+  const io::ColmapModel out = refine::refineModel(input, refine::allImages(input), {}, &report, nullptr, &matches);
+  EXPECT_LT(ate(out, exact), 0.5 * ate(input, exact)) << report.message;
+  EXPECT_LT(report.reprojection_error_refined, 1.0);
+  // The outliers are not in the model: every observation within the filter's 4 px.
+  for (const auto& [id, p] : out.points) EXPECT_LE(p.error, 4.0);
+}
+
+TEST_F(Refinement, HeldImagesDoNotMove) {
+  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng);
+  const std::set<int> movable = {5, 6, 7, 8, 9, 10};
+  refine::RefinementReport report;
+  const io::ColmapModel out = refine::refineModel(input, movable, {}, &report);
+  EXPECT_FALSE(report.aligned);
+  for (const auto& [id, im] : out.images) {
+    if (movable.count(id)) continue;
+    EXPECT_EQ(input.images.at(id).translation, im.translation) << id;
+    EXPECT_NEAR(0.0, input.images.at(id).rotation.angularDistance(im.rotation), 1e-12) << id;
+  }
+}
+
+TEST_F(Refinement, AnImplausibleCorrectionKeepsTheInputPose) {
+  // Image 12's given pose is 2 m off (a SLAM glitch) while its observations are right: the
+  // adjustment would move it back by more than half the depth of its points (3 m), which is not
+  // a drift correction. It keeps its input pose and the report says why; the others refine.
+  std::vector<Eigen::Vector3d> t = translation;
+  const std::vector<Eigen::Quaterniond> r = rotation;
+  io::ColmapModel input = knownPoseModel(exact, r, t, rng, 0.0, 1e9);  // every observation kept
+  input.images.at(12).translation += Eigen::Vector3d(2.0, 0.0, 0.0);
+  refine::RefinementConfig config;
+  config.prior_translation_ratio = 0.0;  // nothing holds it to its neighbours
+  config.max_reprojection_error = 1e9;   // its observations stay in every solve
+  refine::RefinementReport report;
+  const io::ColmapModel out = refine::refineModel(input, refine::allImages(input), config, &report);
+  ASSERT_TRUE(report.refined) << report.message;
+  EXPECT_EQ(2, report.passes);
+  const auto& c = report.images.at(11);
+  ASSERT_EQ(12, c.image_id);
+  EXPECT_FALSE(c.refined);
+  EXPECT_NE(std::string::npos, c.kept.find("implausible")) << c.kept;
+  EXPECT_EQ(input.images.at(12).translation, out.images.at(12).translation);
+  for (const auto& i : report.images) {
+    if (i.image_id == 12) continue;
+    EXPECT_TRUE(i.refined) << i.name << ": " << i.kept;
+  }
+}
+
+TEST_F(Refinement, ARunawaySolveKeepsTheWholeInput) {
+  // Observations that fit no geometry (every 2D point moved at random after triangulation):
+  // no adjustment makes them agree, most end up beyond 4 px, and the input is kept as it came.
+  io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (auto& [id, im] : input.images)
+    for (auto& p : im.points2D) p.xy = Eigen::Vector2d(640 * u(rng), 480 * u(rng));
+  refine::RefinementConfig config;
+  config.max_reprojection_error = 4.0;
+  refine::RefinementReport report;
+  const io::ColmapModel out = refine::refineModel(input, refine::allImages(input), config, &report);
+  EXPECT_EQ("diverged", report.status) << report.message;
+  EXPECT_FALSE(report.refined);
+  for (const auto& [id, im] : out.images) {
+    EXPECT_EQ(input.images.at(id).translation, im.translation);
+    EXPECT_EQ(input.images.at(id).rotation.coeffs(), im.rotation.coeffs());
+  }
+  EXPECT_EQ(input.points.size(), out.points.size());
+  for (const auto& c : report.images) EXPECT_FALSE(c.kept.empty());
+}
+
+TEST_F(Refinement, RejectsCamerasItCannotProject) {
+  io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng);
+  input.cameras.at(1).model_id = 2;  // SIMPLE_RADIAL
+  input.cameras.at(1).params = {525.0, 319.5, 239.5, 0.01};
+  EXPECT_THROW(refine::refineModel(input, refine::allImages(input), {}, nullptr), core::InvalidArgument);
+  refine::RefinementConfig bad;
+  bad.loss = "square";
+  EXPECT_THROW(bad.validate(), core::InvalidArgument);
+}
+
+TEST(Tracks, MatchesJoinIntoTracksWithoutTwoKeypointsOfOneImage) {
+  using refine::Match;
+  const std::vector<Match> matches = {{{1, 0}, {2, 5}}, {{2, 5}, {3, 7}}, {{1, 0}, {3, 8}},  // 3/7 vs 3/8: left out
+                                      {{4, 1}, {5, 1}}};
+  const refine::Tracks t = refine::buildTracks(matches);
+  ASSERT_EQ(2u, t.tracks.size());
+  EXPECT_EQ(1u, t.conflicts);
+  EXPECT_EQ(3u, t.tracks[0].size() + t.tracks[1].size() - 2);
+  const fs::path file = fs::temp_directory_path() / ("vs_matches_" + std::to_string(::getpid()));
+  refine::writeMatches(file.string(), matches);
+  const std::vector<Match> back = refine::readMatches(file.string());
+  ASSERT_EQ(matches.size(), back.size());
+  EXPECT_TRUE(back[2].b == (refine::Observation{3, 8}));
+  fs::resize_file(file, fs::file_size(file) - 3);
+  EXPECT_THROW(refine::readMatches(file.string()), core::IoError);
+  fs::remove(file);
+}
+
+TEST(ColmapModelFiles, WrittenModelReadsBackTheSame) {
+  std::mt19937 rng(3);
+  const Scene exact = makeScene(rng);
+  const io::ColmapModel m = knownPoseModel(exact, exact.rotation, exact.translation, rng);
+  const fs::path dir = fs::temp_directory_path() / ("vs_colmap_model_" + std::to_string(::getpid()));
+  io::writeColmapModel(m, dir.string());
+  const io::ColmapModel back = io::readColmapModel(dir.string());
+  ASSERT_EQ(m.images.size(), back.images.size());
+  ASSERT_EQ(m.points.size(), back.points.size());
+  EXPECT_EQ(m.cameras.at(1).params, back.cameras.at(1).params);
+  for (const auto& [id, im] : m.images) {
+    const auto& b = back.images.at(id);
+    EXPECT_EQ(im.name, b.name);
+    EXPECT_NEAR(0.0, (im.translation - b.translation).norm(), 1e-15);
+    ASSERT_EQ(im.points2D.size(), b.points2D.size());
+    for (size_t q = 0; q < im.points2D.size(); ++q) EXPECT_EQ(im.points2D[q].point3D_id, b.points2D[q].point3D_id);
+  }
+  EXPECT_EQ(m.observations(), back.observations());
+  // A truncated file is an error naming it, not a smaller model.
+  const fs::path points = dir / "points3D.bin";
+  fs::resize_file(points, fs::file_size(points) / 2);
+  try {
+    io::readColmapModel(dir.string());
+    ADD_FAILURE() << "a truncated points3D.bin was read";
+  } catch (const core::IoError& e) {
+    EXPECT_NE(std::string::npos, std::string(e.what()).find("points3D.bin")) << e.what();
+  }
+  fs::remove_all(dir);
+  EXPECT_THROW(io::readColmapModel(dir.string()), core::IoError);
+}
+
+}  // namespace
