@@ -9,6 +9,7 @@
 #include <boost/make_shared.hpp>
 
 #include <cmath>
+#include <limits>
 
 namespace view_selection::ros_node {
 
@@ -92,6 +93,12 @@ FrameInputs::~FrameInputs() {
   compressed_depth_sub_.shutdown();
   info_sub_.shutdown();
   points_sub_.shutdown();
+  // The images still waiting for a partner are decided now with what came (as their timeouts
+  // would): each becomes a frame for the worker, which handles it before it stops, or a
+  // counted drop. Nothing that arrived is lost at shutdown.
+  std::lock_guard<std::mutex> lock(sync_mutex_);
+  discardEarlierGenerations();
+  deliver(sync_.poll(std::numeric_limits<double>::infinity()));
 }
 
 void FrameInputs::onImage(const sensor_msgs::ImageConstPtr& image) { addImage(image); }
@@ -214,6 +221,7 @@ void FrameInputs::deliver(SynchronisedFrames decided) {
                      "stamp " + stampText(frame.image->header.stamp) + ": " + corrupt->message,
                      frame.image->header.stamp);
   }
+  statistics_.pairedOnTimeout(decided.undecided);
   statistics_.setImagesInSynchroniser(sync_.waiting());
 }
 

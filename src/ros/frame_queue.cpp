@@ -53,12 +53,32 @@ void FrameQueue::reconfigure(const core::ViewSelectorConfig& config) {
   wake_.notify_one();
 }
 
-std::optional<core::ViewSelectorConfig> FrameQueue::takeRequests(uint64_t* generation) {
+void FrameQueue::setMap(Eigen::Matrix3Xd points) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    pending_map_ = std::move(points);
+  }
+  wake_.notify_one();
+}
+
+void FrameQueue::requestSave(std::function<void()> save) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    pending_saves_.push_back(std::move(save));
+  }
+  wake_.notify_one();
+}
+
+FrameQueue::Requests FrameQueue::takeRequests() {
   std::lock_guard<std::mutex> lock(mutex_);
-  std::optional<core::ViewSelectorConfig> config = std::move(pending_config_);
+  Requests r;
+  r.config = std::move(pending_config_);
   pending_config_.reset();
-  *generation = generation_.load();
-  return config;
+  r.map = std::move(pending_map_);
+  pending_map_.reset();
+  r.saves.swap(pending_saves_);
+  r.generation = generation_.load();
+  return r;
 }
 
 std::optional<QueuedFrame> FrameQueue::next(uint64_t applied_generation,
@@ -69,16 +89,24 @@ std::optional<QueuedFrame> FrameQueue::next(uint64_t applied_generation,
     idle();
     lock.lock();
   }
-  wake_.wait(lock, [&] {
-    return stopping_ || !queue_.empty() || pending_config_ ||
+  const auto requested = [&] {
+    return pending_config_ || pending_map_ || !pending_saves_.empty() ||
            generation_.load() != applied_generation;
-  });
-  *stop = stopping_;
-  if (stopping_ || queue_.empty()) return std::nullopt;  // stop, or a request
+  };
+  wake_.wait(lock, [&] { return stopping_ || !queue_.empty() || requested(); });
+  // On stop, the frames still queued are handled first (each becomes a keyframe or a counted
+  // drop); then the worker stops.
+  *stop = stopping_ && queue_.empty() && !requested();
+  if (queue_.empty() || requested()) return std::nullopt;  // stop, or a request to apply first
   QueuedFrame frame = std::move(queue_.front());
   queue_.pop_front();
   queued_count_ = queue_.size();
   return frame;
+}
+
+bool FrameQueue::stopping() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return stopping_;
 }
 
 void FrameQueue::stop() {

@@ -181,6 +181,7 @@ void FrameSynchroniser::release(double now, SynchronisedFrames& out) {
       missing = "the nearest depth image is " + seconds(depth_offset) + " from it";
     if (missing.empty()) {
       out.frames.push_back({head.image, info, depth, head.generation});
+      if (!ready) ++out.undecided;
     } else {
       out.drops.push_back({stamp, "no partner for the image within " + seconds(config_.max_spread) +
                                       " (~max_stamp_spread): " + missing +

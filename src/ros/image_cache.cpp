@@ -9,6 +9,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
@@ -76,9 +77,15 @@ ImageFolder::~ImageFolder() {
 }
 
 KeyframeImageCache::KeyframeImageCache(size_t memory_bytes, std::shared_ptr<ImageFolder> folder)
-    : budget_(memory_bytes), base_(std::move(folder)) {}
+    : budget_(memory_bytes), base_(std::move(folder)), spill_thread_([this] { spillLoop(); }) {}
 
 KeyframeImageCache::~KeyframeImageCache() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stopping_ = true;
+  }
+  wake_.notify_all();
+  if (spill_thread_.joinable()) spill_thread_.join();
   if (dir_.empty()) return;
   std::error_code ec;
   fs::remove_all(dir_, ec);
@@ -87,8 +94,8 @@ KeyframeImageCache::~KeyframeImageCache() {
                                                                          << "': " << ec.message());
 }
 
-std::string KeyframeImageCache::fileLocked(size_t id) const {
-  return (fs::path(dir_) / (std::to_string(id) + ".image")).string();
+std::string KeyframeImageCache::fileOf(const std::string& dir, size_t id) const {
+  return (fs::path(dir) / (std::to_string(id) + ".image")).string();
 }
 
 void KeyframeImageCache::reportLocked(const std::string& error) {
@@ -109,30 +116,25 @@ void KeyframeImageCache::reportLocked(const std::string& error) {
   last_report_ = now;
 }
 
-bool KeyframeImageCache::spillLocked(size_t id) {
-  if (!base_ || !base_->error().empty()) {
-    reportLocked(base_ ? base_->error() : std::string("no image folder"));
-    return false;
-  }
-  if (dir_.empty()) {
-    std::string error;
-    dir_ = makeUniqueFolder(base_->path(), "session_", error);
+std::string KeyframeImageCache::spill(size_t id, const sensor_msgs::Image& image) {
+  std::string dir;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (!base_ || !base_->error().empty()) return base_ ? base_->error() : "no image folder";
     if (dir_.empty()) {
-      reportLocked(error);
-      return false;
+      std::string error;
+      dir_ = makeUniqueFolder(base_->path(), "session_", error);
+      if (dir_.empty()) return error;
     }
+    dir = dir_;
   }
-  const sensor_msgs::Image& image = *entries_[id].image;
   const uint32_t length = ros::serialization::serializationLength(image);
   std::vector<uint8_t> bytes(length);
   ros::serialization::OStream out(bytes.data(), length);
   ros::serialization::serialize(out, image);
-  const std::string path = fileLocked(id);
+  const std::string path = fileOf(dir, id);
   std::FILE* f = std::fopen(path.c_str(), "wb");
-  if (!f) {
-    reportLocked("cannot write '" + path + "': " + std::strerror(errno));
-    return false;
-  }
+  if (!f) return "cannot write '" + path + "': " + std::strerror(errno);
   const size_t written = std::fwrite(bytes.data(), 1, bytes.size(), f);
   const int write_errno = errno;
   const bool flushed = std::fflush(f) == 0;
@@ -142,38 +144,96 @@ bool KeyframeImageCache::spillLocked(size_t id) {
     const int e = written != bytes.size() ? write_errno : flushed ? errno : flush_errno;
     std::error_code ec;
     fs::remove(path, ec);
-    reportLocked("cannot write '" + path + "': " + std::strerror(e));
-    return false;
+    return "cannot write '" + path + "': " + std::strerror(e);
   }
-  return true;
+  return {};
+}
+
+void KeyframeImageCache::releaseLocked(size_t id, bool spilled, const std::string& error) {
+  Entry& e = entries_[id];
+  memory_bytes_ -= e.image->data.size();
+  e.image.reset();
+  e.where = spilled ? Where::kDisk : Where::kLost;
+  ++(spilled ? on_disk_ : lost_);
+  if (!spilled) reportLocked(error);
+}
+
+void KeyframeImageCache::spillLoop() {
+  std::unique_lock<std::mutex> lock(mutex_);
+  while (true) {
+    wake_.wait(lock, [this] { return stopping_ || !spill_queue_.empty(); });
+    if (stopping_) return;
+    const size_t id = spill_queue_.front();
+    spill_queue_.pop_front();
+    const sensor_msgs::ImageConstPtr image = entries_[id].image;  // kept in RAM until written
+    spill_busy_ = true;
+    lock.unlock();
+    const std::string error = spill(id, *image);  // the disk, outside the lock
+    lock.lock();
+    spill_busy_ = false;
+    spill_bytes_ -= image->data.size();
+    releaseLocked(id, error.empty(), error);
+    if (spill_queue_.empty()) spilled_.notify_all();
+  }
 }
 
 void KeyframeImageCache::push(sensor_msgs::ImageConstPtr image) {
-  std::lock_guard<std::mutex> lock(mutex_);
-  const size_t id = entries_.size();
-  Entry entry;
-  if (image) {
-    entry.where = Where::kMemory;
-    memory_bytes_ += image->data.size();
-    entry.image = std::move(image);
-    memory_order_.push_back(id);
+  bool wake = false;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const size_t id = entries_.size();
+    Entry entry;
+    if (image) {
+      entry.where = Where::kMemory;
+      memory_bytes_ += image->data.size();
+      entry.image = std::move(image);
+      memory_order_.push_back(id);
+    }
+    entries_.push_back(std::move(entry));
+    // Over the budget: the oldest images in RAM go to the spill thread (still readable meanwhile).
+    const bool unusable = !base_ || !base_->error().empty();
+    while (memory_bytes_ - spill_bytes_ > budget_ && !memory_order_.empty()) {
+      const size_t oldest = memory_order_.front();
+      memory_order_.pop_front();
+      if (unusable) {  // known at once: no disk to wait for
+        releaseLocked(oldest, false, base_ ? base_->error() : std::string("no image folder"));
+        continue;
+      }
+      entries_[oldest].where = Where::kSpilling;
+      spill_bytes_ += entries_[oldest].image->data.size();
+      spill_queue_.push_back(oldest);
+      wake = true;
+    }
+    // A disk that cannot keep up loses the oldest waiting images rather than the RAM bound.
+    const size_t backlog = std::max(budget_, kMinSpillBacklog);
+    while (spill_bytes_ > backlog && spill_queue_.size() > 1) {
+      const size_t oldest = spill_queue_.front();
+      spill_queue_.pop_front();
+      spill_bytes_ -= entries_[oldest].image->data.size();
+      releaseLocked(oldest, false,
+                    "the disk is too slow: more than " + std::to_string(backlog >> 20) +
+                        " MB of images wait to be written to ~image_dir");
+    }
   }
-  entries_.push_back(std::move(entry));
-  while (memory_bytes_ > budget_ && !memory_order_.empty()) {
-    const size_t oldest = memory_order_.front();
-    memory_order_.pop_front();
-    Entry& e = entries_[oldest];
-    const bool spilled = spillLocked(oldest);
-    memory_bytes_ -= e.image->data.size();
-    e.image.reset();
-    e.where = spilled ? Where::kDisk : Where::kLost;
-    ++(spilled ? on_disk_ : lost_);
-  }
+  if (wake) wake_.notify_one();
 }
 
 size_t KeyframeImageCache::size() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return entries_.size();
+}
+
+bool KeyframeImageCache::has(size_t id) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (id >= entries_.size()) return false;
+  const Where w = entries_[id].where;
+  return w == Where::kMemory || w == Where::kSpilling || w == Where::kDisk;
+}
+
+bool KeyframeImageCache::waitSpilled(double timeout) const {
+  std::unique_lock<std::mutex> lock(mutex_);
+  return spilled_.wait_for(lock, std::chrono::duration<double>(timeout),
+                           [this] { return spill_queue_.empty() && !spill_busy_; });
 }
 
 sensor_msgs::ImageConstPtr KeyframeImageCache::get(size_t id) const {
@@ -182,9 +242,9 @@ sensor_msgs::ImageConstPtr KeyframeImageCache::get(size_t id) const {
     std::lock_guard<std::mutex> lock(mutex_);
     if (id >= entries_.size()) return nullptr;
     const Entry& e = entries_[id];
-    if (e.where == Where::kMemory) return e.image;
+    if (e.where == Where::kMemory || e.where == Where::kSpilling) return e.image;
     if (e.where != Where::kDisk) return nullptr;
-    path = fileLocked(id);
+    path = fileOf(dir_, id);
   }
   // Read outside the lock: a spilled file is never written again.
   std::FILE* f = std::fopen(path.c_str(), "rb");
@@ -215,7 +275,8 @@ KeyframeImageCache::Stats KeyframeImageCache::stats() const {
   std::lock_guard<std::mutex> lock(mutex_);
   Stats s;
   s.images = entries_.size();
-  s.in_memory = memory_order_.size();
+  s.in_memory = memory_order_.size() + spill_queue_.size() + (spill_busy_ ? 1 : 0);
+  s.spilling = spill_queue_.size() + (spill_busy_ ? 1 : 0);
   s.on_disk = on_disk_;
   s.lost = lost_;
   s.memory_bytes = memory_bytes_;

@@ -53,6 +53,13 @@ void InputStatistics::setImagesInSynchroniser(uint64_t images) {
   ++version_;
 }
 
+void InputStatistics::pairedOnTimeout(uint64_t frames) {
+  if (frames == 0) return;
+  std::lock_guard<std::mutex> lock(mutex_);
+  counts_.frames_paired_on_timeout += frames;
+  ++version_;
+}
+
 void InputStatistics::pathApplied(uint64_t keyframes) {
   std::lock_guard<std::mutex> lock(mutex_);
   ++counts_.paths_applied;
@@ -112,7 +119,9 @@ void InputStatistics::count(const std::string& reason, const std::string& messag
     ++counts_.dropped[reason];
     counts_.last_error = reason + ": " + message;
     counts_.last_error_stamp = stamp;
-    if (frame) counts_.last_frame_stamp = stamp;
+    // A frame the node stopped before handling was never considered: a replay after a restart
+    // sends it again.
+    if (frame && reason != kShutdownReason) counts_.last_frame_stamp = stamp;
     ++version_;
     Throttle& t = throttle_[reason];
     const ros::WallTime now = ros::WallTime::now();
@@ -209,6 +218,7 @@ view_selection::InputStatistics InputStatistics::toMsg() const {
   msg.depths_arrived = counts_.depths_arrived;
   msg.frames_received = counts_.frames_received;
   msg.images_in_synchroniser = counts_.images_in_synchroniser;
+  msg.frames_paired_on_timeout = counts_.frames_paired_on_timeout;
   msg.paths_applied = counts_.paths_applied;
   msg.keyframes_corrected = counts_.keyframes_corrected;
   msg.frames_offered = counts_.frames_offered;

@@ -26,18 +26,30 @@ KeyframeImageWriter::~KeyframeImageWriter() {
   if (thread_.joinable()) thread_.join();
 }
 
-std::string KeyframeImageWriter::setDirectory(const std::string& directory) {
-  std::string error;
+KeyframeImageWriter::Switch KeyframeImageWriter::setDirectory(const std::string& directory) {
+  Switch out;
   if (!directory.empty()) {
     std::error_code ec;
     fs::create_directories(directory, ec);
     if (ec || !fs::is_directory(directory, ec))
-      error = "cannot make folder '" + directory + "': " + (ec ? ec.message() : "not a folder");
+      out.error = "cannot make folder '" + directory + "': " + (ec ? ec.message() : "not a folder");
   }
-  std::lock_guard<std::mutex> lock(mutex_);
-  directory_ = error.empty() ? directory : std::string();
-  if (!error.empty()) stats_.last_error = error;
-  return error;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    directory_ = out.error.empty() ? directory : std::string();
+    lost_.clear();
+    if (!out.error.empty()) stats_.last_error = out.error;
+    out.shared = shared_;
+    // In the same step as the switch: the keyframes accepted and not in the served selection
+    // yet, which the caller cannot see.
+    if (!directory_.empty())
+      for (const Held& h : unshared_) {
+        ++out.queued;
+        if (!queueLocked(h.name, h.image)) ++out.dropped;
+      }
+  }
+  wake_.notify_one();
+  return out;
 }
 
 std::string KeyframeImageWriter::directory() const {
@@ -45,21 +57,64 @@ std::string KeyframeImageWriter::directory() const {
   return directory_;
 }
 
-bool KeyframeImageWriter::push(const std::string& name, sensor_msgs::ImageConstPtr image) {
+void KeyframeImageWriter::lostLocked(const std::string& name, const std::string& error) {
+  stats_.last_error = error;
+  // Bounded: a consumer asks again for what it lacks; the names of a long outage are not kept.
+  if (lost_.size() < 10000) lost_.push_back(name);
+}
+
+bool KeyframeImageWriter::queueLocked(const std::string& name, sensor_msgs::ImageConstPtr image) {
+  if (holding_ >= max_queue_) {
+    ++stats_.dropped;
+    lostLocked(name, "the image writer is " + std::to_string(max_queue_) +
+                         " images behind (the disk is too slow); dropped " + name);
+    ROS_ERROR_STREAM_THROTTLE(5.0, "view_selection: " << stats_.last_error);
+    return false;
+  }
+  ++holding_;
+  queue_.push_back({(fs::path(directory_) / name).string(), name, std::move(image), nullptr, 0});
+  return true;
+}
+
+void KeyframeImageWriter::accepted(std::size_t id, const std::string& name,
+                                   sensor_msgs::ImageConstPtr image) {
+  if (!image) return;
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    if (directory_.empty() || !image) return false;
-    if (queue_.size() >= max_queue_) {
-      ++stats_.dropped;
-      stats_.last_error = "the image writer is " + std::to_string(max_queue_) +
-                          " images behind (the disk is too slow); dropped " + name;
-      ROS_ERROR_STREAM_THROTTLE(5.0, "view_selection: " << stats_.last_error);
-      return true;
-    }
-    queue_.push_back({(fs::path(directory_) / name).string(), std::move(image)});
+    unshared_.push_back({id, name, image});
+    if (directory_.empty()) return;
+    queueLocked(name, std::move(image));
+  }
+  wake_.notify_one();
+}
+
+void KeyframeImageWriter::shared(std::size_t keyframes) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  shared_ = keyframes;
+  while (!unshared_.empty() && unshared_.front().id < keyframes) unshared_.pop_front();
+}
+
+void KeyframeImageWriter::newSession() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  unshared_.clear();
+  shared_ = 0;
+}
+
+bool KeyframeImageWriter::queueFromCache(const std::string& name,
+                                         std::shared_ptr<const KeyframeImageCache> cache,
+                                         std::size_t id) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (directory_.empty() || !cache) return false;
+    queue_.push_back({(fs::path(directory_) / name).string(), name, nullptr, std::move(cache), id});
   }
   wake_.notify_one();
   return true;
+}
+
+std::vector<std::string> KeyframeImageWriter::lostNames() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return lost_;
 }
 
 bool KeyframeImageWriter::waitIdle(double timeout) const {
@@ -85,9 +140,11 @@ void KeyframeImageWriter::loop() {
     }
     Job job = std::move(queue_.front());
     queue_.pop_front();
+    if (job.image) --holding_;
     busy_ = true;
     lock.unlock();
     write(job);
+    job = Job{};  // the image released outside the lock
     lock.lock();
     busy_ = false;
     if (queue_.empty()) idle_.notify_all();
@@ -106,14 +163,17 @@ void KeyframeImageWriter::write(const Job& job) {
     if (ec)
       throw core::IoError("cannot make folder '" + fs::path(job.path).parent_path().string() +
                           "': " + ec.message());
-    const cv::Mat bgr = imageForCore(job.image);
+    // A keyframe image from the cache is read now (back from disk when it was spilled).
+    const sensor_msgs::ImageConstPtr image = job.image ? job.image : job.cache->get(job.id);
+    if (!image) throw core::IoError("the node no longer has the image");
+    const cv::Mat bgr = imageForCore(image);
     io::writeAtomically(job.path, [&](const std::string& tmp) { io::writePng(tmp, bgr); });
     std::lock_guard<std::mutex> lock(mutex_);
     ++stats_.written;
   } catch (const std::exception& e) {
     std::lock_guard<std::mutex> lock(mutex_);
     ++stats_.failed;
-    stats_.last_error = std::string("keyframe image ") + job.path + ": " + e.what();
+    lostLocked(job.name, std::string("keyframe image ") + job.path + ": " + e.what());
     ROS_ERROR_STREAM_THROTTLE(5.0, "view_selection: " << stats_.last_error
                                                       << " (the image is lost; "
                                                       << stats_.failed << " so far)");

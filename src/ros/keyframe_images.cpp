@@ -20,7 +20,7 @@ std::shared_ptr<KeyframeImageCache> KeyframeImages::newCache() const {
       static_cast<size_t>(config_.image_cache_mb * 1024.0 * 1024.0), folder_);
 }
 
-void KeyframeImages::keyframeAccepted(const std::string& name,
+void KeyframeImages::keyframeAccepted(size_t id, const std::string& name,
                                       const sensor_msgs::ImageConstPtr& image,
                                       const CameraModel& camera) {
   if (!cache_ && !writer_) return;
@@ -28,7 +28,11 @@ void KeyframeImages::keyframeAccepted(const std::string& name,
   const sensor_msgs::ImageConstPtr kept =
       camera.rectify ? rectifiedImageMessage(camera, image) : image;
   if (cache_) cache_->push(kept);
-  if (writer_) writer_->push(name, kept);
+  if (writer_) writer_->accepted(id, name, kept);
+}
+
+void KeyframeImages::shared(size_t keyframes) {
+  if (writer_) writer_->shared(keyframes);
 }
 
 void KeyframeImages::continued(size_t keyframes) {
@@ -38,6 +42,7 @@ void KeyframeImages::continued(size_t keyframes) {
 
 void KeyframeImages::newSession() {
   if (cache_) cache_ = newCache();
+  if (writer_) writer_->newSession();
 }
 
 }  // namespace view_selection::ros_node

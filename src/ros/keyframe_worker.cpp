@@ -56,6 +56,8 @@ KeyframeWorker::KeyframeWorker(const NodeConfig& config, PoseProvider& poses,
 }
 
 KeyframeWorker::~KeyframeWorker() {
+  // The frames still queued are handled before the thread ends: with the pose source and the
+  // verdicts stopped, none waits; each becomes a keyframe, a non-keyframe or a counted drop.
   intake_.stop();
   poses_.stop();
   if (verdicts_) verdicts_->stop();
@@ -172,30 +174,47 @@ void KeyframeWorker::applyResetLocked(uint64_t generation) {
 }
 
 void KeyframeWorker::applyRequests() {
-  uint64_t generation = 0;
-  const std::optional<core::ViewSelectorConfig> config = intake_.takeRequests(&generation);
-  if (generation == applied_generation_ && !config) return;
+  FrameQueue::Requests r = intake_.takeRequests();
+  if (r.generation == applied_generation_ && !r.config && !r.map && r.saves.empty()) return;
   std::lock_guard<std::timed_mutex> lock(state_mutex_);
-  if (generation != applied_generation_) applyResetLocked(generation);
-  if (config) {
+  if (r.generation != applied_generation_) applyResetLocked(r.generation);
+  if (r.config) {
     // Readers keep the selection shared last meanwhile (its lists are shared copy-on-write,
     // so recomputing E in place does not touch what they read).
-    selector_->setConfig(*config);
+    selector_->setConfig(*r.config);
     handoff_.markChanged();
     shareSelectionLocked();
   }
+  if (r.map) applyMapLocked(std::move(*r.map));
+  for (const auto& save : r.saves) save();
 }
 
-StateSnapshot KeyframeWorker::captureState() {
-  std::lock_guard<std::timed_mutex> lock(state_mutex_);
-  return handoff_.captureWhole(*selector_);
+void KeyframeWorker::requestSave(std::function<void(const SaveResult&)> done) {
+  if (!keeper_.enabled()) {
+    done({false, "~state_file is empty: saving is off", 0, 0.0});
+    return;
+  }
+  // Captured on the worker's thread (under the state lock, which no service thread takes),
+  // written on the keeper's.
+  intake_.requestSave([this, done = std::move(done)] {
+    keeper_.saveLater(handoff_.captureWhole(*selector_), done);
+  });
 }
 
 void KeyframeWorker::setMapPoints(Eigen::Matrix3Xd points) {
-  std::lock_guard<std::timed_mutex> lock(state_mutex_);
+  if (!points.allFinite()) throw core::InvalidInput("map points must be finite");
+  intake_.setMap(std::move(points));
+}
+
+void KeyframeWorker::applyMapLocked(Eigen::Matrix3Xd points) {
   points::MapPointSource* map = points::mapSourceOf(selector_->pointSource());
   if (!map) return;
-  map->setMapPoints(std::move(points));
+  try {
+    map->setMapPoints(std::move(points));
+  } catch (const core::InvalidInput& e) {
+    statistics_.dropInput("bad_map", std::string("ignored the map: ") + e.what(), ros::Time());
+    return;
+  }
   const std::vector<core::ViewId> rows = selector_->applyPointUpdates();
   handoff_.markChanged();
   if (!rows.empty()) shareSelectionLocked();
@@ -268,7 +287,9 @@ void KeyframeWorker::shareSelectionLocked() {
   next->image_count = images_.count();
   unshared_ = false;
   last_share_ = ros::WallTime::now();
+  const size_t keyframes = next->selection.size();
   shared_.install(std::move(next), applied_generation_);
+  images_.shared(keyframes);  // after the install: a folder switch finds them served
 }
 
 void KeyframeWorker::keyframeInsertedLocked() {
@@ -337,6 +358,10 @@ void KeyframeWorker::process(const QueuedFrame& queued) {
   bool external = false;
   if (verdicts_ && verdicts_->active()) {
     const KeyframeVerdicts::Verdict verdict = verdicts_->wait(stamp);
+    if (verdict == KeyframeVerdicts::Verdict::kUnknown && intake_.stopping())
+      return drop(queued, kShutdownDrop,
+                  "the node stopped before the frame's keyframe verdict came on " +
+                      verdicts_->describe());
     if (verdict == KeyframeVerdicts::Verdict::kUnknown)
       return drop(queued, "no_keyframe_verdict",
                   "no stamp on " + verdicts_->describe() + " at or after " + stampText(stamp) +
@@ -345,6 +370,9 @@ void KeyframeWorker::process(const QueuedFrame& queued) {
     external = verdict == KeyframeVerdicts::Verdict::kKeyframe;
   }
   const PoseLookup lookup = poses_.lookup(normaliseFrameId(frame.image->header.frame_id), stamp);
+  if (!lookup.pose && lookup.reason == "no_pose" && intake_.stopping())
+    return drop(queued, kShutdownDrop,
+                "the node stopped before the frame's pose came (" + lookup.message + ")");
   if (!lookup.pose) return drop(queued, lookup.reason, lookup.message);
   if (!lookup.pose->isValid())
     return drop(queued, "bad_pose",
@@ -401,7 +429,8 @@ void KeyframeWorker::process(const QueuedFrame& queued) {
   handoff_.markChanged();
   double insertion = -1.0;
   if (result.outcome == core::FrameOutcome::kKeyframe) {
-    images_.keyframeAccepted(core_frame.image_name, frame.image, camera);
+    images_.keyframeAccepted(static_cast<size_t>(result.id), core_frame.image_name, frame.image,
+                             camera);
     insertion = result.points_seconds + result.matrix_seconds;
     // Counted before the selection is shared: a reader never sees more keyframes in the
     // selection than in the statistics.

@@ -70,6 +70,45 @@ TfPoseProvider::~TfPoseProvider() {
 void TfPoseProvider::clearLocked() {
   buffer_.clear();  // static transforms stay
   newest_.clear();
+  links_.clear();
+}
+
+namespace {
+bool sameTransform(const geometry_msgs::TransformStamped& a,
+                   const geometry_msgs::TransformStamped& b) {
+  const auto& p = a.transform.translation;
+  const auto& q = b.transform.translation;
+  const auto& r = a.transform.rotation;
+  const auto& o = b.transform.rotation;
+  return a.header.frame_id == b.header.frame_id && p.x == q.x && p.y == q.y && p.z == q.z &&
+         r.x == o.x && r.y == o.y && r.z == o.z && r.w == o.w;
+}
+}  // namespace
+
+void TfPoseProvider::noteLinkLocked(const geometry_msgs::TransformStamped& t,
+                                    const std::string& authority) {
+  auto [it, first] = links_.try_emplace(t.child_frame_id);
+  Link& link = it->second;
+  if (first || t.header.stamp < link.first.header.stamp) {
+    if (!first) link.moved = link.moved || !sameTransform(t, link.first);
+    link.first = t;
+    return;
+  }
+  if (link.moved || link.extended) return;
+  if (!sameTransform(t, link.first)) {
+    link.moved = true;
+    return;
+  }
+  // Seen twice, the same: a fixed link. It held before its first message too.
+  link.extended = true;
+  geometry_msgs::TransformStamped earlier = link.first;
+  const double back = std::min(kFixedLinkBackfill, earlier.header.stamp.toSec());
+  earlier.header.stamp -= ros::Duration(back);
+  try {
+    buffer_.setTransform(earlier, authority, false);
+  } catch (const tf2::TransformException&) {
+    // Older than the buffer keeps: nothing to extend.
+  }
 }
 
 void TfPoseProvider::onTf(const ros::MessageEvent<tf2_msgs::TFMessage const>& event,
@@ -98,6 +137,7 @@ void TfPoseProvider::onTf(const ros::MessageEvent<tf2_msgs::TFMessage const>& ev
     }
     try {
       buffer_.setTransform(t, authority, is_static);
+      if (!is_static) noteLinkLocked(t, authority);
     } catch (const tf2::TransformException& e) {
       ROS_ERROR_STREAM_THROTTLE(5.0, "view_selection: tf from " << authority << ": " << e.what());
     }

@@ -10,6 +10,8 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include <algorithm>
+#include <chrono>
+#include <future>
 #include <filesystem>
 
 namespace view_selection::ros_node {
@@ -58,16 +60,19 @@ bool SelectionServices::getPairs(view_selection::GetPairs::Request& req,
   (void)worker_.servedLatest();  // keyframes accepted so far are shared, so announced too
   pairs_.answer(req.since, res);
   res.keyframe_image_dir = image_writer_.directory();
+  res.keyframe_images_lost = image_writer_.lostNames();
   return true;
 }
 
 bool SelectionServices::writeImages(view_selection::WriteKeyframeImages::Request& req,
                                     view_selection::WriteKeyframeImages::Response& res) {
   res.success = false;
-  const std::string error = image_writer_.setDirectory(req.directory);
-  if (!error.empty()) {
-    res.message = error;
-    ROS_ERROR_STREAM_THROTTLE(5.0, "view_selection: ~write_keyframe_images: " << error);
+  // The switch and the keyframes it leaves to this call are one step: the writer queues the
+  // keyframes accepted and not shared yet itself; every one below `shared` is served from now on.
+  const KeyframeImageWriter::Switch sw = image_writer_.setDirectory(req.directory);
+  if (!sw.error.empty()) {
+    res.message = sw.error;
+    ROS_ERROR_STREAM_THROTTLE(5.0, "view_selection: ~write_keyframe_images: " << sw.error);
     return true;
   }
   if (req.directory.empty()) {
@@ -75,28 +80,37 @@ bool SelectionServices::writeImages(view_selection::WriteKeyframeImages::Request
     res.message = "keyframe images are no longer written";
     return true;
   }
-  // The keyframes accepted before: their images where the node kept them.
-  const std::shared_ptr<const ServedSelection> served = worker_.servedLatest();
+  const std::shared_ptr<const ServedSelection> served = worker_.served();
   const core::SelectionOutput& s = served->selection;
-  for (size_t i = 0; i < s.size(); ++i) {
-    sensor_msgs::ImageConstPtr image;
-    try {
-      if (served->images && i < served->image_count) image = served->images->get(i);
-    } catch (const core::IoError&) {
-    }
-    if (image && image_writer_.push(s.imageName(i), image))
-      ++res.images_written;
+  const size_t earlier = std::min(sw.shared, s.size());
+  for (size_t i = 0; i < earlier; ++i) {
+    const std::string name = s.imageName(i);
+    std::error_code ec;
+    if (fs::exists(fs::path(req.directory) / name, ec))
+      ++res.images_written;  // there already (written once: kept)
+    else if (served->images && i < served->image_count && served->images->has(i) &&
+             image_writer_.queueFromCache(name, served->images, i))
+      ++res.images_queued;
     else
       ++res.images_missing;
   }
+  res.images_queued += static_cast<int32_t>(sw.queued - sw.dropped);
+  res.images_dropped = static_cast<int32_t>(sw.dropped);
+  const size_t keyframes = earlier + sw.queued;
   res.success = true;
   res.message = "keyframe images go to '" + req.directory + "' from now on; of the " +
-                std::to_string(s.size()) + " keyframes before, " +
-                std::to_string(res.images_written) + " images queued" +
+                std::to_string(keyframes) + " keyframes so far, " +
+                std::to_string(res.images_written) + " images are there already, " +
+                std::to_string(res.images_queued) + " queued for writing" +
+                (res.images_dropped > 0 ? ", " + std::to_string(res.images_dropped) +
+                                              " dropped (the image writer is too far behind: "
+                                              "ask again once it caught up)"
+                                        : std::string()) +
                 (res.images_missing > 0
                      ? ", " + std::to_string(res.images_missing) +
                            " missing (the node keeps earlier images only with "
-                           "~save_keyframe_images)"
+                           "~save_keyframe_images, and none of keyframes continued from "
+                           "~state_file)"
                      : std::string());
   ROS_INFO_STREAM("view_selection: " << res.message);
   return true;
@@ -228,9 +242,28 @@ bool SelectionServices::saveState(std_srvs::Trigger::Request&, std_srvs::Trigger
     res.message = "~state_file is empty: saving is off";
     return true;
   }
-  const SaveResult saved = keeper_.saveNow(worker_.captureState());
-  res.success = saved.ok;
-  res.message = saved.message;
+  // The worker's thread captures the session before its next frame and the keeper's writes it;
+  // this thread only waits for the answer, at most kSaveAnswerWait.
+  auto done = std::make_shared<std::promise<SaveResult>>();
+  std::future<SaveResult> answer = done->get_future();
+  worker_.requestSave([done](const SaveResult& r) { done->set_value(r); });
+  if (answer.wait_for(std::chrono::duration<double>(kSaveAnswerWait)) !=
+      std::future_status::ready) {
+    res.success = true;
+    res.message = "the save is under way (not written within " +
+                  core::formatNumber(kSaveAnswerWait) +
+                  " s: a large session, or the worker is busy); ~statistics' "
+                  "state_saved_keyframes says when it is on disk";
+    return true;
+  }
+  try {
+    const SaveResult saved = answer.get();
+    res.success = saved.ok;
+    res.message = saved.message;
+  } catch (const std::future_error&) {
+    res.success = false;
+    res.message = "the node stopped before the session was saved";
+  }
   return true;
 }
 

@@ -146,26 +146,36 @@ void StateKeeper::refuseLoaded(const std::string& why) {
                    << why << kept << "; starting empty");
 }
 
-void StateKeeper::saveLater(StateSnapshot snapshot) {
-  if (!enabled()) return;
+void StateKeeper::saveLater(StateSnapshot snapshot, SaveDone done) {
+  if (!enabled()) {
+    if (done) done({false, "~state_file is empty: the session is not saved", 0, 0.0});
+    return;
+  }
   {
     std::lock_guard<std::mutex> lock(mutex_);
     // A record waiting is older: the snapshot holds it.
     if (waiting_record_ && waiting_record_->sequence <= snapshot.sequence) waiting_record_.reset();
     waiting_ = std::move(snapshot);
+    if (done) waiting_done_.push_back(std::move(done));
   }
   wake_.notify_one();
 }
 
 SaveResult StateKeeper::saveNow(StateSnapshot snapshot) {
   if (!enabled()) return {false, "~state_file is empty: the session is not saved", 0, 0.0};
+  std::vector<SaveDone> done;
   {
     // A snapshot or record still waiting is older than this one.
     std::lock_guard<std::mutex> lock(mutex_);
-    if (waiting_ && waiting_->sequence <= snapshot.sequence) waiting_.reset();
+    if (waiting_ && waiting_->sequence <= snapshot.sequence) {
+      waiting_.reset();
+      done.swap(waiting_done_);  // this save holds what they waited for
+    }
     if (waiting_record_ && waiting_record_->sequence <= snapshot.sequence) waiting_record_.reset();
   }
-  return write(snapshot);
+  const SaveResult result = write(snapshot);
+  for (const SaveDone& d : done) d(result);
+  return result;
 }
 
 void StateKeeper::appendLater(JournalSnapshot record) {
@@ -216,19 +226,26 @@ void StateKeeper::loop() {
   while (true) {
     std::optional<StateSnapshot> aside, snapshot;
     std::optional<JournalSnapshot> record;
+    std::vector<SaveDone> done;
     {
       std::unique_lock<std::mutex> lock(mutex_);
       wake_.wait(lock, [this] { return stopping_ || waiting_ || aside_ || waiting_record_; });
-      if (stopping_) return;
+      // On stop, what still waits is written first: a capture handed over is the only copy
+      // of what changed since the save before it (the worker's shutdown save only adds to it).
+      if (stopping_ && !waiting_ && !aside_ && !waiting_record_) return;
       aside = std::move(aside_);  // first: the session before the one waiting_ holds
       aside_.reset();
       snapshot = std::move(waiting_);
       waiting_.reset();
+      done.swap(waiting_done_);
       record = std::move(waiting_record_);
       waiting_record_.reset();
     }
     if (aside) writeAside(*aside);
-    if (snapshot) write(*snapshot);
+    if (snapshot) {
+      const SaveResult result = write(*snapshot);
+      for (const SaveDone& d : done) d(result);
+    }
     if (record && (!snapshot || record->sequence > snapshot->sequence)) append(*record);
   }
 }

@@ -42,7 +42,7 @@ ViewSelectionRos::ViewSelectionRos(ros::NodeHandle nh, ros::NodeHandle private_n
       corrections_(config_, nh, worker_, *poses_, statistics_),
       inputs_(config_, nh, private_nh, worker_, statistics_) {
   if (!config_.keyframe_image_dir.empty()) {
-    const std::string error = image_writer_.setDirectory(config_.keyframe_image_dir);
+    const std::string error = image_writer_.setDirectory(config_.keyframe_image_dir).error;
     if (!error.empty())
       ROS_ERROR_STREAM("view_selection: ~keyframe_image_dir: " << error
                                                                << "; keyframe images are not written");

@@ -53,6 +53,12 @@ the saved parameters, changed by the selection and matrix parameters given (the 
 recomputed when a gate changes; keyframe and point-source parameters cannot change).
 
 options:
+  --input KIND              auto | collection | stream (default auto). A photo collection keeps
+                            every image as a keyframe; a video stream is thinned by the keyframe
+                            policy (--keyframe-policy). auto: a collection when the images are
+                            at least 0.5 s apart (median), as photos are (DTU, castle: 1 s);
+                            a stream otherwise (video at 10-60 Hz). A keyframe option given
+                            (--keyframe-policy, --every, ...) applies to either.
   --every N                 every Nth frame becomes a keyframe (--every 1: every frame); short
                             for --keyframe-policy every_nth --every-n N
   --max-frames N            use only the first N associated frames
@@ -114,6 +120,20 @@ struct Options {
   std::vector<int> stream_report;  ///< --stream-report: stability rules to replay
   std::string strategy = "ours";
   NearestPairsConfig nearest;
+  std::string input = "auto";      ///< --input: auto | collection | stream
+  bool keyframe_options = false;   ///< a keyframe policy option was given
+};
+
+/// Median interval between consecutive frames at or above which --input auto takes a folder for a
+/// photo collection [s]: photos converted to the TUM layout are stamped seconds apart (their
+/// index, or when they were taken), video frames 1/60 to 1/10 s.
+constexpr double kCollectionInterval = 0.5;
+
+/// How the frames are taken: a collection (every image a keyframe) or a stream (the policy
+/// thins it), and why, for the summary.
+struct InputKind {
+  bool collection = false;
+  std::string why;
 };
 
 /// argv with the short aliases replaced by the option names they stand for ("--a=b" too).
@@ -181,7 +201,7 @@ Options parse(int argc, char** argv) {
   std::set<std::string> options = {
       "dataset", "every",      "max-frames", "points",    "max-time-difference",
       "out",     "print-sets", "strategy",   "nearest-k", "nearest-max-angle",
-      "state",   "stream-report"};
+      "state",   "stream-report", "input"};
   const std::set<std::string> method =
       view_selection::tools::parameterOptions(ViewSelectorConfig{});
   const std::set<std::string> sources =
@@ -221,6 +241,10 @@ Options parse(int argc, char** argv) {
     kf.mode = kf.every_n == 1 ? KeyframeMode::kEveryFrame : KeyframeMode::kEveryNth;
   }
   if (cli.flag("no-occlusion")) o.config.matrix.occlusion.enabled = false;
+  o.input = cli.choice("input", "auto", {"auto", "collection", "stream"});
+  for (const char* name : {"every", "keyframe-policy", "every-n", "keyframe-overlap",
+                           "keyframe-parallax-deg", "min-translation", "min-rotation-deg"})
+    o.keyframe_options = o.keyframe_options || cli.has(name);
   o.max_frames = cli.integer("max-frames", 0, 1, 100000000);
   o.points = cli.choice("points", "auto", {"auto", "depth", "features"});
   o.max_time_difference = cli.real("max-time-difference", o.max_time_difference, 0.0, 10.0);
@@ -645,14 +669,87 @@ int runPointsOnly(const Options& o, const fs::path& points_file) {
   return 0;
 }
 
-int run(const Options& o) {
-  if (!o.state.empty()) return runFromState(o);
+/// --input: a photo collection or a video stream (see the usage), and the keyframe rule that
+/// follows: every image of a collection, unless a keyframe option was given.
+InputKind inputKind(const Options& o, const TumDataset& dataset, ViewSelectorConfig& config) {
+  InputKind kind;
+  const size_t total = framesToUse(o, dataset);
+  std::vector<double> steps;
+  for (size_t q = 1; q < total; ++q)
+    steps.push_back(dataset.frames[q].stamp - dataset.frames[q - 1].stamp);
+  double median = 0.0;
+  if (!steps.empty()) {
+    std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2),
+                     steps.end());
+    median = steps[steps.size() / 2];
+  }
+  std::ostringstream interval;
+  interval.precision(3);
+  interval << std::fixed << median;
+  if (o.input == "auto") {
+    kind.collection = steps.empty() || median >= kCollectionInterval;
+    kind.why = std::string(kind.collection ? "a photo collection" : "a video stream") +
+               " (--input auto: images " + interval.str() + " s apart, median; " +
+               (kind.collection ? "at least " : "under ") + "0.5 s is " +
+               (kind.collection ? "a collection)" : "video)");
+  } else {
+    kind.collection = o.input == "collection";
+    kind.why = std::string(kind.collection ? "a photo collection" : "a video stream") +
+               " (--input " + o.input + ")";
+  }
+  if (kind.collection && !o.keyframe_options) {
+    config.keyframes.mode = KeyframeMode::kEveryFrame;
+    kind.why += ": every image is kept";
+  } else if (kind.collection) {
+    kind.why += ": thinned by the keyframe options given";
+  } else {
+    kind.why += ": keyframes by the keyframe policy";
+  }
+  return kind;
+}
+
+/// The summary's account of the frames that did not become keyframes, by name when few.
+void printDropped(const Options& o, const TumDataset& dataset, const ViewSelector& selector,
+                  const InputKind& kind) {
+  const size_t total = framesToUse(o, dataset);
+  std::set<std::string> kept;
+  const ErrorResistanceMatrix& m = selector.matrix();
+  for (size_t i = 0; i < m.size(); ++i)
+    kept.insert(m.keyframe(static_cast<ViewId>(i)).image_name);
+  std::vector<std::string> dropped;
+  for (size_t q = 0; q < total; ++q)
+    if (!kept.count(dataset.imageName(dataset.frames[q])))
+      dropped.push_back(dataset.frames[q].rgb_path);
+  std::printf("input       %s\n", kind.why.c_str());
+  if (dropped.empty()) {
+    std::printf("dropped     none: every one of the %zu images is a keyframe\n", total);
+    return;
+  }
+  std::printf("dropped     %zu of %zu images, not keyframes by the rule %s", dropped.size(), total,
+              describeKeyframeRule(o.config.keyframes).c_str());
+  // A collection's dropped photos are named (a user expects each one); a stream's are counted.
+  constexpr size_t kNamed = 20;
+  if (kind.collection || dropped.size() <= kNamed) {
+    std::printf(":");
+    for (size_t i = 0; i < dropped.size() && i < kNamed; ++i)
+      std::printf(" %s", dropped[i].c_str());
+    if (dropped.size() > kNamed) std::printf(" ... (%zu more)", dropped.size() - kNamed);
+    if (kind.collection)
+      std::printf(" (--input collection without keyframe options keeps every image)");
+  }
+  std::printf("\n");
+}
+
+int run(const Options& given) {
+  if (!given.state.empty()) return runFromState(given);
+  Options o = given;
   if (const fs::path points = fs::path(o.dataset) / "points.bin"; fs::exists(points))
     return runPointsOnly(o, points);
   const auto t_start = std::chrono::steady_clock::now();
   TumDatasetOptions dataset_options;
   dataset_options.max_time_difference = o.max_time_difference;
   const TumDataset dataset = loadTumDataset(o.dataset, dataset_options);
+  const InputKind kind = inputKind(o, dataset, o.config);
   if (o.strategy == "nearest") return runNearest(o, dataset);
 
   ViewSelector selector(o.config, pointSourceFor(o, dataset));
@@ -672,6 +769,7 @@ int run(const Options& o) {
   const ExportResult written = writeOutputs(o, selector, snapshot, std::move(params), "");
   t.write = seconds(t_write);
   printSummary(o, dataset, selector, snapshot, written, t, seconds(t_start));
+  printDropped(o, dataset, selector, kind);
   stream.print(selector.select().pairs);
   return 0;
 }

@@ -147,5 +147,69 @@ TEST_F(EvaluationTools, SelectViewsNearestWritesPairsByName) {
   EXPECT_NE(out.find("need --strategy nearest"), std::string::npos) << out;
 }
 
+// Photo collections keep every photo (issue 30): the rendered box seen from views 3 degrees
+// apart on an arc, stamped 1 s apart as photos converted to the TUM layout are. By default every
+// image is a keyframe and the summary says why; as a video stream the scale-free policy thins
+// them (parallax under 5 degrees) and the summary names each one it dropped.
+TEST_F(EvaluationTools, SelectViewsKeepsEveryPhotoOfACollection) {
+  std::string out;
+  auto generate = [&](const std::string& name, int frames, bool depth) {
+    const fs::path folder = dir_ / name;
+    EXPECT_EQ(runTool(tool("generate_sequence") + " --out " + folder.string() + " --frames " +
+                          std::to_string(frames) + " --ring-step 3 --fps 1 --width 320 " +
+                          "--height 240 --quiet" + (depth ? "" : " --no-depth"),
+                      &out),
+              0)
+        << out;
+    return folder;
+  };
+  auto keyframes = [&](const fs::path& selection) {
+    const nlohmann::json j = nlohmann::json::parse(readAll(selection / "selection.json"));
+    return j["keyframes"].size();
+  };
+  // Two RGB-D photos 3 degrees apart: depth gives the first its points, so a video stream's
+  // policy would take the second for the same view.
+  const fs::path two = generate("two_photos", 2, true);
+  ASSERT_EQ(runTool(tool("select_views") + " --dataset " + two.string() + " --out " +
+                        (dir_ / "two_default").string() + " --quiet --print-sets 0",
+                    &out),
+            0)
+      << out;
+  EXPECT_EQ(keyframes(dir_ / "two_default"), 2u) << out;
+  EXPECT_NE(out.find("a photo collection (--input auto: images 1.000 s apart"), std::string::npos)
+      << out;
+  EXPECT_NE(out.find("dropped     none"), std::string::npos) << out;
+  ASSERT_EQ(runTool(tool("select_views") + " --dataset " + two.string() + " --out " +
+                        (dir_ / "two_stream").string() + " --quiet --print-sets 0 --input stream",
+                    &out),
+            0)
+      << out;
+  EXPECT_EQ(keyframes(dir_ / "two_stream"), 1u) << "as a stream the second view is thinned: " << out;
+  EXPECT_NE(out.find("dropped     1 of 2 images"), std::string::npos) << out;
+  EXPECT_NE(out.find("rgb/1001.000000.png"), std::string::npos) << "the dropped photo by name: " << out;
+
+  // Ten photos without depth (features, as DTU and castle): every one kept by default.
+  const fs::path ten = generate("ten_photos", 10, false);
+  ASSERT_EQ(runTool(tool("select_views") + " --dataset " + ten.string() + " --out " +
+                        (dir_ / "ten_default").string() + " --quiet --print-sets 0",
+                    &out),
+            0)
+      << out;
+  EXPECT_EQ(keyframes(dir_ / "ten_default"), 10u) << out;
+  // An explicit keyframe option applies to a collection too, and its drops are named.
+  ASSERT_EQ(runTool(tool("select_views") + " --dataset " + ten.string() + " --out " +
+                        (dir_ / "ten_policy").string() +
+                        " --quiet --print-sets 0 --keyframe-policy scale_free",
+                    &out),
+            0)
+      << out;
+  const size_t kept = keyframes(dir_ / "ten_policy");
+  EXPECT_LT(kept, 10u) << out;
+  EXPECT_NE(out.find("dropped     " + std::to_string(10 - kept) + " of 10 images"),
+            std::string::npos)
+      << out;
+  EXPECT_NE(out.find("thinned by the keyframe options given"), std::string::npos) << out;
+}
+
 }  // namespace
 }  // namespace view_selection

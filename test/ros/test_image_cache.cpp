@@ -1,16 +1,21 @@
 // The keyframe image cache (~image_cache_mb, ~image_dir): at most the budget in RAM, the rest on
 // disk and read back equal, folders made and removed as documented, and a folder that cannot be
-// written loses images (counted, with the reason) without throwing. No master needed.
+// written loses images (counted, with the reason) without throwing. The keyframe image writer
+// (~write_keyframe_images): a full queue drops images and says which, and a folder switch loses
+// no accepted keyframe. No master needed.
 #include "view_selection/core/exceptions.h"
 #include "view_selection/ros/image_cache.h"
+#include "view_selection/ros/keyframe_image_writer.h"
 
 #include <boost/make_shared.hpp>
 #include <gtest/gtest.h>
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <memory>
 #include <string>
 #include <vector>
@@ -18,6 +23,7 @@
 namespace fs = std::filesystem;
 using view_selection::ros_node::ImageFolder;
 using view_selection::ros_node::KeyframeImageCache;
+using view_selection::ros_node::KeyframeImageWriter;
 
 namespace {
 
@@ -67,6 +73,7 @@ TEST(ImageCache, KeepsTheBudgetInMemoryAndReadsTheRestBackEqual) {
   for (int i = 0; i < 6; ++i) {
     pushed.push_back(i == 3 ? nullptr : makeImage(i));  // keyframe 3 has no image
     cache.push(pushed.back());
+    ASSERT_TRUE(cache.waitSpilled(30.0));  // spills are written on the cache's own thread
     EXPECT_LE(cache.stats().memory_bytes, 2 * one + one / 2) << "over budget after " << i;
   }
   const KeyframeImageCache::Stats s = cache.stats();
@@ -97,6 +104,7 @@ TEST(ImageCache, ZeroBudgetPutsEveryImageOnDisk) {
   auto folder = std::make_shared<ImageFolder>("");
   KeyframeImageCache cache(0, folder);
   for (int i = 0; i < 3; ++i) cache.push(makeImage(i, 17, 5));
+  ASSERT_TRUE(cache.waitSpilled(30.0));
   EXPECT_EQ(cache.stats().in_memory, 0u);
   EXPECT_EQ(cache.stats().memory_bytes, 0u);
   EXPECT_EQ(cache.stats().on_disk, 3u);
@@ -111,6 +119,7 @@ TEST(ImageCache, FoldersItMadeAreRemovedAndAGivenOneIsKept) {
     EXPECT_TRUE(folder->created());
     KeyframeImageCache cache(0, folder);
     cache.push(makeImage(1));
+    ASSERT_TRUE(cache.waitSpilled(30.0));
     session = cache.folder();
     EXPECT_TRUE(fs::exists(session));
   }
@@ -125,6 +134,7 @@ TEST(ImageCache, FoldersItMadeAreRemovedAndAGivenOneIsKept) {
     EXPECT_FALSE(folder->created());
     KeyframeImageCache cache(0, folder);
     cache.push(makeImage(2));
+    ASSERT_TRUE(cache.waitSpilled(30.0));
     session = cache.folder();
     EXPECT_EQ(fs::path(session).parent_path(), given);
   }
@@ -140,6 +150,7 @@ TEST(ImageCache, FoldersItMadeAreRemovedAndAGivenOneIsKept) {
     EXPECT_TRUE(folder->created());
     KeyframeImageCache cache(0, folder);
     cache.push(makeImage(3));
+    ASSERT_TRUE(cache.waitSpilled(30.0));
     EXPECT_EQ(cache.stats().on_disk, 1u);
   }
   EXPECT_FALSE(fs::exists(made));
@@ -162,6 +173,7 @@ TEST(ImageCache, AnUnwritableFolderLosesImagesWithTheReasonAndNeverThrows) {
       pushed.push_back(makeImage(i));
       EXPECT_NO_THROW(cache.push(pushed.back()));
     }
+    ASSERT_TRUE(cache.waitSpilled(30.0));
     const KeyframeImageCache::Stats s = cache.stats();
     EXPECT_EQ(s.lost, 3u);
     EXPECT_EQ(s.on_disk, 0u);
@@ -180,6 +192,7 @@ TEST(ImageCache, ADamagedFileIsAnIoErrorNamingIt) {
   auto folder = std::make_shared<ImageFolder>("");
   KeyframeImageCache cache(0, folder);
   cache.push(makeImage(5));
+  ASSERT_TRUE(cache.waitSpilled(30.0));
   const fs::path spilled = fs::path(cache.folder()) / "0.image";
   ASSERT_TRUE(fs::exists(spilled));
   fs::resize_file(spilled, 10);
@@ -191,6 +204,101 @@ TEST(ImageCache, ADamagedFileIsAnIoErrorNamingIt) {
   }
   fs::remove(spilled);
   EXPECT_THROW(cache.get(0), view_selection::core::IoError);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The keyframe image writer
+
+std::string nameOf(size_t id) { return "rgb/" + std::to_string(id) + ".png"; }
+
+/// PNG files below `dir`, by name relative to it.
+std::set<std::string> pngsIn(const fs::path& dir) {
+  std::set<std::string> names;
+  if (!fs::exists(dir)) return names;
+  for (const auto& e : fs::recursive_directory_iterator(dir))
+    if (e.is_regular_file() && e.path().extension() == ".png")
+      names.insert(fs::relative(e.path(), dir).string());
+  return names;
+}
+
+TEST(KeyframeImageWriter, AFullQueueDropsImagesAndNamesEachOne) {
+  ros::Time::init();  // the throttled error log reads ROS time (wall time here: no master)
+  const fs::path dir = scratch("writer_full");
+  fs::remove_all(dir);
+  std::vector<std::string> lost;
+  KeyframeImageWriter::Stats stats;
+  constexpr size_t kImages = 60;
+  {
+    // Room for 2 images: a burst of 60 VGA keyframes (PNG encoding takes milliseconds each,
+    // pushing them microseconds) overflows it.
+    KeyframeImageWriter writer(2);
+    ASSERT_TRUE(writer.setDirectory(dir.string()).error.empty());
+    for (size_t i = 0; i < kImages; ++i) writer.accepted(i, nameOf(i), makeImage(int(i), 640, 480));
+    ASSERT_TRUE(writer.waitIdle(120.0));
+    stats = writer.stats();
+    lost = writer.lostNames();
+  }
+  EXPECT_GT(stats.dropped, 0u) << "the queue of 2 never overflowed";
+  EXPECT_EQ(stats.written + stats.dropped, kImages) << "every image is written or dropped";
+  EXPECT_EQ(stats.failed, 0u) << stats.last_error;
+  EXPECT_NE(stats.last_error.find("behind"), std::string::npos) << stats.last_error;
+  // The names of the dropped ones are exactly the images missing from the folder.
+  const std::set<std::string> on_disk = pngsIn(dir);
+  EXPECT_EQ(on_disk.size(), stats.written);
+  ASSERT_EQ(lost.size(), stats.dropped);
+  for (size_t i = 0; i < kImages; ++i) {
+    const bool dropped = std::find(lost.begin(), lost.end(), nameOf(i)) != lost.end();
+    EXPECT_NE(dropped, on_disk.count(nameOf(i)) == 1) << nameOf(i);
+  }
+  fs::remove_all(dir);
+}
+
+TEST(KeyframeImageWriter, AFolderSwitchLosesNoAcceptedKeyframe) {
+  const fs::path a = scratch("writer_switch_a"), b = scratch("writer_switch_b");
+  fs::remove_all(a);
+  fs::remove_all(b);
+  auto cache = std::make_shared<KeyframeImageCache>(size_t(1) << 30,
+                                                   std::make_shared<ImageFolder>(""));
+  KeyframeImageWriter writer;
+  // Keyframes 0-4 accepted without a folder; a selection with 0-2 was shared, 3 and 4 not yet.
+  for (size_t i = 0; i < 5; ++i) {
+    const sensor_msgs::ImageConstPtr image = makeImage(int(i));
+    cache->push(image);
+    writer.accepted(i, nameOf(i), image);
+  }
+  writer.shared(3);
+  KeyframeImageWriter::Switch sw = writer.setDirectory(a.string());
+  ASSERT_TRUE(sw.error.empty()) << sw.error;
+  EXPECT_EQ(sw.shared, 3u) << "the caller writes keyframes 0-2 from the served selection";
+  EXPECT_EQ(sw.queued, 2u) << "keyframes 3 and 4 are not served yet: the switch queues them";
+  EXPECT_EQ(sw.dropped, 0u);
+  for (size_t i = 0; i < sw.shared; ++i) EXPECT_TRUE(writer.queueFromCache(nameOf(i), cache, i));
+  // Later keyframes go to the folder as they are accepted.
+  const sensor_msgs::ImageConstPtr later = makeImage(5);
+  cache->push(later);
+  writer.accepted(5, nameOf(5), later);
+  ASSERT_TRUE(writer.waitIdle(60.0));
+  EXPECT_EQ(pngsIn(a), (std::set<std::string>{nameOf(0), nameOf(1), nameOf(2), nameOf(3),
+                                               nameOf(4), nameOf(5)}));
+  EXPECT_EQ(writer.stats().written, 6u);
+  EXPECT_TRUE(writer.lostNames().empty());
+
+  // Shared up to 5; a switch to b leaves every keyframe but the unshared 5 to the caller.
+  writer.shared(5);
+  sw = writer.setDirectory(b.string());
+  EXPECT_EQ(sw.shared, 5u);
+  EXPECT_EQ(sw.queued, 1u);
+  ASSERT_TRUE(writer.waitIdle(60.0));
+  EXPECT_EQ(pngsIn(b), std::set<std::string>{nameOf(5)});
+  // A file already there is kept, not written again.
+  EXPECT_TRUE(writer.queueFromCache(nameOf(5), cache, 5));
+  ASSERT_TRUE(writer.waitIdle(60.0));
+  EXPECT_EQ(writer.stats().kept, 1u);
+  // A new session starts its ids over: nothing of the old one is held.
+  writer.newSession();
+  EXPECT_EQ(writer.setDirectory(a.string()).queued, 0u);
+  fs::remove_all(a);
+  fs::remove_all(b);
 }
 
 }  // namespace

@@ -1,8 +1,11 @@
-// Interface rostest: the node (or nodelet) named by ~node advertises its topics and services,
-// subscribes to its inputs, and an empty node answers every service sensibly.
+// Interface rostest: the node (or nodelet) named by ~node advertises its topics and its seven
+// services, subscribes to its inputs, and an empty node answers every service sensibly. The node
+// started as the README starts it (rosrun, no name given) serves under /view_selection.
 #include <view_selection/Export.h>
 #include <view_selection/GetNextViews.h>
+#include <view_selection/GetPairs.h>
 #include <view_selection/GetSelection.h>
+#include <view_selection/WriteKeyframeImages.h>
 #include <view_selection/InputStatistics.h>
 #include <view_selection/ViewSelection.h>
 
@@ -12,6 +15,8 @@
 #include <ros/ros.h>
 #include <std_srvs/Trigger.h>
 
+#include <signal.h>
+#include <sys/wait.h>
 #include <unistd.h>
 #include <algorithm>
 
@@ -74,7 +79,9 @@ TEST(Interface, AdvertisesTopicsAndSubscribesToInputs) {
   // The launch file remaps image/camera_info/depth under /camera.
   for (const char* topic : {"/camera/image", "/camera/camera_info", "/camera/depth"})
     EXPECT_TRUE(contains(subscribed, topic)) << topic << " has no subscriber";
-  for (const char* srv : {"/get_next_views", "/get_selection", "/export", "/reset"})
+  EXPECT_TRUE(contains(published, node + "/pairs")) << node << "/pairs is not advertised";
+  for (const char* srv : {"/get_next_views", "/get_selection", "/export", "/reset", "/get_pairs",
+                          "/write_keyframe_images", "/save_state"})
     EXPECT_TRUE(ros::service::exists(node + srv, false)) << node + srv << " is not advertised";
 }
 
@@ -120,9 +127,79 @@ TEST(Interface, EmptyNodeAnswersSensibly) {
   std::error_code ec;
   std::filesystem::remove_all(exp.request.directory, ec);
 
+  // The pair stream from the start: one full message of the (empty) announced set.
+  view_selection::GetPairs pairs_srv;
+  pairs_srv.request.since = 0;
+  ASSERT_TRUE(call(node + "/get_pairs", pairs_srv));
+  EXPECT_TRUE(pairs_srv.response.success) << pairs_srv.response.message;
+  ASSERT_EQ(pairs_srv.response.changes.size(), 1u);
+  EXPECT_TRUE(pairs_srv.response.changes[0].full);
+  EXPECT_TRUE(pairs_srv.response.changes[0].added.empty());
+  EXPECT_EQ(pairs_srv.response.keyframe_image_dir, "");
+  EXPECT_TRUE(pairs_srv.response.keyframe_images_lost.empty());
+
+  // Keyframe images into a folder: none yet, so nothing written, queued, dropped or missing;
+  // ~get_pairs names the folder; "" stops; a folder that cannot be made is an error.
+  view_selection::WriteKeyframeImages images;
+  images.request.directory = exp.request.directory + "_images";
+  ASSERT_TRUE(call(node + "/write_keyframe_images", images));
+  EXPECT_TRUE(images.response.success) << images.response.message;
+  EXPECT_EQ(images.response.images_written + images.response.images_queued +
+                images.response.images_dropped + images.response.images_missing,
+            0);
+  ASSERT_TRUE(call(node + "/get_pairs", pairs_srv));
+  EXPECT_EQ(pairs_srv.response.keyframe_image_dir, images.request.directory);
+  images.request.directory = "";
+  ASSERT_TRUE(call(node + "/write_keyframe_images", images));
+  EXPECT_TRUE(images.response.success) << images.response.message;
+  ASSERT_TRUE(call(node + "/get_pairs", pairs_srv));
+  EXPECT_EQ(pairs_srv.response.keyframe_image_dir, "");
+  images.request.directory = "/proc/version/cannot_be_a_folder";
+  ASSERT_TRUE(call(node + "/write_keyframe_images", images));
+  EXPECT_FALSE(images.response.success);
+  EXPECT_NE(images.response.message.find("cannot make folder"), std::string::npos)
+      << images.response.message;
+  std::filesystem::remove_all(exp.request.directory + "_images", ec);
+
+  // Without ~state_file (both launch files here), saving is off, and says so.
+  std_srvs::Trigger save;
+  ASSERT_TRUE(call(node + "/save_state", save));
+  EXPECT_FALSE(save.response.success);
+  EXPECT_NE(save.response.message.find("state_file"), std::string::npos) << save.response.message;
+
   std_srvs::Trigger reset;
   ASSERT_TRUE(call(node + "/reset", reset));
   EXPECT_TRUE(reset.response.success) << reset.response.message;
+}
+
+// The README's `rosrun view_selection view_selection_node image:=...` gives no name: the node
+// must still serve where the README's rosservice calls look, /view_selection/... (here under a
+// namespace of its own, beside the node the launch file started).
+TEST(Interface, RosrunWithoutANameServesUnderViewSelection) {
+  if (nodeName() != "/view_selection") GTEST_SKIP() << "checked once, in interface.test";
+  const pid_t pid = ::fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    ::setpgid(0, 0);
+    ::execlp("rosrun", "rosrun", "view_selection", "view_selection_node", "__ns:=/readme",
+             "image:=/readme/camera/image", static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  const bool up = ros::service::waitForService("/readme/view_selection/get_selection",
+                                               ros::Duration(60.0));
+  view_selection::GetSelection selection;
+  const bool answered = up && ros::service::call("/readme/view_selection/get_selection", selection);
+  ::kill(-pid, SIGINT);
+  int status = 0;
+  for (int i = 0; i < 150 && ::waitpid(pid, &status, WNOHANG) == 0; ++i)
+    ros::WallDuration(0.1).sleep();
+  if (::waitpid(pid, &status, WNOHANG) == 0) {
+    ::kill(-pid, SIGKILL);
+    ::waitpid(pid, &status, 0);
+  }
+  ASSERT_TRUE(up) << "rosrun view_selection view_selection_node does not serve "
+                     "/readme/view_selection/get_selection";
+  EXPECT_TRUE(answered && selection.response.success);
 }
 
 TEST(Interface, PublishesDiagnostics) {

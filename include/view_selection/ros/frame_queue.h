@@ -18,6 +18,7 @@
 #include <functional>
 #include <mutex>
 #include <optional>
+#include <vector>
 
 namespace view_selection::ros_node {
 
@@ -66,18 +67,35 @@ class FrameQueue {
   void startGeneration(const std::function<void()>& under_lock);
   /// New method parameters for the worker's thread (the latest one wins).
   void reconfigure(const core::ViewSelectorConfig& config);
-  /// For the worker's thread: the reconfigure handed over since the last call (if any), and the
-  /// generation now, read together under the queue lock.
-  std::optional<core::ViewSelectorConfig> takeRequests(uint64_t* generation);
+  /// A new map for the "map" point source, applied by the worker's thread (a later one replaces
+  /// one not taken yet: each map replaces the last anyway).
+  void setMap(Eigen::Matrix3Xd points);
+  /// ~save_state: `save` runs on the worker's thread before its next frame (it captures the
+  /// session there, so that no service thread waits for the state lock).
+  void requestSave(std::function<void()> save);
+
+  /// What other threads handed the worker's thread since it last asked.
+  struct Requests {
+    uint64_t generation = 0;  ///< the generation now
+    std::optional<core::ViewSelectorConfig> config;
+    std::optional<Eigen::Matrix3Xd> map;
+    std::vector<std::function<void()>> saves;
+  };
+  /// For the worker's thread: the requests handed over since the last call, and the generation
+  /// now, read together under the queue lock.
+  Requests takeRequests();
 
   /// For the worker's thread: the next frame, waiting for one. When the queue is empty, `idle`
   /// runs first (without the queue lock). Returns without a frame when a request is waiting
   /// (a reconfigure, or a generation other than `applied_generation`): apply it and call again;
-  /// `*stop` turns true after stop().
+  /// `*stop` turns true after stop(), once every frame queued before it was returned.
   std::optional<QueuedFrame> next(uint64_t applied_generation, const std::function<void()>& idle,
                                   bool* stop);
-  /// Wakes the worker's thread for good: next() returns with `*stop` set, push() queues nothing.
+  /// Wakes the worker's thread for good: push() queues nothing more, next() returns the frames
+  /// still queued (nothing accepted is lost at shutdown), then sets `*stop`.
   void stop();
+  /// Whether stop() was called.
+  bool stopping() const;
 
  private:
   const size_t capacity_;
@@ -89,6 +107,8 @@ class FrameQueue {
   std::deque<QueuedFrame> queue_;
   std::atomic<size_t> queued_count_{0};  // queue_.size()
   std::optional<core::ViewSelectorConfig> pending_config_;  // reconfigure() not yet taken
+  std::optional<Eigen::Matrix3Xd> pending_map_;             // setMap() not yet taken
+  std::vector<std::function<void()>> pending_saves_;        // requestSave() not yet taken
   bool stopping_ = false;
 };
 

@@ -54,6 +54,9 @@ struct SynchronisedFrames {
   };
   std::vector<PendingFrame> frames;
   std::vector<Drop> drops;
+  /// Of `frames`, those released on a timeout (or a full queue) before a later partner could
+  /// rule out a nearer one: their pairing depended on when messages arrived.
+  size_t undecided = 0;
 };
 
 class FrameSynchroniser {

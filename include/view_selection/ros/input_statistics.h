@@ -27,6 +27,8 @@ class InputStatistics {
     uint64_t depths_arrived = 0;
     uint64_t frames_received = 0;
     uint64_t images_in_synchroniser = 0;  ///< arrived, neither output nor discarded yet
+    /// Frames paired on a timeout before a nearer partner was ruled out (timing decided them).
+    uint64_t frames_paired_on_timeout = 0;
     uint64_t paths_applied = 0;           ///< loop-closure paths applied
     uint64_t keyframes_corrected = 0;     ///< keyframe pose corrections, over all paths
     uint64_t frames_offered = 0;
@@ -48,6 +50,8 @@ class InputStatistics {
   void arrived(Input input);
   /// How many images the synchroniser holds now (the last of a bag waits for a later partner).
   void setImagesInSynchroniser(uint64_t images);
+  /// `frames` were paired on a timeout, before a nearer partner was ruled out.
+  void pairedOnTimeout(uint64_t frames);
   /// A loop-closure path was applied and moved `keyframes` keyframes.
   void pathApplied(uint64_t keyframes);
   /// A synchronised frame reached the node; returns the session it belongs to.
@@ -84,6 +88,8 @@ class InputStatistics {
   view_selection::InputStatistics toMsg() const;
 
   static constexpr double kLogPeriod = 5.0;  ///< [s, wall] between warnings of one reason
+  /// Frames the node stopped before it could handle them (no pose yet at shutdown).
+  static constexpr const char* kShutdownReason = "shutdown";
 
  private:
   struct Throttle {

@@ -21,10 +21,13 @@ class KeyframeImages {
   /// `writer`: where accepted keyframes' images are written, or null.
   KeyframeImages(const NodeConfig& config, KeyframeImageWriter* writer);
 
-  /// A keyframe named `name` was accepted: its image kept (rectified for a distorted camera, as
-  /// the exported intrinsics are) in the cache and handed to the writer.
-  void keyframeAccepted(const std::string& name, const sensor_msgs::ImageConstPtr& image,
-                        const CameraModel& camera);
+  /// Keyframe `id` named `name` was accepted: its image kept (rectified for a distorted camera,
+  /// as the exported intrinsics are) in the cache and handed to the writer.
+  void keyframeAccepted(size_t id, const std::string& name,
+                        const sensor_msgs::ImageConstPtr& image, const CameraModel& camera);
+  /// A selection with `keyframes` keyframes is served: the writer need not hold their images
+  /// for a folder switch any more.
+  void shared(size_t keyframes);
   /// `keyframes` continued from ~state_file, which keeps no images: they have none (null).
   void continued(size_t keyframes);
   /// A new session: a new cache (selections shared before keep the old one).

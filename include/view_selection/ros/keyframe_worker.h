@@ -60,9 +60,14 @@ class KeyframeWorker {
                  StateKeeper& keeper, KeyframeVerdicts* verdicts = nullptr,
                  const PointSourceFactory& make_points = {}, PairStream* pairs = nullptr,
                  KeyframeImageWriter* image_writer = nullptr);
-  /// Stops the thread (a frame in flight is abandoned: it is not part of the saved session),
-  /// joins it, and saves the session when it changed since the last save.
+  /// Stops taking frames, handles the frames still queued (none waits for a pose or a verdict
+  /// any more: one whose pose has not come is a kShutdownDrop), joins the thread, and saves the
+  /// session when it changed since the last save (the state keeper writes what still waits).
   ~KeyframeWorker();
+  /// The drop reason of a frame whose pose or verdict had not come when the node stopped. Such a
+  /// frame does not move the statistics' last frame stamp: a replay after a restart from the
+  /// state file sends it again.
+  static constexpr const char* kShutdownDrop = InputStatistics::kShutdownReason;
   KeyframeWorker(const KeyframeWorker&) = delete;
   KeyframeWorker& operator=(const KeyframeWorker&) = delete;
 
@@ -84,10 +89,13 @@ class KeyframeWorker {
   uint64_t generation() const { return generation_.load(); }
   /// The last stamp offered to the core (continued from ~state_file: its last frame's), if any.
   std::optional<double> lastStamp() const;
-  /// The whole session now, for ~save_state (copied under the state lock, written outside it).
-  StateSnapshot captureState();
-  /// Replaces the map of the "map" point source and recomputes the rows of the keyframes whose
-  /// points changed. Throws core::InvalidInput for bad points (nothing changes then).
+  /// ~save_state: the whole session is captured on the worker's thread before its next frame
+  /// and written by the state keeper's; `done` runs on the keeper's thread with the result (at
+  /// once when saving is off). Returns at once: no caller waits for the state lock.
+  void requestSave(std::function<void(const SaveResult&)> done);
+  /// Replaces the map of the "map" point source: the worker's thread applies it before its next
+  /// frame and recomputes the rows of the keyframes whose points changed (the caller, an input
+  /// callback, never waits for that). Throws core::InvalidInput for non-finite points.
   void setMapPoints(Eigen::Matrix3Xd points);
   /// New method parameters, live, applied by the worker's thread before its next frame (this
   /// returns at once; readers keep the served selection until the new one is shared): the
@@ -133,6 +141,8 @@ class KeyframeWorker {
   /// reset() and timeJump(): a new generation and statistics session, the queue emptied, an
   /// empty selection served. Returns the number of keyframes forgotten.
   size_t startSession(bool time_jump);
+  /// Under state_mutex_: the map handed over by setMapPoints.
+  void applyMapLocked(Eigen::Matrix3Xd points);
   /// At construction: continues the session the keeper read, or starts empty.
   void restoreLoaded();
   void drop(const QueuedFrame& queued, const std::string& reason, const std::string& message);

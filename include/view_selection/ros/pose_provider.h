@@ -93,6 +93,12 @@ class TfPoseProvider : public PoseProvider {
   static constexpr uint32_t kTfQueue = 100;      ///< as tf2_ros::TransformListener
 
   void onTf(const ros::MessageEvent<tf2_msgs::TFMessage const>& event, bool is_static);
+  /// Under tf_mutex_: a fixed link re-sent on /tf (every message of its child frame the same
+  /// transform, as the old static_transform_publisher sent them, stamped ahead by its period:
+  /// the TUM benchmark's bags) also holds before its first message, by kFixedLinkBackfill: a
+  /// frame stamped just after a replay started (after a restart, `rosbag play -s`) gets its
+  /// pose instead of waiting for a transform that can never come.
+  void noteLinkLocked(const geometry_msgs::TransformStamped& t, const std::string& authority);
   /// Under tf_mutex_: forgets every transform but the static ones.
   void clearLocked();
 
@@ -101,6 +107,13 @@ class TfPoseProvider : public PoseProvider {
   tf2_ros::Buffer buffer_;
   std::mutex tf_mutex_;  // the timeline below; held while a transform is added
   std::map<std::string, ros::Time> newest_;  ///< newest stamp by child frame, this timeline
+  struct Link {
+    geometry_msgs::TransformStamped first;  ///< the earliest message of the child frame
+    bool moved = false;                     ///< a message differed from the first
+    bool extended = false;                  ///< the first was also added kFixedLinkBackfill earlier
+  };
+  std::map<std::string, Link> links_;  ///< by child frame, this timeline
+  static constexpr double kFixedLinkBackfill = 1.0;  ///< [s]
   bool timeline_started_ = false;            ///< by the transforms since the last newTimeline()
   ros::Time last_update_;                    ///< ROS time of the last /tf message
   ros::CallbackQueue tf_queue_;

@@ -35,6 +35,9 @@ class SelectionServices {
 
   /// The callback queue the services run on (shared with dynamic_reconfigure's).
   ros::CallbackQueue& queue() { return queue_; }
+  /// [s] ~save_state answers with the result when the save is on disk within this, else that it
+  /// is under way (the worker and the state keeper do the work; this thread only waits).
+  static constexpr double kSaveAnswerWait = 10.0;
 
  private:
   bool getNextViews(view_selection::GetNextViews::Request& req,

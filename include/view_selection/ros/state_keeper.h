@@ -11,10 +11,12 @@
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
+#include <functional>
 #include <mutex>
 #include <optional>
 #include <string>
 #include <thread>
+#include <vector>
 
 namespace view_selection::ros_node {
 
@@ -46,8 +48,8 @@ class StateKeeper {
   /// With an empty ~state_file, does nothing. Otherwise resolves the path (relative to ROS_HOME,
   /// default ~/.ros) and reads the file if it exists; `producer` is written into every save.
   StateKeeper(const NodeConfig& config, InputStatistics& statistics, std::string producer);
-  /// Finishes the write in progress, drops one still waiting (the worker saves its final state
-  /// itself, before this), and joins the thread.
+  /// Writes what still waits (a snapshot, a journal record, a time jump's session), then joins
+  /// the thread.
   ~StateKeeper();
   StateKeeper(const StateKeeper&) = delete;
   StateKeeper& operator=(const StateKeeper&) = delete;
@@ -60,9 +62,11 @@ class StateKeeper {
   /// `why` once, keeps the file aside (it is never overwritten) and the node starts empty.
   void refuseLoaded(const std::string& why);
 
-  /// Queues a snapshot for the keeper's thread; one still waiting is replaced. Never blocks on
-  /// a write.
-  void saveLater(StateSnapshot snapshot);
+  /// Called with the result once a snapshot is written (or a later one that holds it).
+  using SaveDone = std::function<void(const SaveResult&)>;
+  /// Queues a snapshot for the keeper's thread; one still waiting is replaced (its `done` then
+  /// follows the new one). Never blocks on a write. `done` runs on the keeper's thread.
+  void saveLater(StateSnapshot snapshot, SaveDone done = {});
   /// Writes now, after a write in progress (~save_state, shutdown).
   SaveResult saveNow(StateSnapshot snapshot);
   /// Whether the next save must be a whole snapshot (saveLater/saveNow): no base file with a
@@ -111,6 +115,7 @@ class StateKeeper {
   std::mutex mutex_;
   std::condition_variable wake_;
   std::optional<StateSnapshot> waiting_;
+  std::vector<SaveDone> waiting_done_;  // to call once waiting_ (or a later snapshot) is written
   std::optional<JournalSnapshot> waiting_record_;
   std::optional<StateSnapshot> aside_;  // saveAside() not yet written
   bool stopping_ = false;

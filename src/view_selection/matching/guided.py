@@ -15,8 +15,11 @@ epipolar line F x_a.
      plus a pixel), at least `band_px` (COLMAP 3.8's two-view verification allows 4 px) and at
      most the window. Good poses give a narrow band, drifting ones a wider one.
   3. Match every feature within the band, with COLMAP's ratio (0.8) and distance (0.7) tests and
-     the mutual check; the matches whose point lies in front of both cameras are the inliers
-     (at least COLMAP's min_num_inliers, 15, or the pair falls back).
+     the mutual check; the ratio test's second best is looked for in the whole window (a feature
+     with a look-alike along its epipolar line is ambiguous: measured, this gives both more
+     points and a lower reprojection error than a second best from the band alone, docs/live.md).
+     The matches whose point lies in front of both cameras are the inliers (at least COLMAP's
+     min_num_inliers, 15, or the pair falls back).
 
 Descriptor distances are angles between unit RootSIFT descriptors, as COLMAP's matcher measures
 them. The search is a dense product of the two descriptor matrices with the band as a mask: for
@@ -98,20 +101,23 @@ def epipolar_distances(f, xa, xb):
     return np.abs(lines @ hb.T)
 
 
-def mutual_ratio_matches(similarity, ratio, max_distance):
+def mutual_ratio_matches(similarity, ratio, max_distance, competitors=None):
     """Mutual best matches passing the ratio and distance tests on angular distances (M x 2 row,
-    column). `similarity` holds cosines, -1 where masked out; it is scratch space (changed, then
-    restored)."""
+    column). `similarity` holds cosines, -1 where masked out; the second best of the ratio test
+    comes from `competitors` (a wider mask of the same cosines; default `similarity`). Both are
+    scratch space (changed, then restored)."""
     n = similarity.shape[0]
     if n == 0 or similarity.shape[1] == 0:
         return np.zeros((0, 2), np.int64)
+    competitors = similarity if competitors is None else competitors
     rows = np.arange(n)
     best = similarity.argmax(axis=1)
     first = similarity[rows, best].copy()
     if similarity.shape[1] > 1:
-        similarity[rows, best] = -1.0
-        second = similarity.max(axis=1)
-        similarity[rows, best] = first
+        kept = competitors[rows, best].copy()
+        competitors[rows, best] = -1.0
+        second = competitors.max(axis=1)
+        competitors[rows, best] = kept
     else:
         second = np.full(n, -1.0, np.float32)
     d1 = np.arccos(np.clip(first, -1.0, 1.0))
@@ -156,10 +162,14 @@ def match_pair(fa, fb, ka, kb, options=None):
                           searched=len(searched))
     # 2. the band those matches need
     band = float(min(window, max(o.band_px, np.percentile(distances[searched[:, 0], searched[:, 1]], 90) + 1.0)))
-    # 3. every feature within the band, COLMAP's tests
+    # 3. every feature within the band, COLMAP's tests; the ratio test against every candidate
+    # the window allows (a feature with a look-alike along its epipolar line is ambiguous, even
+    # when the look-alike lies outside the band)
     similarity = fa.descriptors @ fb.descriptors.T
-    similarity[epipolar_distances(f, fa.xy, fb.xy) > band] = -1.0
-    matches = mutual_ratio_matches(similarity, o.ratio, o.max_distance)
+    distances = epipolar_distances(f, fa.xy, fb.xy)
+    similarity[distances > window] = -1.0
+    in_band = np.where(distances <= band, similarity, np.float32(-1.0))
+    matches = mutual_ratio_matches(in_band, o.ratio, o.max_distance, competitors=similarity)
     inliers = in_front_of_both(matches, fa, fb, kma, kmb, r, t_unit)
     if len(inliers) < o.min_inliers:
         return PairResult(FALLBACK, "%d inliers within %.1f px" % (len(inliers), band), matches=matches,

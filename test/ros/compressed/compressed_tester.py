@@ -25,10 +25,8 @@ are the ground truth at the image stamps, so that only the images differ):
 """
 import json
 import os
-import shutil
 import struct
 import sys
-import tempfile
 import time
 import unittest
 
@@ -40,10 +38,11 @@ from sensor_msgs.msg import CameraInfo, CompressedImage
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'replay'))
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
-from replay_tester import Replay, find_tool, msg_stamp_ns, run, wait_for_subscribers  # noqa: E402
-from vs_robust import NodeProcess, Statistics, call, note_without_real_data, synthetic_frames  # noqa: E402
+from replay_tester import Replay  # noqa: E402
+from vs_replay import (assert_every_frame_offered, bag_test_setup, msg_stamp_ns, remove_output, run,  # noqa: E402
+                       skip_without_data, wait_for_services, wait_for_subscribers, wait_until_processed)
+from vs_robust import NodeProcess, Statistics, call, synthetic_frames  # noqa: E402
 
-from view_selection.msg import InputStatistics  # noqa: E402
 from view_selection.srv import GetSelection  # noqa: E402
 
 PKG = 'view_selection'
@@ -72,20 +71,10 @@ def shared_pairs(selection, expected, near_us=0):
 class Compressed(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        cls.nodes = rospy.get_param('~nodes').split()
-        cls.rate = float(rospy.get_param('~rate', 1.0))
-        cls.max_frames = int(rospy.get_param('~max_frames', 300))
-        cls.timeout = float(rospy.get_param('~timeout', 60.0))
-        cls.dataset = rospy.get_param('~dataset', '')
-        cls.tmp = tempfile.mkdtemp(prefix='view_selection_compressed_')
-        cls.skip_reason = None
-        if not os.path.isfile(os.path.join(cls.dataset, 'groundtruth.txt')):
-            note_without_real_data('compressed', cls.dataset)
-            cls.skip_reason = 'no TUM folder at %s (the kitchen in ../shared/data)' % cls.dataset
+        tools = bag_test_setup(cls, 'compressed', 300, skip_note='compressed')
+        if not tools:
             return
-        tum_to_bag, select_views = find_tool('tum_to_bag'), find_tool('select_views')
-        if not tum_to_bag or not select_views:
-            raise AssertionError('tum_to_bag or select_views is not built (build the package first)')
+        tum_to_bag, select_views = tools
         cls.bag = os.path.join(cls.tmp, 'compressed.bag')
         run([tum_to_bag, '--dataset', cls.dataset, '--out', cls.bag, '--compressed',
              '--max-frames', str(cls.max_frames), '--quiet'], 900,
@@ -99,54 +88,24 @@ class Compressed(unittest.TestCase):
                 + Replay.select_views_options(node), 900, 'select_views')
             with open(os.path.join(out, 'selection.json')) as f:
                 cls.expected[node] = json.load(f)
-        for node in cls.nodes:
-            try:
-                rospy.wait_for_service(node + '/get_selection', timeout=cls.timeout)
-            except rospy.ROSException:
-                raise AssertionError('%s/get_selection was not advertised within %.0f s' % (node, cls.timeout))
+        wait_for_services(cls.nodes, cls.timeout)
         topics = ['/camera/rgb/image_color/compressed', '/camera/rgb/camera_info',
                   '/camera/depth/image/compressedDepth', '/tf']
         wait_for_subscribers({node: topics for node in cls.nodes}, cls.timeout)
         play = ['rosbag', 'play', '--clock', '-q', '-r', str(cls.rate), '-d', '3', cls.bag]
         run(play, 120.0 + 10.0 * cls.max_frames / 30.0 / cls.rate, 'rosbag play')
-        cls.wait_until_processed()
+        wait_until_processed(cls.nodes, cls.timeout)
 
     @classmethod
     def tearDownClass(cls):
-        if os.environ.get('VIEW_SELECTION_KEEP_TEST_OUTPUT'):
-            rospy.loginfo('compressed test output kept in %s', cls.tmp)
-        else:
-            shutil.rmtree(cls.tmp, ignore_errors=True)
-
-    @classmethod
-    def wait_until_processed(cls):
-        """Until every node has handled every image that arrived and its counts stopped changing."""
-        deadline = time.time() + cls.timeout
-        for node in cls.nodes:
-            last, since = None, time.time()
-            while time.time() < deadline:
-                s = rospy.wait_for_message(node + '/statistics', InputStatistics, timeout=cls.timeout)
-                key = (s.images_arrived, s.frames_received, s.frames_offered, s.frames_dropped, s.images_in_synchroniser)
-                done = s.images_in_synchroniser == 0 and s.frames_offered + s.frames_dropped >= s.images_arrived
-                if key != last:
-                    last, since = key, time.time()
-                elif done and time.time() - since > 1.0:
-                    break
-                time.sleep(0.2)
+        remove_output(cls.tmp, 'compressed test')
 
     def setUp(self):
-        if self.skip_reason:
-            rospy.logwarn('compressed test skipped: %s', self.skip_reason)
-            self.skipTest(self.skip_reason)
+        skip_without_data(self, 'compressed test')
 
     # ------------------------------------------------------------------------------------------
     def selection_of(self, node, same_keyframes=True):
-        stats = rospy.wait_for_message(node + '/statistics', InputStatistics, timeout=self.timeout)
-        reasons = dict(zip(stats.drop_reasons, stats.drop_counts))
-        self.assertEqual(stats.frames_dropped, 0, '%s dropped frames: %s (last: %s)' % (node, reasons, stats.last_error))
-        self.assertEqual(stats.images_arrived, self.max_frames, node + ': images arrived')
-        self.assertEqual(stats.depths_arrived, self.max_frames, node + ': depth images arrived')
-        self.assertEqual(stats.frames_offered, self.max_frames, node + ': frames offered to the policy')
+        assert_every_frame_offered(self, node, self.max_frames, self.timeout)
         answer = call(node + '/get_selection', GetSelection, timeout=self.timeout)
         self.assertTrue(answer.success, answer.message)
         s, e = answer.selection, self.expected[node]

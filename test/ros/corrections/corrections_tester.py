@@ -20,7 +20,6 @@ least 95% shared.
 import json
 import math
 import os
-import shutil
 import sys
 import tempfile
 import time
@@ -31,12 +30,16 @@ import rospy
 import rostest
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'replay'))
-from replay_tester import Replay, find_tool, msg_stamp_ns, run, stamp_ns  # noqa: E402
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
+from vs_poses import camera_info_msg, compose, inverse, pose_msg, slerp, transform_msg, yaw  # noqa: E402
+from replay_tester import Replay  # noqa: E402
+from vs_replay import msg_stamp_ns, remove_output, run, stamp_ns, tum_rows, wait_for_statistics  # noqa: E402
+from vs_robust import find_tool  # noqa: E402
 
-from geometry_msgs.msg import PoseStamped, TransformStamped  # noqa: E402
+from geometry_msgs.msg import PoseStamped  # noqa: E402
 from nav_msgs.msg import Path  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
-from view_selection.msg import InputStatistics, ViewSelection  # noqa: E402
+from view_selection.msg import ViewSelection  # noqa: E402
 from view_selection.srv import GetSelection  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
 
@@ -50,47 +53,6 @@ EXTRINSIC_T = numpy.array([0.03, -0.01, 0.02])
 EXTRINSIC_Q = numpy.array([-0.5, 0.5, -0.5, 0.5])  # x, y, z, w
 
 
-def qmul(a, b):
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return numpy.array([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-                        aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz])
-
-
-def qconj(q):
-    return numpy.array([-q[0], -q[1], -q[2], q[3]])
-
-
-def rotate(q, v):
-    return qmul(qmul(q, numpy.array([v[0], v[1], v[2], 0.0])), qconj(q))[:3]
-
-
-def compose(a, b):
-    """(t, q) of a * b."""
-    return a[0] + rotate(a[1], b[0]), qmul(a[1], b[1])
-
-
-def inverse(a):
-    qi = qconj(a[1])
-    return -rotate(qi, a[0]), qi
-
-
-def yaw(angle):
-    return numpy.array([0.0, 0.0, math.sin(angle / 2), math.cos(angle / 2)])
-
-
-def slerp(a, b, s):
-    dot = float(numpy.dot(a, b))
-    if dot < 0.0:
-        b, dot = -b, -dot
-    if dot > 0.9995:
-        q = a + s * (b - a)
-    else:
-        theta = math.acos(dot)
-        q = (math.sin((1 - s) * theta) * a + math.sin(s * theta) * b) / math.sin(theta)
-    return q / numpy.linalg.norm(q)
-
-
 def interpolate(a, b, s):
     return a[0] + s * (b[0] - a[0]), slerp(a[1], b[1], s)
 
@@ -98,14 +60,6 @@ def interpolate(a, b, s):
 def ros_time(stamp):
     ns = stamp_ns(stamp)
     return rospy.Time(ns // 1000000000, ns % 1000000000)
-
-
-def pose_msg(t, q, stamp, frame='world'):
-    m = PoseStamped()
-    m.header.stamp, m.header.frame_id = stamp, frame
-    m.pose.position.x, m.pose.position.y, m.pose.position.z = t
-    m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w = q
-    return m
 
 
 class Corrections(unittest.TestCase):
@@ -136,34 +90,21 @@ class Corrections(unittest.TestCase):
 
     @classmethod
     def tearDownClass(cls):
-        shutil.rmtree(cls.tmp, ignore_errors=True)
-
-    @classmethod
-    def read(cls, name):
-        rows = []
-        with open(os.path.join(cls.dataset, name)) as f:
-            for line in f:
-                if line.strip() and not line.startswith('#'):
-                    rows.append(line.split())
-        return rows
+        remove_output(cls.tmp, 'corrections test')
 
     @classmethod
     def run_sequence(cls):
         import cv2
-        rgb, depth = cls.read('rgb.txt')[:cls.frames], cls.read('depth.txt')[:cls.frames]
+        rgb, depth = tum_rows(cls.dataset, 'rgb.txt')[:cls.frames], tum_rows(cls.dataset, 'depth.txt')[:cls.frames]
         truth = {round(float(r[0]), 6): (numpy.array([float(x) for x in r[1:4]]),
-                                         numpy.array([float(x) for x in r[4:8]])) for r in cls.read('groundtruth.txt')}
+                                         numpy.array([float(x) for x in r[4:8]])) for r in tum_rows(cls.dataset, 'groundtruth.txt')}
         with open(os.path.join(cls.dataset, 'camera.yaml')) as f:
             k = dict(line.split(':') for line in f if ':' in line and not line.startswith('#'))
         fx, fy, cx, cy = (float(k[n]) for n in ('fx', 'fy', 'cx', 'cy'))
         width, height = int(k['width']), int(k['height'])
 
         static = rospy.Publisher('/tf_static', TFMessage, queue_size=1, latch=True)
-        t = TransformStamped()
-        t.header.stamp, t.header.frame_id, t.child_frame_id = rospy.Time.now(), 'camera_link', 'openni_rgb_optical_frame'
-        t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = EXTRINSIC_T
-        (t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z,
-         t.transform.rotation.w) = EXTRINSIC_Q
+        t = transform_msg('camera_link', 'openni_rgb_optical_frame', EXTRINSIC_T, EXTRINSIC_Q, rospy.Time.now())
         static.publish(TFMessage(transforms=[t]))
 
         pubs = {n: rospy.Publisher('/drift/' + n, m, queue_size=100)
@@ -187,13 +128,7 @@ class Corrections(unittest.TestCase):
             dt = float(s) - t0
             drifted = compose((numpy.array([0.03 * dt, 0.0, -0.01 * dt]), yaw(math.radians(1.5 * dt))), body)
             pubs['pose'].publish(pose_msg(drifted[0], drifted[1], stamp))
-            info = CameraInfo()
-            info.header.stamp, info.header.frame_id = stamp, 'openni_rgb_optical_frame'
-            info.width, info.height, info.distortion_model = width, height, 'plumb_bob'
-            info.D = [0.0] * 5
-            info.K = [fx, 0, cx, 0, fy, cy, 0, 0, 1]
-            info.R = [1, 0, 0, 0, 1, 0, 0, 0, 1]
-            info.P = [fx, 0, cx, 0, 0, fy, cy, 0, 0, 0, 1, 0]
+            info = camera_info_msg(stamp, 'openni_rgb_optical_frame', width, height, fx, fy, cx, cy)
             bgr = cv2.imread(os.path.join(cls.dataset, rgb_path), cv2.IMREAD_COLOR)
             png = cv2.imread(os.path.join(cls.dataset, depth_path), cv2.IMREAD_ANYDEPTH)
             metres = (png * (1.0 / 5000.0)).astype(numpy.float32)
@@ -225,19 +160,13 @@ class Corrections(unittest.TestCase):
         cls.path_poses = len(path.poses)
         cls.path_stamps = {msg_stamp_ns(p.header.stamp) for p in path.poses}
         path_pub.publish(path)
+        # Applied: the corrected selection is shared before the path is counted.
         cls.stats = cls.wait_stats(lambda s: s.paths_applied >= 1, 'the path applied')
-        time.sleep(0.5)  # ~selection is republished within ~publish_period
         cls.after = rospy.ServiceProxy(cls.node + '/get_selection', GetSelection)().selection
 
     @classmethod
     def wait_stats(cls, predicate, what):
-        deadline = time.time() + cls.timeout
-        while time.time() < deadline:
-            s = rospy.wait_for_message(cls.node + '/statistics', InputStatistics, timeout=cls.timeout)
-            if predicate(s):
-                return s
-            time.sleep(0.2)
-        raise AssertionError('%s: not within %.0f s (last statistics: %s)' % (what, cls.timeout, s))
+        return wait_for_statistics(cls.node, predicate, cls.timeout, what)
 
     def setUp(self):
         if self.skip_reason:

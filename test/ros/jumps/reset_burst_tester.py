@@ -13,7 +13,6 @@ keyframes exactly 10, 12 and 14 (frame 11 is no keyframe: the old path's verdict
 """
 import os
 import sys
-import time
 import unittest
 
 import rospy
@@ -75,37 +74,41 @@ class ResetBurst(unittest.TestCase):
         return path
 
     @classmethod
+    def publish_in_order(cls, frames):
+        """Each frame once the node has received the one before (its images queue in order)."""
+        for f in frames:
+            before = cls.stats.get().frames_received if cls.stats.get() else 0
+            cls.publisher.publish(f)
+            cls.stats.wait(lambda s: s.frames_received > before, TIMEOUT, 'receives the frame at %s' % f.stamp)
+
+    @classmethod
     def run_burst(cls):
         frames, pub = cls.frames, cls.publisher
+        # Latched, and the worker waits (~keyframe_verdict_timeout) for a verdict it lacks.
         cls.keyframes.publish(cls.path(OLD_KEYFRAMES))
-        time.sleep(0.2)
-        for f in frames[:5]:
-            pub.publish(f)
-            time.sleep(0.02)
+        cls.publish_in_order(frames[:5])
         cls.stats.wait(lambda s: s.frames_offered == 5 and s.images_in_synchroniser == 0, TIMEOUT,
                        'offers frames 0-4')
-        # The images of 5-9 (and their poses) without their partners: they wait (~sync_timeout 1 s).
+        # The images of 5-9 (and their poses) without their partners: they wait (~sync_timeout 1 s,
+        # counted from the last message of their partners' inputs).
         for f in frames[5:10]:
             pub.publish_pose(f)
             pub.image.publish(f.image)
-        # Arrived (images_arrived 5 in the new session says they came before the reset), and
-        # well within ~sync_timeout: still waiting.
-        time.sleep(0.2)
+        cls.stats.wait(lambda s: s.images_arrived == 10 and s.images_in_synchroniser == 5, TIMEOUT,
+                       'holds the images of frames 5-9 in the synchroniser')
         answer = call(cls.node.name + '/reset', Trigger, timeout=TIMEOUT)
         assert answer.success, answer.message
         for f in frames[5:10]:  # the partners that would release them
             pub.depth.publish(f.depth)
             pub.info.publish(f.info)
-        time.sleep(0.3)
+        cls.stats.wait(lambda s: s.depths_arrived == 5 and s.camera_infos_arrived == 5, TIMEOUT,
+                       'receives the partners of frames 5-9 after the reset')
         cls.keyframes.publish(cls.path(NEW_KEYFRAMES))
-        time.sleep(0.3)
-        for f in frames[10:]:
-            pub.publish(f)
-            time.sleep(0.02)
-        # Frames 10-14 handled, then long enough for anything else to show (~sync_timeout 1 s).
-        cls.stats.wait(lambda s: s.frames_offered + s.frames_dropped >= 5, TIMEOUT, 'handles frames 10-14')
-        time.sleep(1.5)
-        cls.result = cls.stats.get()
+        cls.publish_in_order(frames[10:])
+        # Frames are handled in order, after anything released before them: once 10-14 are handled
+        # and nothing waits, the session is complete.
+        cls.result = cls.stats.wait(lambda s: s.frames_offered + s.frames_dropped >= 5 and
+                                    s.images_in_synchroniser == 0, TIMEOUT, 'handles frames 10-14')
         cls.selection = call(cls.node.name + '/get_selection', GetSelection, timeout=TIMEOUT).selection
 
     def test_waiting_images_do_not_enter_the_new_session(self):

@@ -5,7 +5,6 @@ it cannot; and the pair stream's sequence across a node restart on ~state_file. 
 clear error, and the view selection node keeps running and answering."""
 import json
 import os
-import shutil
 import signal
 import stat
 import sys
@@ -21,8 +20,8 @@ from view_selection.srv import (GetPairs, GetPairsRequest, GetSelection, WriteKe
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
 from vs_robust import (FramePublisher, NodeProcess, Statistics, call, find_tool,  # noqa: E402
-                       synthetic_frames, wait_until)
-from faults_tester import mount_tmpfs, umount  # noqa: E402
+                       shut_down, synthetic_frames, wait_until)
+from faults_tester import small_file_system, umount  # noqa: E402
 
 NODE = '/live_faults_vs'
 
@@ -56,10 +55,7 @@ class LiveFaults(unittest.TestCase):
 
     @classmethod
     def tearDownClass(cls):
-        cls.node.stop()
-        cls.stats.close()
-        cls.pub.close()
-        shutil.rmtree(cls.tmp, ignore_errors=True)
+        shut_down(cls.node, cls.stats, cls.pub, folder=cls.tmp)
 
     def assert_node_serves(self):
         self.assertTrue(self.node.alive(), 'the view selection node died')
@@ -133,11 +129,7 @@ class LiveFaults(unittest.TestCase):
             bridge.stop(60)
 
     def test_a_full_disk(self):
-        folder = os.path.join(self.tmp, 'full')
-        os.makedirs(folder)
-        why = mount_tmpfs(folder, 'size=300k')
-        if why:
-            self.skipTest('no small file system to fill: ' + why)
+        folder = small_file_system(self, os.path.join(self.tmp, 'full'), '300k')
         bridge = None
         try:
             bridge = self.start_bridge('/bridge_full', {'project': folder, 'batch_period': 0.2})

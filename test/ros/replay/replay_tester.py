@@ -9,25 +9,20 @@ generate_sequence; when that tool is not built either, the test is skipped with 
 """
 import json
 import os
-import shutil
-import signal
 import subprocess
 import sys
 import tempfile
 import time
 import unittest
 
-import rosgraph
-import roslib.packages
 import rospy
 import rostest
-from std_srvs.srv import SetBool, SetBoolRequest
-from xmlrpc.client import ServerProxy
 
 from view_selection.srv import Export, ExportRequest, GetSelection
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
-from vs_robust import call  # noqa: E402  a service call with a timeout
+from vs_robust import call, find_tool  # noqa: E402,F401  a service call with a timeout
+from vs_replay import msg_stamp_ns, play_bag, remove_output, run, stamp_ns, wait_for_subscribers  # noqa: E402,F401
 
 PKG = 'view_selection'
 
@@ -45,123 +40,6 @@ def dense_error_resistance(selection):
     return dense
 
 
-def find_tool(name):
-    """Path of an executable of this package as rosrun finds it (devel space or install), or None."""
-    try:
-        found = roslib.packages.find_node(PKG, name)  # a list in Noetic, a path in older releases
-    except Exception:  # a broken workspace: report as not found
-        return None
-    if isinstance(found, (list, tuple)):
-        found = found[0] if found else None
-    return found or None
-
-
-def run(cmd, timeout, what):
-    """Runs a command; fails with its output when it does not exit 0 within timeout seconds."""
-    try:
-        done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, timeout=timeout,
-                              universal_newlines=True)
-    except subprocess.TimeoutExpired as e:
-        raise AssertionError('%s did not finish within %.0f s: %s\n%s' % (what, timeout, ' '.join(cmd),
-                                                                          e.output or ''))
-    if done.returncode != 0:
-        raise AssertionError('%s failed (exit %d): %s\n%s' % (what, done.returncode, ' '.join(cmd), done.stdout))
-    return done.stdout
-
-
-def stamp_ns(seconds):
-    return int(round(seconds * 1e9))
-
-
-def msg_stamp_ns(t):
-    return t.secs * 1000000000 + t.nsecs
-
-
-
-def play_bag(bag, rate, wanted, frames, timeout, play_timeout):
-    """Plays `bag` at `rate` into the nodes of `wanted` (node -> topics) and returns once each node
-    counted `frames` images and depth images (~statistics), or after `play_timeout` s.
-
-    The player starts paused and is unpaused when its own bus information lists each node on each
-    of its topics (a fixed delay lost the first frame on a loaded machine). It is kept alive
-    (--keep-alive) until the nodes have everything: a player that exits right after its last
-    message can take the last image, still queued for a lagging connection, with it (stop 26: 119
-    of 120 images at four nodes)."""
-    from view_selection.msg import InputStatistics
-    player_name = '/replay_player'
-    play = ['rosbag', 'play', '--clock', '-q', '--pause', '--keep-alive', '-r', str(rate), bag,
-            '__name:=' + player_name.lstrip('/')]
-    player = subprocess.Popen(play, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                              universal_newlines=True)
-    try:
-        master = rosgraph.Master(rospy.get_name())
-        want = {(node, topic) for node, topics in wanted.items() for topic in topics}
-        deadline = time.time() + timeout
-        missing = want
-        while time.time() < deadline and missing:
-            try:
-                api = master.lookupNode(player_name)
-                info = ServerProxy(api).getBusInfo(rospy.get_name())[2]
-                # [id, destination (the subscriber's name), direction, transport, topic, ...]
-                have = {(c[1], c[4]) for c in info if c[2] == 'o' and (len(c) < 6 or c[5])}
-                missing = {w for w in want if w not in have}
-            except Exception:  # the player is not registered yet
-                pass
-            if missing:
-                time.sleep(0.1)
-        if missing:
-            raise AssertionError('the player did not connect to %s within %.0f s' % (sorted(missing), timeout))
-        # Counts are per session: a play after a time jump counts from zero, another play adds.
-        base = {node: rospy.wait_for_message(node + '/statistics', InputStatistics, timeout=timeout)
-                for node in wanted}
-
-        def arrived(node, s):
-            b = base[node] if s.time_jumps == base[node].time_jumps else None
-            counts = [s.images_arrived - (b.images_arrived if b else 0)]
-            if rospy.get_param(node + '/use_depth', True):
-                counts.append(s.depths_arrived - (b.depths_arrived if b else 0))
-            return min(counts)
-        call(player_name + '/pause_playback', SetBool, SetBoolRequest(data=False), timeout)
-        deadline = time.time() + play_timeout
-        pending = set(wanted)
-        while pending and time.time() < deadline:
-            if player.poll() is not None:
-                raise AssertionError('rosbag play failed (exit %d): %s' % (player.returncode, player.stdout.read()))
-            for node in sorted(pending):
-                try:
-                    s = rospy.wait_for_message(node + '/statistics', InputStatistics, timeout=5.0)
-                except rospy.ROSException:
-                    continue
-                if arrived(node, s) >= frames:
-                    pending.discard(node)
-            time.sleep(0.2)
-        # Nodes still short of frames: the tests' counts say which and how many.
-    finally:
-        if player.poll() is None:
-            player.send_signal(signal.SIGINT)
-            try:
-                player.wait(10)
-            except subprocess.TimeoutExpired:
-                player.kill()
-                player.wait(10)
-
-
-def wait_for_subscribers(wanted, timeout):
-    """Waits (at most `timeout` s) until each node of `wanted` (node -> topics) subscribes to each
-    of its topics; raises AssertionError naming what is missing."""
-    master = rosgraph.Master(rospy.get_name())
-    deadline = time.time() + timeout
-    missing = []
-    while time.time() < deadline:
-        subscribers = {topic: set(names) for topic, names in master.getSystemState()[1]}
-        missing = ['%s on %s' % (node, topic) for node, topics in wanted.items() for topic in topics
-                   if node not in subscribers.get(topic, ())]
-        if not missing:
-            return
-        time.sleep(0.2)
-    raise AssertionError('not subscribed within %.0f s: %s' % (timeout, ', '.join(missing)))
-
-
 class Replay(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
@@ -177,10 +55,7 @@ class Replay(unittest.TestCase):
 
     @classmethod
     def tearDownClass(cls):
-        if os.environ.get('VIEW_SELECTION_KEEP_TEST_OUTPUT'):
-            rospy.loginfo('replay test output kept in %s', cls.tmp)
-        else:
-            shutil.rmtree(cls.tmp, ignore_errors=True)
+        remove_output(cls.tmp, 'replay test')
 
     # ------------------------------------------------------------------------------------------
     @classmethod

@@ -18,20 +18,17 @@ shared.
 import json
 import math
 import os
-import shutil
-import subprocess
 import sys
-import tempfile
-import time
 import unittest
 
 import rospy
 import rostest
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from replay_tester import find_tool, msg_stamp_ns, play_bag, run  # noqa: E402
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
+from vs_replay import (assert_every_frame_offered, bag_test_setup, msg_stamp_ns, play_bag,  # noqa: E402
+                       remove_output, run, skip_without_data, wait_for_services, wait_until_processed)
 
-from view_selection.msg import InputStatistics  # noqa: E402
 from view_selection.srv import GetSelection  # noqa: E402
 
 PKG = 'view_selection'
@@ -84,19 +81,10 @@ def angle_deg(qa, qb):
 class TumLayout(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        cls.nodes = rospy.get_param('~nodes').split()
-        cls.rate = float(rospy.get_param('~rate', 1.0))
-        cls.max_frames = int(rospy.get_param('~max_frames', 120))
-        cls.timeout = float(rospy.get_param('~timeout', 60.0))
-        cls.dataset = rospy.get_param('~dataset', '')
-        cls.tmp = tempfile.mkdtemp(prefix='view_selection_tum_layout_')
-        cls.skip_reason = None
-        if not os.path.isfile(os.path.join(cls.dataset, 'groundtruth.txt')):
-            cls.skip_reason = 'no TUM folder at %s (the kitchen in ../shared/data)' % cls.dataset
+        tools = bag_test_setup(cls, 'tum_layout', 120)
+        if not tools:
             return
-        tum_to_bag, select_views = find_tool('tum_to_bag'), find_tool('select_views')
-        if not tum_to_bag or not select_views:
-            raise AssertionError('tum_to_bag or select_views is not built (build the package first)')
+        tum_to_bag, select_views = tools
         cls.bag = os.path.join(cls.tmp, 'tum_layout.bag')
         run([tum_to_bag, '--dataset', cls.dataset, '--out', cls.bag, '--layout', 'tum', '--pose-topics',
              '--max-frames', str(cls.max_frames), '--quiet'], 900, 'tum_to_bag --layout tum')
@@ -109,21 +97,14 @@ class TumLayout(unittest.TestCase):
             cls.expected = json.load(f)
         cls.truth = read_groundtruth(os.path.join(cls.dataset, 'groundtruth.txt'))
 
-        for node in cls.nodes:
-            try:
-                rospy.wait_for_service(node + '/get_selection', timeout=cls.timeout)
-            except rospy.ROSException:
-                raise AssertionError('%s/get_selection was not advertised within %.0f s' % (node, cls.timeout))
+        wait_for_services(cls.nodes, cls.timeout)
         play_bag(cls.bag, cls.rate, cls.wanted_topics(), cls.max_frames, cls.timeout,
                  120.0 + 10.0 * cls.max_frames / 30.0 / cls.rate)
-        cls.wait_until_processed()
+        wait_until_processed(cls.nodes, cls.timeout)
 
     @classmethod
     def tearDownClass(cls):
-        if os.environ.get('VIEW_SELECTION_KEEP_TEST_OUTPUT'):
-            rospy.loginfo('tum layout test output kept in %s', cls.tmp)
-        else:
-            shutil.rmtree(cls.tmp, ignore_errors=True)
+        remove_output(cls.tmp, 'tum layout test')
 
     @classmethod
     def wanted_topics(cls):
@@ -140,38 +121,13 @@ class TumLayout(unittest.TestCase):
         return {'topic': '/mocap/pose', 'odometry': '/mocap/odometry',
                 'pose_with_covariance': '/mocap/pose_with_covariance'}[rospy.get_param(node + '/pose_source')]
 
-    @classmethod
-    def wait_until_processed(cls):
-        """Until every node has handled every image that arrived (the last one waits for the
-        synchroniser's timeout), and its counts stopped changing."""
-        deadline = time.time() + cls.timeout
-        for node in cls.nodes:
-            last, since = None, time.time()
-            while time.time() < deadline:
-                s = rospy.wait_for_message(node + '/statistics', InputStatistics, timeout=cls.timeout)
-                key = (s.images_arrived, s.frames_received, s.frames_offered, s.frames_dropped, s.images_in_synchroniser)
-                done = s.images_in_synchroniser == 0 and s.frames_offered + s.frames_dropped >= s.images_arrived
-                if key != last:
-                    last, since = key, time.time()
-                elif done and time.time() - since > 1.0:
-                    break
-                time.sleep(0.2)
-
     def setUp(self):
-        if self.skip_reason:
-            rospy.logwarn('tum layout test skipped: %s', self.skip_reason)
-            self.skipTest(self.skip_reason)
+        skip_without_data(self, 'tum layout test')
 
     # ------------------------------------------------------------------------------------------
     def check_node(self, node):
-        stats = rospy.wait_for_message(node + '/statistics', InputStatistics, timeout=self.timeout)
-        reasons = dict(zip(stats.drop_reasons, stats.drop_counts))
         # No frame lost: every colour frame of the bag arrived, was synchronised and offered.
-        self.assertEqual(stats.frames_dropped, 0, '%s dropped frames: %s (last: %s)' % (node, reasons, stats.last_error))
-        self.assertEqual(stats.images_arrived, self.max_frames, node + ': images arrived')
-        self.assertEqual(stats.depths_arrived, self.max_frames, node + ': depth images arrived')
-        self.assertEqual(stats.frames_received, self.max_frames, node + ': frames synchronised')
-        self.assertEqual(stats.frames_offered, self.max_frames, node + ': frames offered to the policy')
+        assert_every_frame_offered(self, node, self.max_frames, self.timeout)
 
         answer = rospy.ServiceProxy(node + '/get_selection', GetSelection)()
         self.assertTrue(answer.success, answer.message)

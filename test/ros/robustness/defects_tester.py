@@ -9,7 +9,6 @@
 
 ~node_binary runs test 1 and 2 against another build's node (e.g. the code before the fix)."""
 import sys
-import time
 import unittest
 
 import rosnode
@@ -20,8 +19,8 @@ from std_srvs.srv import Trigger
 
 from view_selection.srv import GetSelection
 
-from vs_robust import (FramePublisher, NodeProcess, Statistics, call, check_statistics,
-                       synthetic_frames, wait_until)
+from vs_robust import (Diagnostics, FramePublisher, NodeProcess, Statistics, call,
+                       check_statistics, synthetic_frames, wait_until)
 
 PKG = 'view_selection'
 
@@ -54,10 +53,14 @@ def loaded_nodelets(manager):
 class Defects(unittest.TestCase):
     def test_reset_discards_the_frame_in_flight(self):
         pub = FramePublisher('/reset_race/camera')
+        # pose_timeout 5 s: as a user sets it beside a SLAM system whose poses come seconds late
+        # (VINS on a loaded machine); here it keeps f1 waiting for its pose across the reset.
+        # every_frame: each frame a keyframe, so that a frame that slipped in shows.
         node = NodeProcess('reset_race', {
             'pose_source': 'topic', 'pose_timeout': 5.0, 'keyframe_policy': 'every_frame',
-            'publish_period': 0.02, 'world_frame': 'world'}, pub.remaps()).start()
+            'world_frame': 'world'}, pub.remaps()).start()
         stats = Statistics(node.name)
+        diagnostics = Diagnostics(node.name)
         try:
             node.wait_for_services()
             pub.wait_connected()
@@ -65,7 +68,10 @@ class Defects(unittest.TestCase):
             # f1 without its pose: the worker takes it and waits (up to ~pose_timeout) for one.
             pub.publish(f1, pose=False)
             stats.wait(lambda s: s.frames_received >= 1, 10, 'received f1')
-            time.sleep(0.2)  # the worker pops f1 at once; give it the moment to be in the lookup
+            # In flight: received, not waiting in the queue (the worker took it), not handled.
+            diagnostics.wait(lambda d: d.get('frames waiting for the worker') == '0', 10,
+                             'the worker took f1 from its queue')
+            self.assertEqual(stats.handled(), 0, 'f1 was handled before its pose came')
             reset = call(node.name + '/reset', Trigger)
             self.assertTrue(reset.success, reset.message)
             stats.wait(lambda s: s.frames_received == 0, 10, 'statistics reset')
@@ -74,9 +80,9 @@ class Defects(unittest.TestCase):
             pub.publish(f2)
             # The worker handles frames in order: once f2 is handled, f1 is done with too.
             stats.wait(lambda s: s.frames_offered + s.frames_dropped >= 1, 10, 'handled f2')
+            # f1 came before f2 and the worker handles frames in order: its fate is decided.
             wait_until(lambda: len(call(node.name + '/get_selection', GetSelection)
                                    .selection.keyframes) >= 1, 10, 'f2 a keyframe')
-            time.sleep(0.3)  # a late insertion of f1 would show below
             selection = call(node.name + '/get_selection', GetSelection).selection
             self.assertEqual([k.stamp for k in selection.keyframes], [f2.stamp],
                              'a frame received before ~reset entered the new session')
@@ -88,6 +94,7 @@ class Defects(unittest.TestCase):
         finally:
             node.stop()
             stats.close()
+            diagnostics.close()
             pub.close()
 
     def test_unknown_transport_exits_with_code_1_and_one_fatal_line(self):

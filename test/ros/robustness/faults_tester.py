@@ -10,7 +10,6 @@ mount, those two cases are skipped and say so."""
 import json
 import os
 import random
-import shutil
 import signal
 import subprocess
 import sys
@@ -27,7 +26,7 @@ from view_selection.srv import Export, ExportRequest, GetNextViews, GetNextViews
 
 from vs_robust import (CallTimeout, FramePublisher, NodeProcess, Statistics, call,
                        check_selection, check_statistics, find_tool, note_without_real_data,
-                       synthetic_frames)
+                       shut_down, synthetic_frames)
 
 PKG = 'view_selection'
 EXPORT_FILES = ('selection.json', 'pairs.txt', 'selection.png')
@@ -46,6 +45,15 @@ def umount(folder):
     subprocess.run(['umount', '-l', folder], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
+def small_file_system(test, folder, size):
+    """A tmpfs of `size` mounted at `folder` (made here) to fill, or `test` skipped saying why."""
+    os.makedirs(folder)
+    why = mount_tmpfs(folder, 'size=' + size)
+    if why:
+        test.skipTest('no small file system to fill: ' + why)
+    return folder
+
+
 def leftovers(folder):
     """Temporary or partial files an export may have left behind."""
     found = []
@@ -61,7 +69,7 @@ class Faults(unittest.TestCase):
         cls.frames = synthetic_frames(12)
         cls.pub = FramePublisher('/faults_node/camera')
         cls.node = NodeProcess('faults_node', {
-            'pose_source': 'topic', 'keyframe_policy': 'every_frame', 'publish_period': 0.02,
+            'pose_source': 'topic', 'keyframe_policy': 'every_frame',
             'save_keyframe_images': True}, cls.pub.remaps()).start()
         cls.node.wait_for_services()
         cls.pub.wait_connected()
@@ -72,10 +80,7 @@ class Faults(unittest.TestCase):
 
     @classmethod
     def tearDownClass(cls):
-        cls.node.stop()
-        cls.stats.close()
-        cls.pub.close()
-        shutil.rmtree(cls.tmp, ignore_errors=True)
+        shut_down(cls.node, cls.stats, cls.pub, folder=cls.tmp)
 
     def export(self, node, directory, timeout=30.0):
         return call(node.name + '/export', Export, ExportRequest(directory=directory), timeout)
@@ -111,11 +116,7 @@ class Faults(unittest.TestCase):
             os.chmod(folder, 0o700)
 
     def test_export_onto_a_full_file_system(self):
-        folder = os.path.join(self.tmp, 'full')
-        os.makedirs(folder)
-        why = mount_tmpfs(folder, 'size=2m')
-        if why:
-            self.skipTest('no small file system to fill: ' + why)
+        folder = small_file_system(self, os.path.join(self.tmp, 'full'), '2m')
         try:
             # An earlier complete export, then the disk fills up.
             first = self.export(self.node, folder)
@@ -151,8 +152,7 @@ class Faults(unittest.TestCase):
 
     def test_sigkill_during_an_export_leaves_complete_files(self):
         pub = FramePublisher('/kill_export/camera')
-        params = {'pose_source': 'topic', 'keyframe_policy': 'every_frame', 'publish_period': 0.02,
-                  'save_keyframe_images': True}
+        params = {'pose_source': 'topic', 'keyframe_policy': 'every_frame', 'save_keyframe_images': True}
         node = NodeProcess('kill_export', params, pub.remaps())
         stats = None
         frames = synthetic_frames(24, width=320, height=240, step=0.02)
@@ -243,9 +243,8 @@ class Faults(unittest.TestCase):
                    'depth': '/camera/depth/image', 'pose': '/camera/pose'} if bag else
                   FramePublisher(prefix).remaps())
         node = NodeProcess('load', {'pose_source': 'topic', 'world_frame': '/world',
-                                    'publish_period': 0.05, 'save_keyframe_images': True,
-                                    'min_translation': 0.05, 'min_rotation_deg': 5.0,
-                                    'max_pending_frames': 30}, remaps).start()
+                                    'save_keyframe_images': True,
+                                    'min_translation': 0.05, 'min_rotation_deg': 5.0}, remaps).start()
         stats = Statistics(node.name)
         errors = []
         answers = {'get_selection': 0, 'get_next_views': 0, 'export': 0, 'reset': 0,

@@ -3,6 +3,7 @@ kill and restart themselves, frames published by the test, statistics watched, s
 waits that all have a timeout."""
 import io
 import os
+import shutil
 import signal
 import subprocess
 import tempfile
@@ -162,18 +163,22 @@ class NodeProcess:
                                      % (self.name, srv, timeout, self.output()[-3000:]))
 
 
-class Statistics:
-    """The latest ~statistics of a node (latched, republished on change)."""
+class Latest:
+    """The latest message of a topic about a node, as `convert(message)` makes it (None: not
+    about this node); get() and wait() read it."""
 
-    def __init__(self, node):
+    def __init__(self, node, topic, msg_type, convert=lambda m: m):
         self.node = node.rstrip('/')
         self.lock = threading.Lock()
         self.last = None
-        self.subscriber = rospy.Subscriber(self.node + '/statistics', InputStatistics, self._on)
+        self.convert = convert
+        self.subscriber = rospy.Subscriber(topic, msg_type, self._on, queue_size=100)
 
     def _on(self, msg):
-        with self.lock:
-            self.last = msg
+        value = self.convert(msg)
+        if value is not None:
+            with self.lock:
+                self.last = value
 
     def forget(self):
         """Forgets the last message (before a restart: only the new process's count)."""
@@ -184,6 +189,29 @@ class Statistics:
         with self.lock:
             return self.last
 
+    def wait(self, predicate, timeout, what):
+        """The first value for which predicate(value) holds."""
+        found = []
+
+        def check():
+            value = self.get()
+            if value is not None and predicate(value):
+                found.append(value)
+                return True
+            return False
+        wait_until(check, timeout, '%s %s' % (self.node, what))
+        return found[0]
+
+    def close(self):
+        self.subscriber.unregister()
+
+
+class Statistics(Latest):
+    """The latest ~statistics of a node (latched, republished on change)."""
+
+    def __init__(self, node):
+        Latest.__init__(self, node, node.rstrip('/') + '/statistics', InputStatistics)
+
     def handled(self):
         """Frames offered or dropped (frame drops only; bad_map counts clouds)."""
         s = self.get()
@@ -192,21 +220,21 @@ class Statistics:
         drops = sum(c for r, c in zip(s.drop_reasons, s.drop_counts) if r != 'bad_map')
         return s.frames_offered + drops
 
-    def wait(self, predicate, timeout, what):
-        """The first message for which predicate(message) holds."""
-        found = []
 
-        def check():
-            s = self.get()
-            if s is not None and predicate(s):
-                found.append(s)
-                return True
-            return False
-        wait_until(check, timeout, '%s %s' % (self.node, what))
-        return found[0]
+class Diagnostics(Latest):
+    """The latest /diagnostics status of a node, as {key: value} (the updater publishes it once
+    a second)."""
 
-    def close(self):
-        self.subscriber.unregister()
+    def __init__(self, node):
+        from diagnostic_msgs.msg import DiagnosticArray
+        prefix = node.strip('/') + ':'
+
+        def values(msg):
+            for status in msg.status:
+                if status.name.startswith(prefix):
+                    return {kv.key: kv.value for kv in status.values}
+            return None
+        Latest.__init__(self, node, '/diagnostics', DiagnosticArray, values)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -359,3 +387,13 @@ def check_statistics(test, s, what):
     test.assertLessEqual(s.frames_offered + drops, s.frames_received,
                          what + ': offered + dropped <= received (%d + %d > %d)'
                          % (s.frames_offered, drops, s.frames_received))
+
+
+def shut_down(*parts, folder=None):
+    """Stops the nodes among `parts` (NodeProcess), closes the rest (subscribers, publishers), and
+    removes `folder`."""
+    for part in parts:
+        if part is not None:
+            (part.stop if isinstance(part, NodeProcess) else part.close)()
+    if folder:
+        shutil.rmtree(folder, ignore_errors=True)

@@ -16,10 +16,10 @@ import numpy
 import rospy
 import rostest
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'corrections'))
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'replay'))
-from corrections_tester import pose_msg  # noqa: E402
-from replay_tester import find_tool, msg_stamp_ns, run, stamp_ns  # noqa: E402
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
+from vs_poses import pose_msg  # noqa: E402
+from vs_replay import msg_stamp_ns, run, stamp_ns  # noqa: E402
+from vs_robust import find_tool  # noqa: E402
 
 from geometry_msgs.msg import PoseStamped  # noqa: E402
 from nav_msgs.msg import Path  # noqa: E402

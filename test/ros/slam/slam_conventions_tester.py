@@ -23,7 +23,6 @@ moved since the nearest of them, which is the correction those keyframes take.
 """
 import math
 import os
-import shutil
 import sys
 import tempfile
 import time
@@ -35,17 +34,18 @@ import rospy
 import rostest
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'replay'))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
 import slam_systems as systems  # noqa: E402
 from slam_systems import CONVENTIONS, compose  # noqa: E402
-from replay_tester import find_tool, msg_stamp_ns, run, stamp_ns  # noqa: E402
+from vs_poses import camera_info_msg, pose_msg, transform_msg as transform  # noqa: E402
+from vs_replay import msg_stamp_ns, remove_output, run, stamp_ns, tum_rows, wait_for_statistics  # noqa: E402
+from vs_robust import find_tool  # noqa: E402
 
-from geometry_msgs.msg import PoseStamped, TransformStamped  # noqa: E402
+from geometry_msgs.msg import PoseStamped  # noqa: E402
 from nav_msgs.msg import Path  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 from std_msgs.msg import Empty  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
-from view_selection.msg import InputStatistics  # noqa: E402
 from view_selection.srv import GetSelection  # noqa: E402
 
 PKG = 'view_selection'
@@ -55,22 +55,6 @@ LEAD = 4                 # frames at each end with a true pose but no image
 # and 0.12 deg).
 PATH_POSITION = 3e-3     # [m]
 PATH_ANGLE = 0.3         # [deg]
-
-
-def pose_msg(t, q, stamp, frame='world'):
-    m = PoseStamped()
-    m.header.stamp, m.header.frame_id = stamp, frame
-    m.pose.position.x, m.pose.position.y, m.pose.position.z = t
-    m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w = q
-    return m
-
-
-def transform(parent, child, t, q, stamp):
-    m = TransformStamped()
-    m.header.stamp, m.header.frame_id, m.child_frame_id = stamp, parent, child
-    m.transform.translation.x, m.transform.translation.y, m.transform.translation.z = t
-    m.transform.rotation.x, m.transform.rotation.y, m.transform.rotation.z, m.transform.rotation.w = q
-    return m
 
 
 class SlamConventions(unittest.TestCase):
@@ -92,12 +76,7 @@ class SlamConventions(unittest.TestCase):
 
     @classmethod
     def tearDownClass(cls):
-        shutil.rmtree(cls.tmp, ignore_errors=True)
-
-    @classmethod
-    def rows(cls, name):
-        with open(os.path.join(cls.folder, name)) as f:
-            return [line.split() for line in f if line.strip() and not line.startswith('#')]
+        remove_output(cls.tmp, 'slam test')
 
     @classmethod
     def wait_for(cls, publishers, what):
@@ -110,7 +89,7 @@ class SlamConventions(unittest.TestCase):
     def run_sequence(cls):
         import cv2
         c = cls.c
-        rgb, depth, truth = cls.rows('rgb.txt'), cls.rows('depth.txt'), cls.rows('groundtruth.txt')
+        rgb, depth, truth = (tum_rows(cls.folder, name) for name in ('rgb.txt', 'depth.txt', 'groundtruth.txt'))
         with open(os.path.join(cls.folder, 'camera.yaml')) as f:
             k = dict(line.split(':') for line in f if ':' in line and not line.startswith('#'))
         fx, fy, cx, cy = (float(k[n]) for n in ('fx', 'fy', 'cx', 'cy'))
@@ -143,13 +122,7 @@ class SlamConventions(unittest.TestCase):
             cls.true_body.append((stamp, compose(optical, to_body)))
             truth_pub.publish(pose_msg(optical[0], optical[1], stamp, 'truth'))
             if LEAD <= q < len(rgb) - LEAD:
-                info = CameraInfo()
-                info.header.stamp, info.header.frame_id = stamp, c['optical']
-                info.width, info.height, info.distortion_model = width, height, 'plumb_bob'
-                info.D = [0.0] * 5
-                info.K = [fx, 0, cx, 0, fy, cy, 0, 0, 1]
-                info.R = [1, 0, 0, 0, 1, 0, 0, 0, 1]
-                info.P = [fx, 0, cx, 0, 0, fy, cy, 0, 0, 0, 1, 0]
+                info = camera_info_msg(stamp, c['optical'], width, height, fx, fy, cx, cy)
                 bgr = cv2.imread(os.path.join(cls.folder, rgb_path), cv2.IMREAD_COLOR)
                 png = cv2.imread(os.path.join(cls.folder, depth_path), cv2.IMREAD_ANYDEPTH)
                 millimetres = numpy.round(png.astype(numpy.float64) / 5.0).astype(numpy.uint16)  # 16UC1, as drivers
@@ -188,13 +161,7 @@ class SlamConventions(unittest.TestCase):
 
     @classmethod
     def wait_stats(cls, predicate, what):
-        deadline, s = time.time() + cls.timeout, None
-        while time.time() < deadline:
-            s = rospy.wait_for_message(cls.node + '/statistics', InputStatistics, timeout=cls.timeout)
-            if predicate(s):
-                return s
-            time.sleep(0.2)
-        raise AssertionError('%s: not within %.0f s (last statistics: %s)' % (what, cls.timeout, s))
+        return wait_for_statistics(cls.node, predicate, cls.timeout, what)
 
     def pose_errors(self, selection):
         truth = {msg_stamp_ns(t): p for t, p in self.truth}

@@ -12,8 +12,13 @@ Node names, as each system's own launch files start it:
                                          /loop_fusion               -> /loop_fusion/pose_graph_path
 """
 import math
+import os
+import sys
 
 import numpy
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
+from vs_poses import compose, inverse, slerp, yaw  # noqa: E402  (the stand-ins use compose from here)
 
 OPTICAL_FROM_X_FORWARD = numpy.array([-0.5, 0.5, -0.5, 0.5])  # x-forward frame <- optical frame
 
@@ -58,47 +63,6 @@ VINS_RATE = 15.0             # [Hz] VINS' odometry, stamped by its own camera ..
 VINS_CLOCK_OFFSET = 0.013    # [s] ... on a clock 13 ms off the RGB-D camera's
 VINS_KEYFRAME_EVERY = 4      # a VINS keyframe (a pose of pose_graph_path) every 4th of its frames
 ORB_SLAM_LATENCY = 0.03      # [s, wall] tracking time before ORB-SLAM publishes a frame's pose
-
-
-def qmul(a, b):
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return numpy.array([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-                        aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz])
-
-
-def qconj(q):
-    return numpy.array([-q[0], -q[1], -q[2], q[3]])
-
-
-def rotate(q, v):
-    return qmul(qmul(q, numpy.array([v[0], v[1], v[2], 0.0])), qconj(q))[:3]
-
-
-def compose(a, b):
-    """(t, q) of a * b."""
-    return a[0] + rotate(a[1], b[0]), qmul(a[1], b[1])
-
-
-def inverse(a):
-    qi = qconj(a[1])
-    return -rotate(qi, a[0]), qi
-
-
-def yaw(angle):
-    return numpy.array([0.0, 0.0, math.sin(angle / 2), math.cos(angle / 2)])
-
-
-def slerp(a, b, s):
-    dot = float(numpy.dot(a, b))
-    if dot < 0.0:
-        b, dot = -b, -dot
-    if dot > 0.9995:
-        q = a + s * (b - a)
-    else:
-        theta = math.acos(dot)
-        q = (math.sin((1 - s) * theta) * a + math.sin(s * theta) * b) / math.sin(theta)
-    return q / numpy.linalg.norm(q)
 
 
 def interpolate(samples, t):
