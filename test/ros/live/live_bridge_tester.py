@@ -34,22 +34,13 @@ from view_selection.msg import PairChanges
 from view_selection.srv import ExportRequest, Export, GetPairs, GetPairsRequest, GetSelection
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
+from vs_replay import run  # noqa: E402
 from vs_robust import NodeProcess, Statistics, call, find_tool, wait_until  # noqa: E402
 
 NODE = '/live_vs'
 TOPICS = {'image': '/camera/rgb/image_color', 'camera_info': '/camera/rgb/camera_info',
           'depth': '/camera/depth/image', 'pose': '/camera/pose'}
 
-
-def run(cmd, timeout, what):
-    try:
-        done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, timeout=timeout,
-                              universal_newlines=True)
-    except subprocess.TimeoutExpired as e:
-        raise AssertionError('%s did not finish within %.0f s: %s' % (what, timeout, e.output or ''))
-    if done.returncode != 0:
-        raise AssertionError('%s failed (exit %d): %s\n%s' % (what, done.returncode, ' '.join(cmd), done.stdout))
-    return done.stdout
 
 
 class Consumer:
