@@ -107,3 +107,67 @@ def test_points_without_parallax_or_behind_a_camera_are_not_kept():
     m.add_matches(1, 2, [[0, 0]])
     m.update()
     assert m.to_model().points == {}
+
+
+def add_pair(m, keypoints, a, b, n_points):
+    """The matches of images a and b (0-based) of a scene, every point."""
+    kp_of_point_b = np.argsort(keypoints[b][1])
+    m.add_matches(a + 1, b + 1, np.stack([np.arange(n_points), kp_of_point_b[keypoints[a][1]]], 1))
+
+
+def test_a_track_that_grows_is_extended_not_triangulated_again():
+    """Each new keyframe adds one observation to tracks of many: the update handles those new
+    observations, not whole tracks (a full re-triangulation of every track would handle 5 each)."""
+    n = 40
+    points, poses, kps = scene(n_images=6, n_points=n)
+    m = build(points, poses[:4], kps[:4])  # tracks of 4 observations, triangulated
+    before = m.observations_triangulated
+    q, t = poses[4]
+    uv, _ = kps[4]
+    m.add_image(5, "4.png", 1, CAMERA, q, t, np.hstack([uv, np.zeros((len(uv), 2))]))
+    add_pair(m, kps, 3, 4, n)
+    assert m.update() == n
+    assert m.observations_triangulated - before == n  # one new observation a track
+    model = m.to_model()
+    assert len(model.points) == n and all(len(p.image_ids) == 5 for p in model.points.values())
+    for p in model.points.values():
+        im = model.images[int(p.image_ids[0])]
+        assert np.linalg.norm(p.xyz - points[kps[im.id - 1][1][int(p.point2D_idxs[0])]]) < 1e-6
+
+
+def test_a_new_observation_off_the_point_does_not_join_it():
+    n = 30
+    points, poses, kps = scene(n_images=5, n_points=n)
+    m = build(points, poses[:4], kps[:4])
+    uv, order = kps[4]
+    uv = uv.copy()
+    uv[:, 1] += np.where(order == 3, 12.0, 0.0)  # point 3 seen 12 px off in the new image
+    q, t = poses[4]
+    m.add_image(5, "4.png", 1, CAMERA, q, t, np.hstack([uv, np.zeros((len(uv), 2))]))
+    add_pair(m, [kps[0], kps[1], kps[2], kps[3], (uv, order)], 3, 4, n)
+    m.update()
+    model = m.to_model()
+    assert len(model.points) == n  # the point stays, without the wrong observation
+    lengths = sorted(len(p.image_ids) for p in model.points.values())
+    assert lengths == [4] + [5] * (n - 1)
+    assert max(p.error for p in model.points.values()) < 1e-6
+
+
+def test_two_points_that_merge_are_triangulated_from_scratch():
+    """Two tracks of the same 3D point, each with its own point, joined by a later match: the
+    one point is triangulated from all observations, not extended from either."""
+    n = 20
+    points, poses, kps = scene(n_images=6, n_points=n)
+    m = LiveModel()
+    for i, ((q, t), (uv, _)) in enumerate(zip(poses, kps)):
+        m.add_image(i + 1, "%d.png" % i, 1, CAMERA, q, t, np.hstack([uv, np.zeros((len(uv), 2))]))
+    for a, b in [(0, 1), (1, 2), (0, 2), (3, 4), (4, 5), (3, 5)]:
+        add_pair(m, kps, a, b, n)
+    m.update()
+    assert len(m.points) == 2 * n
+    before = m.observations_triangulated
+    add_pair(m, kps, 2, 3, n)
+    m.update()
+    assert m.observations_triangulated - before == 6 * n  # every observation of each merged track
+    model = m.to_model()
+    assert len(model.points) == n and all(len(p.image_ids) == 6 for p in model.points.values())
