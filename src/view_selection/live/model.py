@@ -12,8 +12,9 @@ instead: each new observation joins the point when it lies within `max_error_px`
 projection, as COLMAP's incremental triangulator continues a track. So the cost of an update is
 that of its new observations, not of whole tracks that grow with every revisit (issue 28: in a
 room walked round for 3 minutes the mean track reached 22 observations and a full
-re-triangulation 0.31 s of CPU an update). Full triangulation: observations further than `max_error_px` from the point are dropped
-(the worst first, the point refined again), and a point seen at less than `min_angle_deg` of
+re-triangulation 0.31 s of CPU an update). In a full triangulation, observations further than
+`max_error_px` from the point are dropped (the worst, with every one off by more than half as
+much, and the point made again from the rest), and a point seen at less than `min_angle_deg` of
 triangulation angle, or behind a camera, is not kept. The angle is COLMAP 3.8's point_triangulator
 default (tri_min_angle 1.5 deg); the error is tighter than its 4 px (filter_max_reproj_error):
 measured on the kitchen at its poses, 3 px keeps 5,934 points at 1.34 px mean error where 4 px
@@ -60,6 +61,8 @@ class LiveModel:
         self.dirty = set()    # roots to triangulate again (or to extend)
         self.full = set()     # roots that must be triangulated from scratch (a pose moved, two points merged)
         self.full_size = {}   # root -> observations of its point at its last full triangulation
+        self.failed_size = {}  # root -> observations when it last gave no point (retried once it grew by half)
+        self.pending = {}     # root -> {image id: keypoint} joined since its point was made
         self.observations_triangulated = 0  # observations handled by update(), for the benchmarks and tests
         self.points = {}      # root -> (xyz, error, {image id: keypoint index} of the inliers)
         self.by_image = {}    # image id -> set of roots with an observation in it
@@ -124,36 +127,50 @@ class LiveModel:
                 self.full.add(ra)  # two points (or one to redo) become one: triangulated from scratch
             self.full.discard(rb)
             self.full_size.pop(rb, None)
+            self.failed_size.pop(rb, None)
+            self.pending.pop(rb, None)
+            self.pending.setdefault(ra, {}).update(mb)  # new to ra's point, if it has one
             self.dirty.discard(rb)
             self.dirty.add(ra)
-            for img in ma:
+            for img in mb:  # ma's images know ra already
                 roots = self.by_image.setdefault(img, set())
                 roots.discard(rb)
                 roots.add(ra)
 
     # -- triangulation -----------------------------------------------------------------------
-    def update(self):
-        """Triangulates the tracks that changed; returns how many."""
+    def update(self, final=False):
+        """Triangulates the tracks that changed; returns how many. final: also every track that
+        gave no point and has grown since, however little (the finish: nothing waits longer)."""
+        if final:
+            self.dirty |= {root for root, size in self.failed_size.items()
+                           if root in self.members and len(self.members[root]) > size}
         todo = [root for root in self.dirty if root in self.members]
         full, self.dirty, self.full = self.full, set(), set()
         tracks, extend = [], []
         for root in todo:
-            obs = {img: kp for img, kp in self.members[root].items() if img in self.images}
             point = self.points.get(root)
+            joined = self.pending.pop(root, {})
             if (point is not None and root not in full and self.full_size.get(root, 0) >= 3
-                    and len(obs) < 2 * self.full_size[root] and all(img in obs for img in point[2])):
-                new = {img: kp for img, kp in obs.items() if img not in point[2]}
+                    and len(point[2]) + len(joined) < 2 * self.full_size[root]):
+                # Only what joined is looked at: the cost is that of the new observations.
+                new = {img: kp for img, kp in joined.items() if img in self.images and img not in point[2]}
                 if new:
                     extend.append((root, new))
-            elif len(obs) >= 2:
+                continue
+            size, failed = len(self.members[root]), self.failed_size.get(root, 0)
+            if point is None and root not in full and (size <= failed if final else
+                                                       size < max(failed + 2, 1.5 * failed)):
+                continue  # it gave no point with nearly as many observations: not yet again
+            obs = {img: kp for img, kp in self.members[root].items() if img in self.images}
+            if len(obs) >= 2:
                 tracks.append((root, obs))
             else:
                 self.points.pop(root, None)
                 self.full_size.pop(root, None)
         if extend:
             self._extend(extend)
-        # Vectorised by track length: a DLT point, Gauss-Newton, and the worst observation
-        # dropped while it is further than max_error_px (the track then goes round again, one
+        # Vectorised by track length: a DLT point, Gauss-Newton, and the worst observations
+        # dropped while one is further than max_error_px (the track then goes round again,
         # shorter), until every track is kept or has fewer than two observations.
         while tracks:
             by_length = {}
@@ -235,17 +252,25 @@ class LiveModel:
         for q, (root, obs) in enumerate(group):
             if not valid[q]:
                 self.points.pop(root, None)
+                self.failed_size[root] = len(self.members.get(root, obs))
             elif errors[q, worst[q]] > self.max_error_px:
                 self.points.pop(root, None)
+                self.failed_size[root] = len(self.members.get(root, obs))
                 if length > 2:
-                    shorter = dict(obs)
-                    del shorter[int(ids[q, worst[q]])]
-                    again.append((root, shorter))
+                    # The worst goes, and with it every observation off by more than half as much
+                    # (a gross outlier pulls the point; what is that far off is not pulled there):
+                    # a long track with k bad observations is not triangulated k times.
+                    off = errors[q] > max(self.max_error_px, 0.5 * errors[q, worst[q]])
+                    shorter = {img: kp for img, kp, bad in zip(ids[q], (obs[i] for i in ids[q]), off) if not bad}
+                    if len(shorter) >= 2:
+                        again.append((root, {int(img): kp for img, kp in shorter.items()}))
             elif angle[q] < self.min_angle:
                 self.points.pop(root, None)
+                self.failed_size[root] = len(self.members.get(root, obs))
             else:
                 self.points[root] = (x[q], float(errors[q].mean()), dict(obs))
                 self.full_size[root] = len(obs)
+                self.failed_size.pop(root, None)
         return again
 
     # -- the COLMAP model --------------------------------------------------------------------
