@@ -86,8 +86,10 @@ struct RefinementConfig {
   /// stays within a bound however long the session was (issue 28).
   double max_seconds = 0.0;
   int threads = 0;  ///< Ceres threads; 0: one per core
-  /// Ceres' dense Schur solver up to this many images, the sparse one above.
+  /// Ceres' dense Schur solver up to this many images, the sparse one up to sparse_up_to, the
+  /// iterative one (Schur-Jacobi preconditioner) above: COLMAP's bundle adjuster's choice.
   size_t dense_up_to = 50;
+  size_t sparse_up_to = 1000;
   bool verbose = false;  ///< Ceres' report of each solve on stderr
 
   /// Throws core::InvalidArgument naming the bad value.
