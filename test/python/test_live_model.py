@@ -224,3 +224,15 @@ def test_the_final_update_tries_every_track_that_grew_since_it_gave_no_point():
     assert m.points == {}
     m.update(final=True)  # ... not in the finish's
     assert len(m.points) == n
+
+
+def test_every_image_of_a_track_knows_it():
+    """A moved pose re-triangulates every track the image is in, whichever side of the first
+    match it was on (a track begun by a match of two lone observations included)."""
+    points, poses, kps = scene(n_images=3, n_points=30)
+    m = build(points, poses, kps)
+    for iid in (1, 2, 3):
+        assert len(m.by_image[iid]) == 30, iid
+    q, t = poses[0]
+    m.set_pose(1, q, np.asarray(t) + [0.0, 0.05, 0.0])
+    assert m.update() == 30

@@ -125,6 +125,7 @@ class LiveModel:
                 continue
             if len(ma) < len(mb):
                 ra, rb, ma, mb = rb, ra, mb, ma
+            lone = ra not in self.members  # a lone observation: no image knows its root yet
             self.parent[rb] = ra
             self.parent.setdefault(ra, ra)
             ma.update(mb)
@@ -139,7 +140,7 @@ class LiveModel:
             self.pending.setdefault(ra, {}).update(mb)  # new to ra's point, if it has one
             self.dirty.discard(rb)
             self.dirty.add(ra)
-            for img in mb:  # ma's images know ra already
+            for img in (ma if lone else mb):  # (ma holds mb's now) ma's images know ra, unless it was lone
                 roots = self.by_image.setdefault(img, set())
                 roots.discard(rb)
                 roots.add(ra)
