@@ -118,6 +118,7 @@ def main(argv=None):
         if known and args.refine == "on":
             refinement = ModelRefinement(RefinementOptions(retriangulations=args.refine_retriangulations,
                                                            max_seconds=args.refine_max_seconds,
+                                                           timeout=3600.0,  # offline: a large model may take long
                                                            threads=args.threads),
                                          tool=args.refine_tool, log=lambda level, text: log(text))
         work = LiveWork(project, continuity=known and not args.no_continuity, max_batch_pairs=len(export.pairs) + 1,
