@@ -271,6 +271,11 @@ class LiveOdometry(unittest.TestCase):
         with open(os.path.join(self.offline, 'report.json')) as f:
             off_report = json.load(f)
         self.assertTrue(off_report['refinement']['refined'], off_report['refinement'])
+        if self.report['refinement']['status'] == 'out_of_time':
+            # The finish's refinement stops at ~refine_max_seconds (5 s; about 2 s of CPU here):
+            # on a machine too loaded to give it that, it ends where it got to, and the offline
+            # one, without a budget, goes further. Then the two are not meant to be equal.
+            self.skipTest('the online refinement stopped at its time budget: %s' % self.report['refinement']['message'])
         rms = math.sqrt(sum(math.dist(online[n], offline[n]) ** 2 for n in online) / len(online))
         median = self.report['refinement']['translation_median']
         rospy.loginfo('online vs offline refined: RMS %.5f m; the median correction %.5f m', rms, median)
