@@ -322,9 +322,14 @@ class LiveBridge(unittest.TestCase):
         centre = lambda p: -np.array(quaternion_matrix(p[:4])).T @ np.array(p[4:7])
         rms = math.sqrt(sum(float(np.sum((centre(on[n]) - centre(off[n])) ** 2)) for n in on) / len(on))
         rospy.loginfo('online vs offline refined keyframes: RMS %.5f m', rms)
-        self.assertLess(rms, 0.002)
         online = json.load(open(os.path.join(self.a, 'report.json')))
         off = json.load(open(os.path.join(offline, 'report.json')))
+        if online['refinement']['status'] == 'out_of_time':
+            # The finish's refinement stopped at ~refine_max_seconds on a loaded machine: it is
+            # between the unrefined model and the offline one, which has no budget.
+            self.assertLess(rms, 0.002 + off['refinement']['translation_max'], online['refinement']['message'])
+        else:
+            self.assertLess(rms, 0.002)
         self.assertEqual(online['registered'], off['registered'])
         self.assertEqual(online['final_pairs'], off['final_pairs'])
         # The same pairs matched; points within COLMAP's run-to-run SIFT differences.
