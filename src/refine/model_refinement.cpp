@@ -229,7 +229,17 @@ struct Gauge {
 };
 
 /// One bundle adjustment of the poses the gauge lets move, and every point.
-ceres::Solver::Summary adjust(State& s, const Gauge& gauge, const RefinementConfig& config) {
+using Clock = std::chrono::steady_clock;
+
+/// The end of the refinement's time budget (max_seconds), or none.
+struct Deadline {
+  bool set = false;
+  Clock::time_point at;
+  double left() const { return set ? std::chrono::duration<double>(at - Clock::now()).count() : 1e30; }
+  bool passed() const { return set && Clock::now() >= at; }
+};
+
+ceres::Solver::Summary adjust(State& s, const Gauge& gauge, const RefinementConfig& config, const Deadline& deadline) {
   const std::set<int>& moving = gauge.moving;
   ceres::Problem::Options problem_options;
   problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
@@ -271,9 +281,19 @@ ceres::Solver::Summary adjust(State& s, const Gauge& gauge, const RefinementConf
     }
   }
   ceres::Solver::Options options;
-  options.linear_solver_type = used.size() <= config.dense_up_to ? ceres::DENSE_SCHUR : ceres::SPARSE_SCHUR;
+  // As COLMAP's bundle adjuster chooses: dense, sparse, then iterative Schur (a room walked for 10
+  // minutes, 3,253 images seeing each other's points: one sparse Schur step took 58 s).
+  if (used.size() <= config.dense_up_to) {
+    options.linear_solver_type = ceres::DENSE_SCHUR;
+  } else if (used.size() <= config.sparse_up_to) {
+    options.linear_solver_type = ceres::SPARSE_SCHUR;
+  } else {
+    options.linear_solver_type = ceres::ITERATIVE_SCHUR;
+    options.preconditioner_type = ceres::SCHUR_JACOBI;
+  }
   options.max_num_iterations = config.max_iterations;
   options.function_tolerance = config.function_tolerance;
+  if (deadline.set) options.max_solver_time_in_seconds = std::max(0.01, deadline.left());
   options.num_threads = config.threads > 0 ? config.threads
                                            : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
   options.logging_type = ceres::SILENT;
@@ -406,8 +426,9 @@ Gauge gaugeOf(const State& s, const std::map<int, State::Pose>& reference, const
 /// than triangulation_max_error (the point again from the rest); kept when it has two
 /// observations left, lies in front of them and is seen at min_triangulation_angle_deg at
 /// least. A point takes the colour of an old point that shared an observation.
-void retriangulate(State& s, const Tracks& tracks, const std::set<int>& excluded, const RefinementConfig& config,
-                   double max_error) {
+/// Returns false, with `s` untouched, when `deadline` passed before every track was done.
+bool retriangulate(State& s, const Tracks& tracks, const std::set<int>& excluded, const RefinementConfig& config,
+                   double max_error, const Deadline& deadline = Deadline{}) {
   std::map<std::pair<int, int>, int64_t> old_point;  // (image, 2D index) -> old point id
   for (const auto& [id, track] : s.tracks)
     for (const auto& e : track) old_point[{e.image_id, e.point2D_idx}] = id;
@@ -416,7 +437,9 @@ void retriangulate(State& s, const Tracks& tracks, const std::set<int>& excluded
   std::map<int64_t, std::array<uint8_t, 3>> colours;
   const double min_angle = config.min_triangulation_angle_deg * kPi / 180.0;
   int64_t next = 1;
+  size_t done = 0;
   for (const auto& track : tracks.tracks) {
+    if (++done % 1024 == 0 && deadline.passed()) return false;
     std::vector<io::ColmapTrackElement> obs;
     for (const Observation& o : track) {
       const auto im = s.images.find(o.image_id);
@@ -506,6 +529,7 @@ void retriangulate(State& s, const Tracks& tracks, const std::set<int>& excluded
   s.points = std::move(points);
   s.tracks = std::move(new_tracks);
   s.colours = std::move(colours);
+  return true;
 }
 
 struct PassResult {
@@ -515,6 +539,7 @@ struct PassResult {
   int rounds = 0, iterations = 0;
   double initial_cost = 0.0, final_cost = 0.0;
   bool converged = true;
+  bool out_of_time = false;  ///< the deadline passed: rounds, triangulations or a solve were cut short
   size_t observations_filtered = 0, points_filtered = 0;
   bool aligned = false;
   double scale = 1.0;
@@ -525,7 +550,8 @@ struct PassResult {
 /// observations too) and those not in `movable` held; aligned to the input when the caller held
 /// nothing.
 PassResult pass(const State& input, const std::map<int, State::Pose>& reference, const std::set<int>& movable,
-                const std::set<int>& kept, const RefinementConfig& config, const Tracks* tracks) {
+                const std::set<int>& kept, const RefinementConfig& config, const Tracks* tracks,
+                const Deadline& deadline) {
   PassResult r;
   r.state = input;
   State& s = r.state;
@@ -539,18 +565,36 @@ PassResult pass(const State& input, const std::map<int, State::Pose>& reference,
   r.points_filtered += pts;
   const Gauge gauge = gaugeOf(s, reference, movable, kept, config);
   const int stages = tracks ? 1 + config.retriangulations : 1;
-  for (int stage = 0; stage < stages; ++stage) {
+  for (int stage = 0; stage < stages && !r.out_of_time; ++stage) {
+  if (stage > 0 && deadline.passed()) {
+    r.out_of_time = true;
+    break;
+  }
   if (stage > 0 || (tracks && config.triangulate_first)) {
     // Earlier triangulations admit more (the poses are still off), the last one the final limit.
+    // Under a time budget a triangulation may take half of what is left; one that cannot is
+    // given up, and the points stay as they were (the model's own, or the last triangulation's).
     const int later = config.retriangulations - stage;
-    retriangulate(s, *tracks, kept, config,
-                  config.triangulation_max_error * std::pow(config.triangulation_growth, std::max(0, later)));
-    ++r.retriangulations;
+    Deadline half = deadline;
+    if (deadline.set)
+      half.at = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(
+                                   std::max(0.0, deadline.left()) / 2.0));
+    if (retriangulate(s, *tracks, kept, config,
+                      config.triangulation_max_error * std::pow(config.triangulation_growth, std::max(0, later)),
+                      half))
+      ++r.retriangulations;
+    else
+      r.out_of_time = stage > 0;  // the first one given up: the adjustment still runs on the model's points
   }
+  if (r.out_of_time) break;
   for (int round = 0; round < config.max_rounds; ++round) {
     const size_t before = s.observations();
     if (before == 0) break;
-    const ceres::Solver::Summary summary = adjust(s, gauge, config);
+    if (round > 0 && deadline.passed()) {  // the first round of a stage always runs, however briefly
+      r.out_of_time = true;
+      break;
+    }
+    const ceres::Solver::Summary summary = adjust(s, gauge, config, deadline);
     ++r.rounds;
     r.iterations += static_cast<int>(summary.iterations.size());
     if (stage == 0 && round == 0) r.initial_cost = summary.initial_cost;
@@ -565,6 +609,7 @@ PassResult pass(const State& input, const std::map<int, State::Pose>& reference,
       return r;
     }
     if (summary.termination_type == ceres::NO_CONVERGENCE) r.converged = false;
+    if (deadline.passed()) r.out_of_time = true;
     std::tie(obs, pts) = filter(s, config, kept);
     r.observations_filtered += obs;
     r.points_filtered += pts;
@@ -649,6 +694,7 @@ void RefinementConfig::validate() const {
   if (threads < 0) throw core::InvalidArgument("threads must be >= 0");
   if (!(triangulation_max_error > 0.0)) throw core::InvalidArgument("triangulation_max_error must be positive [px]");
   if (retriangulations < 0) throw core::InvalidArgument("retriangulations must be >= 0");
+  if (!(max_seconds >= 0.0)) throw core::InvalidArgument("max_seconds must be >= 0 (0: no limit)");
   if (!(max_filtered_ratio > 0.0 && max_filtered_ratio <= 1.0))
     throw core::InvalidArgument("max_filtered_ratio must be in (0, 1]");
   if (!(prior_translation_ratio >= 0.0)) throw core::InvalidArgument("prior_translation_ratio must be >= 0");
@@ -667,6 +713,11 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
                             const io::ColmapModel* reference_model, const std::vector<Match>* matches) {
   const auto start = std::chrono::steady_clock::now();
   config.validate();
+  Deadline deadline;
+  if (config.max_seconds > 0.0) {
+    deadline.set = true;
+    deadline.at = start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(config.max_seconds));
+  }
   RefinementReport local;
   RefinementReport& rep = report ? *report : local;
   rep = RefinementReport{};
@@ -750,7 +801,7 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
     for (const auto& [id, why] : kept) ids.insert(id);
     return ids;
   };
-  PassResult result = pass(initial, reference, movable, keptIds(), config, with_tracks);
+  PassResult result = pass(initial, reference, movable, keptIds(), config, with_tracks, deadline);
   // Implausible corrections, or images left without enough observations: start again with them
   // kept at their input poses (once; what the second pass still moves too far is put back).
   const auto offenders = [&](const State& s, bool record) {
@@ -776,9 +827,9 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
       for (const auto& [id, why] : found) kept[id] = why;
     return found;
   };
-  if (!result.diverged && !offenders(result.state, true).empty()) {
+  if (!result.diverged && !offenders(result.state, true).empty() && !deadline.passed()) {
     rep.passes = 2;
-    result = pass(initial, reference, movable, keptIds(), config, with_tracks);
+    result = pass(initial, reference, movable, keptIds(), config, with_tracks, deadline);
   }
   if (result.diverged) {
     rep.status = "diverged";
@@ -824,7 +875,7 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
     result.points_filtered += pts;
     s = std::move(with_kept);
   }
-  rep.status = result.converged ? "converged" : "no_convergence";
+  rep.status = result.out_of_time ? "out_of_time" : result.converged ? "converged" : "no_convergence";
   rep.refined = true;
   rep.rounds = result.rounds;
   rep.iterations = result.iterations;
@@ -848,6 +899,7 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
   msg << "refined " << moved << " of " << movable.size() << " movable images in " << rep.rounds
       << " rounds (" << rep.iterations << " iterations, " << rep.status << "); " << kept.size()
       << " kept their input pose";
+  if (result.out_of_time) msg << "; stopped at its time budget of " << config.max_seconds << " s";
   rep.message = msg.str();
   return finish(out, s);
 }

@@ -71,8 +71,12 @@ Cameras must be PINHOLE or SIMPLE_PINHOLE.
   --prior-rotation-deg DEG        ... and turn by DEG (1 sigma; default 3)
   --prior-loss-scale S            Cauchy loss on the priors at S sigmas (default 3)
   --no-align         do not align the result to the input poses
+  --max-seconds S    the time the refinement may take (default 0: no limit): once spent, the solve
+                     under way stops at its best state, no further round, triangulation or pass
+                     begins, and the result is what was reached (status out_of_time)
   --threads N        Ceres threads (default 0: one per core)
-  --dense-up-to N    Ceres' dense Schur solver up to N images, the sparse one above (default 50)
+  --dense-up-to N    Ceres' dense Schur solver up to N images (default 50), ...
+  --sparse-up-to N   ... the sparse one up to N (default 1000), the iterative one above
   --quiet            no summary line
   --verbose          Ceres' report of every solve on stderr
   --help             this text
@@ -125,7 +129,7 @@ int run(int argc, char** argv) {
                          "rounds", "iterations", "min-observations", "max-correction-depth-ratio",
                          "max-correction-deg", "threads", "prior-translation-ratio", "prior-rotation-deg",
                          "prior-loss-scale", "dense-up-to", "function-tolerance", "matches", "retriangulations",
-                         "triangulation-max-error", "triangulation-growth"},
+                         "triangulation-max-error", "triangulation-growth", "max-seconds", "sparse-up-to"},
                         {"no-align", "quiet", "verbose", "no-triangulate-first", "help"});
   if (cli.flag("help")) {
     std::cout << kUsage;
@@ -155,6 +159,8 @@ int run(int argc, char** argv) {
   config.function_tolerance = cli.real("function-tolerance", config.function_tolerance, 1e-12, 0.5);
   config.dense_up_to = static_cast<size_t>(cli.integer("dense-up-to", static_cast<long>(config.dense_up_to), 0, 100000));
   config.threads = static_cast<int>(cli.integer("threads", config.threads, 0, 256));
+  config.max_seconds = cli.real("max-seconds", config.max_seconds, 0.0, 1e9);
+  config.sparse_up_to = static_cast<size_t>(cli.integer("sparse-up-to", static_cast<long>(config.sparse_up_to), 0, 10000000));
 
   const io::ColmapModel input = io::readColmapModel(*cli.text("input"));
   std::set<int> movable = refine::allImages(input);

@@ -107,3 +107,132 @@ def test_points_without_parallax_or_behind_a_camera_are_not_kept():
     m.add_matches(1, 2, [[0, 0]])
     m.update()
     assert m.to_model().points == {}
+
+
+def add_pair(m, keypoints, a, b, n_points):
+    """The matches of images a and b (0-based) of a scene, every point."""
+    kp_of_point_b = np.argsort(keypoints[b][1])
+    m.add_matches(a + 1, b + 1, np.stack([np.arange(n_points), kp_of_point_b[keypoints[a][1]]], 1))
+
+
+def test_a_track_that_grows_is_extended_not_triangulated_again():
+    """Each new keyframe adds one observation to tracks of many: the update handles those new
+    observations, not whole tracks (a full re-triangulation of every track would handle 5 each)."""
+    n = 40
+    points, poses, kps = scene(n_images=6, n_points=n)
+    m = build(points, poses[:4], kps[:4])  # tracks of 4 observations, triangulated
+    before = m.observations_triangulated
+    q, t = poses[4]
+    uv, _ = kps[4]
+    m.add_image(5, "4.png", 1, CAMERA, q, t, np.hstack([uv, np.zeros((len(uv), 2))]))
+    add_pair(m, kps, 3, 4, n)
+    assert m.update() == n
+    assert m.observations_triangulated - before == n  # one new observation a track
+    model = m.to_model()
+    assert len(model.points) == n and all(len(p.image_ids) == 5 for p in model.points.values())
+    for p in model.points.values():
+        im = model.images[int(p.image_ids[0])]
+        assert np.linalg.norm(p.xyz - points[kps[im.id - 1][1][int(p.point2D_idxs[0])]]) < 1e-6
+
+
+def test_a_new_observation_off_the_point_does_not_join_it():
+    n = 30
+    points, poses, kps = scene(n_images=5, n_points=n)
+    m = build(points, poses[:4], kps[:4])
+    uv, order = kps[4]
+    uv = uv.copy()
+    uv[:, 1] += np.where(order == 3, 12.0, 0.0)  # point 3 seen 12 px off in the new image
+    q, t = poses[4]
+    m.add_image(5, "4.png", 1, CAMERA, q, t, np.hstack([uv, np.zeros((len(uv), 2))]))
+    add_pair(m, [kps[0], kps[1], kps[2], kps[3], (uv, order)], 3, 4, n)
+    m.update()
+    model = m.to_model()
+    assert len(model.points) == n  # the point stays, without the wrong observation
+    lengths = sorted(len(p.image_ids) for p in model.points.values())
+    assert lengths == [4] + [5] * (n - 1)
+    assert max(p.error for p in model.points.values()) < 1e-6
+
+
+def test_two_points_that_merge_are_triangulated_from_scratch():
+    """Two tracks of the same 3D point, each with its own point, joined by a later match: the
+    one point is triangulated from all observations, not extended from either."""
+    n = 20
+    points, poses, kps = scene(n_images=6, n_points=n)
+    m = LiveModel()
+    for i, ((q, t), (uv, _)) in enumerate(zip(poses, kps)):
+        m.add_image(i + 1, "%d.png" % i, 1, CAMERA, q, t, np.hstack([uv, np.zeros((len(uv), 2))]))
+    for a, b in [(0, 1), (1, 2), (0, 2), (3, 4), (4, 5), (3, 5)]:
+        add_pair(m, kps, a, b, n)
+    m.update()
+    assert len(m.points) == 2 * n
+    before = m.observations_triangulated
+    add_pair(m, kps, 2, 3, n)
+    m.update()
+    assert m.observations_triangulated - before == 6 * n  # every observation of each merged track
+    model = m.to_model()
+    assert len(model.points) == n and all(len(p.image_ids) == 6 for p in model.points.values())
+
+
+def test_a_track_without_a_point_waits_until_it_grew_by_half():
+    """Tracks seen without parallax give no point; touched again with one more view without
+    parallax they are not triangulated again; once a view with parallax has joined, they are."""
+    rng = np.random.default_rng(5)
+    n = 25
+    points = rng.uniform([-1, -1, 4], [1, 1, 6], (n, 3))
+    m = LiveModel()
+    for i, x in enumerate([0.0, 0.0005, 0.001, 0.0015, 0.8]):  # four views 0.5 mm apart, one 0.8 m away
+        q, t = geometry.world_to_camera(np.array([x, 0.0, 0.0]), (1.0, 0.0, 0.0, 0.0))
+        pc = points @ geometry.rotation_of(q).T + t
+        uv = np.stack([PARAMS[0] * pc[:, 0] / pc[:, 2] + PARAMS[2], PARAMS[1] * pc[:, 1] / pc[:, 2] + PARAMS[3]], 1)
+        m.add_image(i + 1, "%d.png" % i, 1, CAMERA, q, t, np.hstack([uv, np.zeros((n, 2))]))
+    same = np.stack([np.arange(n), np.arange(n)], 1)  # keypoint j is point j in every view
+    m.add_matches(1, 2, same)
+    m.update()
+    assert m.points == {} and m.observations_triangulated == 2 * n
+    m.add_matches(2, 3, same)  # 3 observations: not half as many again as 2
+    m.update()
+    assert m.points == {} and m.observations_triangulated == 2 * n
+    m.add_matches(3, 4, same)  # 4: tried again, still no parallax
+    m.update()
+    assert m.points == {} and m.observations_triangulated == 2 * n + 4 * n
+    m.add_matches(4, 5, same)  # 5 < 6: waits, even with parallax now
+    m.update()
+    assert m.points == {}
+    m.add_matches(1, 5, same)  # the same tracks touched again: still 5 observations, still waiting
+    m.update()
+    assert m.points == {}
+    m.set_pose(5, *geometry.world_to_camera(np.array([0.8001, 0.0, 0.0]), (1.0, 0.0, 0.0, 0.0)))
+    m.update()  # a moved pose triangulates its tracks from scratch: now with parallax
+    assert len(m.points) == n
+
+
+def test_the_final_update_tries_every_track_that_grew_since_it_gave_no_point():
+    rng = np.random.default_rng(6)
+    n = 20
+    points = rng.uniform([-1, -1, 4], [1, 1, 6], (n, 3))
+    m = LiveModel()
+    for i, x in enumerate([0.0, 0.0005, 0.8]):
+        q, t = geometry.world_to_camera(np.array([x, 0.0, 0.0]), (1.0, 0.0, 0.0, 0.0))
+        pc = points @ geometry.rotation_of(q).T + t
+        uv = np.stack([PARAMS[0] * pc[:, 0] / pc[:, 2] + PARAMS[2], PARAMS[1] * pc[:, 1] / pc[:, 2] + PARAMS[3]], 1)
+        m.add_image(i + 1, "%d.png" % i, 1, CAMERA, q, t, np.hstack([uv, np.zeros((n, 2))]))
+    same = np.stack([np.arange(n), np.arange(n)], 1)
+    m.add_matches(1, 2, same)  # no parallax: no point
+    m.update()
+    m.add_matches(2, 3, same)  # 3 observations, 2 when it failed: waits in a live update ...
+    m.update()
+    assert m.points == {}
+    m.update(final=True)  # ... not in the finish's
+    assert len(m.points) == n
+
+
+def test_every_image_of_a_track_knows_it():
+    """A moved pose re-triangulates every track the image is in, whichever side of the first
+    match it was on (a track begun by a match of two lone observations included)."""
+    points, poses, kps = scene(n_images=3, n_points=30)
+    m = build(points, poses, kps)
+    for iid in (1, 2, 3):
+        assert len(m.by_image[iid]) == 30, iid
+    q, t = poses[0]
+    m.set_pose(1, q, np.asarray(t) + [0.0, 0.05, 0.0])
+    assert m.update() == 30

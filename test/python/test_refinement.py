@@ -171,6 +171,25 @@ def test_refine_brings_a_drifted_model_closer(tmp_path):
     assert not [n for n in os.listdir(tmp_path) if n.startswith(".refine_")]  # its work folder is gone
 
 
+def test_a_time_budget_gives_what_the_adjustment_reached(tmp_path):
+    """The bridge's finish gives the refinement a budget (~refine_max_seconds): far below what
+    this model's refinement takes, it stops out of time, sooner, and still brings it closer."""
+    tool = refine_tool()
+    exact = arc_poses()
+    given = drift.add_drift(exact, 0.02, 0.3, seed=3)
+    m = known_pose_model(exact, given, np.random.default_rng(29), database=str(tmp_path / "database.db"))
+    cm.write_model(m, str(tmp_path / "in"))
+    full = refiner.refine(str(tmp_path / "in"), str(tmp_path / "full"), tool=tool, database=str(tmp_path / "database.db"))
+    budget = 0.3 * full["adjustment_seconds"]
+    cut = refiner.refine(str(tmp_path / "in"), str(tmp_path / "out"), refiner.RefinementOptions(max_seconds=budget),
+                         tool=tool, database=str(tmp_path / "database.db"))
+    assert full["status"] == "converged" and cut["status"] == "out_of_time", cut["message"]
+    assert cut["refined"] and "time budget" in cut["message"]
+    assert cut["rounds"] < full["rounds"] and cut["adjustment_seconds"] < full["adjustment_seconds"]
+    truth = [c for c, _ in exact]
+    assert ate_rmse(centres(cm.read_model(str(tmp_path / "out"))), truth) < ate_rmse(centres(m), truth)
+
+
 def fake_tool(path, body):
     path.write_text("#!/bin/sh\n" + body + "\n")
     path.chmod(path.stat().st_mode | stat.S_IEXEC)
@@ -216,8 +235,10 @@ def test_options_reach_the_tool(tmp_path):
                      'cat "$2" > %s; shift; done; exit 3' % (args, fixed))
     with pytest.raises(refiner.RefinementError, match="exit 3"):
         refiner.refine(str(tmp_path), str(tmp_path / "out"),
-                       refiner.RefinementOptions(loss="huber", max_correction_deg=7.5), fixed=["a.png"], tool=tool)
+                       refiner.RefinementOptions(loss="huber", max_correction_deg=7.5, max_seconds=4.5),
+                       fixed=["a.png"], tool=tool)
     text = args.read_text()
     assert "--loss huber" in text and "--max-correction-deg 7.5" in text and "--fixed" in text
+    assert "--max-seconds 4.5" in text
     assert fixed.read_text() == "a.png\n"
     json.dumps(refiner.RefinementOptions().to_json())  # goes into report.json

@@ -80,9 +80,16 @@ struct RefinementConfig {
   double prior_loss_scale = 3.0;
   /// With every image movable: align the result to the input poses (Sim(3)); see above.
   bool align_to_input = true;
+  /// [s] wall time the refinement may take, 0: no limit. Once it is spent, the solve under way
+  /// stops at its best state so far, no further round, triangulation or pass begins, and the
+  /// result is what the adjustments reached (status out_of_time): a live finish's refinement
+  /// stays within a bound however long the session was (issue 28).
+  double max_seconds = 0.0;
   int threads = 0;  ///< Ceres threads; 0: one per core
-  /// Ceres' dense Schur solver up to this many images, the sparse one above.
+  /// Ceres' dense Schur solver up to this many images, the sparse one up to sparse_up_to, the
+  /// iterative one (Schur-Jacobi preconditioner) above: COLMAP's bundle adjuster's choice.
   size_t dense_up_to = 50;
+  size_t sparse_up_to = 1000;
   bool verbose = false;  ///< Ceres' report of each solve on stderr
 
   /// Throws core::InvalidArgument naming the bad value.
@@ -107,7 +114,8 @@ struct ImageCorrection {
 };
 
 struct RefinementReport {
-  /// converged | no_convergence (iterations ran out; the result is still better) | diverged
+  /// converged | no_convergence (iterations ran out; the result is still better) | out_of_time
+  /// (max_seconds was spent: the result is what the adjustments reached by then) | diverged
   /// (the solve failed, raised the cost, or left more than max_filtered_ratio of the
   /// observations as outliers: the input model is returned) | nothing_to_refine | triangulated
   /// (no image may move, matches given: their tracks triangulated at the given poses)

@@ -72,6 +72,9 @@ PARAMETERS = """Parameters (private, ~name):
   refine_max_correction_depth_ratio  a keyframe the refinement would move further than this x the
                      median depth of its points keeps the node's pose, reported (0.5)
   refine_max_correction_deg  ... or turn further than this [deg] (15)
+  refine_max_seconds  [s] the refinement's time budget in a finish: once spent, the model is what
+                     the adjustment reached by then (report.json: status out_of_time), so that a
+                     long session's finish stays bounded (5; 0: no limit)
   refine_tool        the refine_model executable ("": beside this node)
 Publishes ~refined_path (nav_msgs/Path, latched): the refined keyframe poses (optical frame, in the
 node's world frame, at the keyframes' stamps) after each refined model that moved a keyframe by more
@@ -83,6 +86,9 @@ path:=/colmap_bridge/refined_path (docs/live.md, "Refinement").
 # ~refined_path is published when a keyframe moved more than this [m, deg]: half the node's
 # ~correction_min_translation and ~correction_min_rotation_deg defaults.
 PATH_MIN_TRANSLATION, PATH_MIN_ROTATION_DEG = 0.001, 0.05
+# The refinement's time budget in a finish [s]: the kitchen's takes 1.5-3 s here (25,000
+# observations), a 3-minute walk's (330,000) did not end in 120 s (docs/live.md, "Measured").
+REFINE_MAX_SECONDS = 5.0
 
 
 def _param(name, default):
@@ -128,7 +134,8 @@ class Bridge:
                                   max_correction_depth_ratio=float(_param("refine_max_correction_depth_ratio",
                                                                           defaults.max_correction_depth_ratio)),
                                   max_correction_deg=float(_param("refine_max_correction_deg", defaults.max_correction_deg)),
-                                  threads=int(_param("threads", -1))),
+                                  threads=int(_param("threads", -1)),
+                                  max_seconds=float(_param("refine_max_seconds", REFINE_MAX_SECONDS))),
                 tool=_param("refine_tool", "") or None, log=self._log)
         self.work_state = LiveWork(self.project, continuity=bool(_param("continuity_pairs", True)),
                                    max_backlog=_param("max_backlog", 2000),

@@ -133,7 +133,7 @@ class LiveWork:
         return len(due) > limit
 
     # -- the live model ----------------------------------------------------------------------
-    def feed_model(self, keyframes):
+    def feed_model(self, keyframes, final=False):
         """The live model takes the keyframes' poses (new ones, and corrected ones) and the
         verified pairs it does not have yet, and triangulates the tracks that changed; returns
         how many. Also after a restart: the database's pairs all come in once."""
@@ -160,7 +160,7 @@ class LiveWork:
             for (a, b), n in d.inlier_counts().items():
                 if n > 0 and (a, b) not in m.matched_pairs and a in m.images and b in m.images:
                     m.add_matches(a, b, d.matches(a, b, "two_view_geometries"))
-        changed = m.update()
+        changed = m.update(final=final)
         self.status.update(points=len(m.points), tracks=len(m.members))
         return changed
 
@@ -224,7 +224,7 @@ class LiveWork:
                                    % (len(have), len(keyframes), project.images))
             if self.model is not None:
                 with self.clock.measure("triangulation", 1):
-                    out["tracks_triangulated_at_finish"] = self.feed_model(keyframes)
+                    out["tracks_triangulated_at_finish"] = self.feed_model(keyframes, final=True)
                 phases["triangulation"], t0 = time.monotonic() - t0, time.monotonic()
                 with project.db() as d:
                     ids = d.image_ids()

@@ -38,15 +38,18 @@ class RefinementOptions:
     """What refine_model is given (its --help says more) and how the steps run.
 
     retriangulations: how many times the points are triangulated anew from the matches at the
-    refined poses and refined again (0: the model's own points only)."""
+    refined poses and refined again (0: the model's own points only). max_seconds: the time
+    refine_model may take before it stops with what it reached (status out_of_time; 0: no
+    limit); timeout: when it is killed and the unrefined model stays."""
 
     def __init__(self, loss="cauchy", loss_scale=1.0, max_error=4.0, min_angle=1.5, rounds=4, iterations=100,
                  min_observations=15, max_correction_depth_ratio=0.5, max_correction_deg=15.0,
-                 retriangulations=1, threads=-1, timeout=120.0):
+                 retriangulations=1, threads=-1, timeout=120.0, max_seconds=0.0):
         self.loss, self.loss_scale, self.max_error, self.min_angle = loss, float(loss_scale), float(max_error), float(min_angle)
         self.rounds, self.iterations, self.min_observations = int(rounds), int(iterations), int(min_observations)
         self.max_correction_depth_ratio, self.max_correction_deg = float(max_correction_depth_ratio), float(max_correction_deg)
         self.retriangulations, self.threads, self.timeout = int(retriangulations), int(threads), float(timeout)
+        self.max_seconds = float(max_seconds)  # refine_model's own time budget (0: none); timeout kills it
 
     def arguments(self):
         return ["--loss", self.loss, "--loss-scale", repr(self.loss_scale), "--max-error", repr(self.max_error),
@@ -55,7 +58,7 @@ class RefinementOptions:
                 "--max-correction-depth-ratio", repr(self.max_correction_depth_ratio),
                 "--max-correction-deg", repr(self.max_correction_deg),
                 "--retriangulations", str(self.retriangulations),
-                "--threads", str(max(0, self.threads))]
+                "--threads", str(max(0, self.threads)), "--max-seconds", repr(self.max_seconds)]
 
     def to_json(self):
         return dict(vars(self))

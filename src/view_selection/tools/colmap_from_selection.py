@@ -73,6 +73,9 @@ def parse_args(argv):
                         "bundle-adjusted, the SLAM poses' drift corrected; off: the keyframes stay at their poses")
     p.add_argument("--refine-retriangulations", type=int, default=RefinementOptions().retriangulations,
                    help="known_poses: re-triangulations at the refined poses (default %(default)s)")
+    p.add_argument("--refine-max-seconds", type=float, default=0.0,
+                   help="known_poses: the refinement's time budget [s]; once spent, the model is what the adjustment "
+                        "reached (colmap_bridge's ~refine_max_seconds; default 0: no limit)")
     p.add_argument("--refine-tool", help="the refine_model executable (default: found beside this tool)")
     p.add_argument("--no-continuity", action="store_true",
                    help="known_poses: match only the selection's pairs, not also each keyframe with the "
@@ -114,6 +117,8 @@ def main(argv=None):
         refinement = None
         if known and args.refine == "on":
             refinement = ModelRefinement(RefinementOptions(retriangulations=args.refine_retriangulations,
+                                                           max_seconds=args.refine_max_seconds,
+                                                           timeout=3600.0,  # offline: a large model may take long
                                                            threads=args.threads),
                                          tool=args.refine_tool, log=lambda level, text: log(text))
         work = LiveWork(project, continuity=known and not args.no_continuity, max_batch_pairs=len(export.pairs) + 1,

@@ -34,22 +34,13 @@ from view_selection.msg import PairChanges
 from view_selection.srv import ExportRequest, Export, GetPairs, GetPairsRequest, GetSelection
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
+from vs_replay import run  # noqa: E402
 from vs_robust import NodeProcess, Statistics, call, find_tool, wait_until  # noqa: E402
 
 NODE = '/live_vs'
 TOPICS = {'image': '/camera/rgb/image_color', 'camera_info': '/camera/rgb/camera_info',
           'depth': '/camera/depth/image', 'pose': '/camera/pose'}
 
-
-def run(cmd, timeout, what):
-    try:
-        done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, timeout=timeout,
-                              universal_newlines=True)
-    except subprocess.TimeoutExpired as e:
-        raise AssertionError('%s did not finish within %.0f s: %s' % (what, timeout, e.output or ''))
-    if done.returncode != 0:
-        raise AssertionError('%s failed (exit %d): %s\n%s' % (what, done.returncode, ' '.join(cmd), done.stdout))
-    return done.stdout
 
 
 class Consumer:
@@ -331,9 +322,14 @@ class LiveBridge(unittest.TestCase):
         centre = lambda p: -np.array(quaternion_matrix(p[:4])).T @ np.array(p[4:7])
         rms = math.sqrt(sum(float(np.sum((centre(on[n]) - centre(off[n])) ** 2)) for n in on) / len(on))
         rospy.loginfo('online vs offline refined keyframes: RMS %.5f m', rms)
-        self.assertLess(rms, 0.002)
         online = json.load(open(os.path.join(self.a, 'report.json')))
         off = json.load(open(os.path.join(offline, 'report.json')))
+        if online['refinement']['status'] == 'out_of_time':
+            # The finish's refinement stopped at ~refine_max_seconds on a loaded machine: it is
+            # between the unrefined model and the offline one, which has no budget.
+            self.assertLess(rms, 0.002 + off['refinement']['translation_max'], online['refinement']['message'])
+        else:
+            self.assertLess(rms, 0.002)
         self.assertEqual(online['registered'], off['registered'])
         self.assertEqual(online['final_pairs'], off['final_pairs'])
         # The same pairs matched; points within COLMAP's run-to-run SIFT differences.

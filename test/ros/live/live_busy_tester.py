@@ -13,7 +13,6 @@ SLAM system keeps a core busy. After the bag:
   - COLMAP's own commands read the project: model_analyzer agrees with the report, and mapper
     rebuilds a model from the database alone.
 """
-import json
 import math
 import os
 import shutil
@@ -29,20 +28,11 @@ import rostest
 from view_selection.srv import GetSelection
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
+from vs_replay import bridge_report_after, run  # noqa: E402
 from vs_robust import Statistics, call, find_tool, wait_until  # noqa: E402
 
 NODE = '/view_selection'
 
-
-def run(cmd, timeout, what, env=None):
-    try:
-        done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, timeout=timeout,
-                              universal_newlines=True, env=env)
-    except subprocess.TimeoutExpired as e:
-        raise AssertionError('%s did not finish within %.0f s: %s' % (what, timeout, e.output or ''))
-    if done.returncode != 0:
-        raise AssertionError('%s failed (exit %d): %s\n%s' % (what, done.returncode, ' '.join(cmd), done.stdout))
-    return done.stdout
 
 
 def stop(process, timeout=30.0):
@@ -83,16 +73,8 @@ class LiveBusy(unittest.TestCase):
             run(['rosbag', 'play', '--clock', '-q', '-d', '2', '--wait-for-subscribers', cls.bag, '--topics'] + topics,
                 cls.timeout + 4 * cls.frames / 30.0, 'rosbag play')
             cls.bag_end = time.time()
-            report_path = os.path.join(cls.project, 'report.json')
-
-            def model_after_the_bag():
-                try:
-                    with open(report_path) as f:
-                        r = json.load(f)
-                except (OSError, ValueError):
-                    return None
-                return r if r.get('finished_at', 0) > cls.bag_end else None
-            cls.report = wait_until(model_after_the_bag, cls.timeout, 'the bridge wrote the model after the bag',
+            cls.report = wait_until(bridge_report_after(cls.project, cls.bag_end), cls.timeout,
+                                    'the bridge wrote the model after the bag',
                                     period=0.2)
             cls.selection = call(NODE + '/get_selection', GetSelection, None, 30.0).selection
         finally:

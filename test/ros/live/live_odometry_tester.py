@@ -34,6 +34,7 @@ from nav_msgs.msg import Odometry, Path
 from view_selection.srv import Export, ExportRequest, GetSelection
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
+from vs_replay import bridge_report_after, run  # noqa: E402
 from vs_robust import call, find_tool, wait_until  # noqa: E402
 
 from view_selection import geometry  # noqa: E402
@@ -44,16 +45,6 @@ NODE = '/view_selection'
 BLANK = (30, 31, 32)      # frames whose image is a uniform grey
 NO_DEPTH = (33, 34, 35)   # frames whose depth is all zeros
 
-
-def run(cmd, timeout, what):
-    try:
-        done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, timeout=timeout,
-                              universal_newlines=True)
-    except subprocess.TimeoutExpired as e:
-        raise AssertionError('%s did not finish within %.0f s: %s' % (what, timeout, e.output or ''))
-    if done.returncode != 0:
-        raise AssertionError('%s failed (exit %d): %s\n%s' % (what, done.returncode, ' '.join(cmd), done.stdout))
-    return done.stdout
 
 
 def exact_poses(folder):
@@ -125,17 +116,9 @@ class LiveOdometry(unittest.TestCase):
             raise AssertionError('%s; roslaunch said:\n%s' % (e, cls.output()[-3000:]))
         run(['rosbag', 'play', '--clock', '-q', '-d', '1', cls.bag], 60 + 10 * cls.frames / 30.0, 'rosbag play')
         cls.bag_end = time.time()
-        report_path = os.path.join(cls.project, 'report.json')
-
-        def model_after_bag():
-            try:
-                with open(report_path) as f:
-                    r = json.load(f)
-            except (OSError, ValueError):
-                return None
-            return r if r.get('finished_at', 0) > cls.bag_end else None
         try:
-            cls.report = wait_until(model_after_bag, 3 * cls.timeout, 'the bridge wrote the model', period=0.5)
+            cls.report = wait_until(bridge_report_after(cls.project, cls.bag_end), 3 * cls.timeout,
+                                    'the bridge wrote the model', period=0.5)
         except AssertionError as e:
             raise AssertionError('%s; roslaunch said:\n%s' % (e, cls.output()[-4000:]))
         cls.selection = call(NODE + '/get_selection', GetSelection, None, 30.0).selection
@@ -288,6 +271,11 @@ class LiveOdometry(unittest.TestCase):
         with open(os.path.join(self.offline, 'report.json')) as f:
             off_report = json.load(f)
         self.assertTrue(off_report['refinement']['refined'], off_report['refinement'])
+        if self.report['refinement']['status'] == 'out_of_time':
+            # The finish's refinement stops at ~refine_max_seconds (5 s; about 2 s of CPU here):
+            # on a machine too loaded to give it that, it ends where it got to, and the offline
+            # one, without a budget, goes further. Then the two are not meant to be equal.
+            self.skipTest('the online refinement stopped at its time budget: %s' % self.report['refinement']['message'])
         rms = math.sqrt(sum(math.dist(online[n], offline[n]) ** 2 for n in online) / len(online))
         median = self.report['refinement']['translation_median']
         rospy.loginfo('online vs offline refined: RMS %.5f m; the median correction %.5f m', rms, median)

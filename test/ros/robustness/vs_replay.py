@@ -1,6 +1,7 @@
 """Bag replays for the rostests: run a tool, play a bag into nodes once they listen, wait for the
 subscriptions, wait until the nodes have handled what arrived, stamps in nanoseconds. Shared by
-the replay, TUM-layout, compressed, corrections, SLAM, time-jump and restart testers."""
+the replay, TUM-layout, compressed, corrections, SLAM, time-jump, restart and live testers."""
+import json
 import os
 import shutil
 import signal
@@ -15,11 +16,11 @@ from xmlrpc.client import ServerProxy
 from vs_robust import call
 
 
-def run(cmd, timeout, what):
+def run(cmd, timeout, what, env=None):
     """Runs a command; fails with its output when it does not exit 0 within timeout seconds."""
     try:
         done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, timeout=timeout,
-                              universal_newlines=True)
+                              universal_newlines=True, env=env)
     except subprocess.TimeoutExpired as e:
         raise AssertionError('%s did not finish within %.0f s: %s\n%s' % (what, timeout, ' '.join(cmd),
                                                                           e.output or ''))
@@ -221,3 +222,18 @@ def wait_for_statistics(node, predicate, timeout, what):
             return s
         time.sleep(0.2)
     raise AssertionError('%s: not within %.0f s (last statistics: %s)' % (what, timeout, s))
+
+
+def bridge_report_after(project, since):
+    """A predicate for wait_until: colmap_bridge's report.json in `project` once it was written
+    after `since` (time.time()), else None (missing, half written or older)."""
+    path = os.path.join(project, 'report.json')
+
+    def report():
+        try:
+            with open(path) as f:
+                r = json.load(f)
+        except (OSError, ValueError):
+            return None
+        return r if r.get('finished_at', 0) > since else None
+    return report
