@@ -18,6 +18,9 @@ DEFAULT_BUILD_DIR = os.path.join(os.path.dirname(PACKAGE_DIR), "build_" + os.pat
 SHARED_DATA = os.path.join(os.path.dirname(PACKAGE_DIR), "shared", "data")
 # The topics of a TUM RGB-D bag (and of tum_to_bag --layout tum)
 TUM_IMAGE, TUM_DEPTH, TUM_INFO = "/camera/rgb/image_color", "/camera/depth/image", "/camera/rgb/camera_info"
+# A core kept busy at normal priority, as a SLAM system keeps one (python3 -c BUSY_LOOP); SIGINT
+# ends it without a traceback.
+BUSY_LOOP = "import signal\nsignal.signal(signal.SIGINT, signal.SIG_DFL)\nwhile True: pass"
 
 
 class SessionError(Exception):
