@@ -1,11 +1,6 @@
 // rgbd_odometry: the odometry stand-in (OpenCV's RGB-D odometry) on a node of its own.
+#include "view_selection/ros/node_main.h"
 #include "view_selection/ros/rgbd_odometry_ros.h"
-
-#include <ros/ros.h>
-
-#include <cstdio>
-#include <cstring>
-#include <memory>
 
 namespace {
 
@@ -24,29 +19,9 @@ With the view selection node:
   roslaunch view_selection tum_replay.launch bag:=BAG odometry:=true
 )";
 
-bool asksForHelp(int argc, char** argv) {
-  for (int i = 1; i < argc; ++i)
-    if (std::strcmp(argv[i], "--help") == 0 || std::strcmp(argv[i], "-h") == 0) return true;
-  return false;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (asksForHelp(argc, argv)) {  // before ros::init: no master needed
-    std::fputs(kUsage, stdout);
-    return 0;
-  }
-  ros::init(argc, argv, "rgbd_odometry");
-  ros::NodeHandle nh, private_nh("~");
-  std::unique_ptr<view_selection::ros_node::RgbdOdometryRos> node;
-  try {
-    node = std::make_unique<view_selection::ros_node::RgbdOdometryRos>(nh, private_nh);
-  } catch (const std::exception& e) {
-    ROS_FATAL("rgbd_odometry: %s", e.what());
-    return 1;
-  }
-  ros::spin();
-  node.reset();
-  return 0;
+  using namespace view_selection::ros_node;
+  return runNode<RgbdOdometryRos>(argc, argv, "rgbd_odometry", "rgbd_odometry", kUsage);
 }

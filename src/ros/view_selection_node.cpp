@@ -1,11 +1,7 @@
 // view_selection_node: the ViewSelectionRos class on a node of its own.
 #include "view_selection/core/exceptions.h"
+#include "view_selection/ros/node_main.h"
 #include "view_selection/ros/view_selection_ros.h"
-
-#include <ros/ros.h>
-
-#include <cstdio>
-#include <cstring>
 
 namespace {
 
@@ -38,30 +34,9 @@ Beside a SLAM system or a camera driver:
   rosservice call /view_selection/get_next_views "{view: 3, after_completion: true}"
 )";
 
-bool asksForHelp(int argc, char** argv) {
-  for (int i = 1; i < argc; ++i)
-    if (std::strcmp(argv[i], "--help") == 0 || std::strcmp(argv[i], "-h") == 0) return true;
-  return false;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (asksForHelp(argc, argv)) {  // before ros::init: no master needed
-    std::fputs(kUsage, stdout);
-    return 0;
-  }
-  ros::init(argc, argv, "view_selection");
-  // Handles outlive the constructor: if it throws, ROS (and its logging) must still be up.
-  ros::NodeHandle nh, private_nh("~");
-  std::unique_ptr<view_selection::ros_node::ViewSelectionRos> node;
-  try {
-    node = std::make_unique<view_selection::ros_node::ViewSelectionRos>(nh, private_nh);
-  } catch (const std::exception& e) {
-    ROS_FATAL("view_selection_node: %s", e.what());
-    return 1;
-  }
-  ros::spin();
-  node.reset();
-  return 0;
+  using namespace view_selection::ros_node;
+  return runNode<ViewSelectionRos>(argc, argv, "view_selection", "view_selection_node", kUsage);
 }
