@@ -173,19 +173,24 @@ def test_two_points_that_merge_are_triangulated_from_scratch():
     assert len(model.points) == n and all(len(p.image_ids) == 6 for p in model.points.values())
 
 
-def test_a_track_without_a_point_waits_until_it_grew_by_half():
-    """Tracks seen without parallax give no point; touched again with one more view without
-    parallax they are not triangulated again; once a view with parallax has joined, they are."""
-    rng = np.random.default_rng(5)
-    n = 25
-    points = rng.uniform([-1, -1, 4], [1, 1, 6], (n, 3))
+def views_along_x(xs, n, seed):
+    """A live model with one image at each x (looking down z), n random points seen by all,
+    keypoint j being point j in every image; and the matches of a pair (every point)."""
+    points = np.random.default_rng(seed).uniform([-1, -1, 4], [1, 1, 6], (n, 3))
     m = LiveModel()
-    for i, x in enumerate([0.0, 0.0005, 0.001, 0.0015, 0.8]):  # four views 0.5 mm apart, one 0.8 m away
+    for i, x in enumerate(xs):
         q, t = geometry.world_to_camera(np.array([x, 0.0, 0.0]), (1.0, 0.0, 0.0, 0.0))
         pc = points @ geometry.rotation_of(q).T + t
         uv = np.stack([PARAMS[0] * pc[:, 0] / pc[:, 2] + PARAMS[2], PARAMS[1] * pc[:, 1] / pc[:, 2] + PARAMS[3]], 1)
         m.add_image(i + 1, "%d.png" % i, 1, CAMERA, q, t, np.hstack([uv, np.zeros((n, 2))]))
-    same = np.stack([np.arange(n), np.arange(n)], 1)  # keypoint j is point j in every view
+    return m, np.stack([np.arange(n), np.arange(n)], 1)
+
+
+def test_a_track_without_a_point_waits_until_it_grew_by_half():
+    """Tracks seen without parallax give no point; touched again with one more view without
+    parallax they are not triangulated again; once a view with parallax has joined, they are."""
+    n = 25
+    m, same = views_along_x([0.0, 0.0005, 0.001, 0.0015, 0.8], n, seed=5)  # four views 0.5 mm apart, one 0.8 m away
     m.add_matches(1, 2, same)
     m.update()
     assert m.points == {} and m.observations_triangulated == 2 * n
@@ -207,16 +212,8 @@ def test_a_track_without_a_point_waits_until_it_grew_by_half():
 
 
 def test_the_final_update_tries_every_track_that_grew_since_it_gave_no_point():
-    rng = np.random.default_rng(6)
     n = 20
-    points = rng.uniform([-1, -1, 4], [1, 1, 6], (n, 3))
-    m = LiveModel()
-    for i, x in enumerate([0.0, 0.0005, 0.8]):
-        q, t = geometry.world_to_camera(np.array([x, 0.0, 0.0]), (1.0, 0.0, 0.0, 0.0))
-        pc = points @ geometry.rotation_of(q).T + t
-        uv = np.stack([PARAMS[0] * pc[:, 0] / pc[:, 2] + PARAMS[2], PARAMS[1] * pc[:, 1] / pc[:, 2] + PARAMS[3]], 1)
-        m.add_image(i + 1, "%d.png" % i, 1, CAMERA, q, t, np.hstack([uv, np.zeros((n, 2))]))
-    same = np.stack([np.arange(n), np.arange(n)], 1)
+    m, same = views_along_x([0.0, 0.0005, 0.8], n, seed=6)
     m.add_matches(1, 2, same)  # no parallax: no point
     m.update()
     m.add_matches(2, 3, same)  # 3 observations, 2 when it failed: waits in a live update ...

@@ -209,7 +209,8 @@ class LiveModel:
         for (root, img, kp), good, e in zip(rows, ok, errors):
             if good:
                 xyz, mean, obs = self.points[root]
-                self.points[root] = (xyz, (mean * len(obs) + float(e)) / (len(obs) + 1), {**obs, img: kp})
+                obs[img] = kp  # the point's own dict (made by the triangulation): no copy per observation
+                self.points[root] = (xyz, (mean * (len(obs) - 1) + float(e)) / len(obs), obs)
 
     def _triangulate_group(self, group):
         """Tracks of one length; returns those to try again one observation shorter."""
