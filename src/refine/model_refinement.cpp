@@ -228,7 +228,6 @@ struct Gauge {
   std::vector<Prior> priors;
 };
 
-/// One bundle adjustment of the poses the gauge lets move, and every point.
 using Clock = std::chrono::steady_clock;
 
 /// The end of the refinement's time budget (max_seconds), or none.
@@ -237,8 +236,17 @@ struct Deadline {
   Clock::time_point at;
   double left() const { return set ? std::chrono::duration<double>(at - Clock::now()).count() : 1e30; }
   bool passed() const { return set && Clock::now() >= at; }
+  /// Half of what is left from now (none stays none).
+  Deadline half() const {
+    Deadline d = *this;
+    if (set)
+      d.at = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                std::chrono::duration<double>(std::max(0.0, left()) / 2.0));
+    return d;
+  }
 };
 
+/// One bundle adjustment of the poses the gauge lets move, and every point.
 ceres::Solver::Summary adjust(State& s, const Gauge& gauge, const RefinementConfig& config, const Deadline& deadline) {
   const std::set<int>& moving = gauge.moving;
   ceres::Problem::Options problem_options;
@@ -575,13 +583,9 @@ PassResult pass(const State& input, const std::map<int, State::Pose>& reference,
     // Under a time budget a triangulation may take half of what is left; one that cannot is
     // given up, and the points stay as they were (the model's own, or the last triangulation's).
     const int later = config.retriangulations - stage;
-    Deadline half = deadline;
-    if (deadline.set)
-      half.at = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(
-                                   std::max(0.0, deadline.left()) / 2.0));
     if (retriangulate(s, *tracks, kept, config,
                       config.triangulation_max_error * std::pow(config.triangulation_growth, std::max(0, later)),
-                      half))
+                      deadline.half()))
       ++r.retriangulations;
     else
       r.out_of_time = stage > 0;  // the first one given up: the adjustment still runs on the model's points
