@@ -29,7 +29,7 @@ from ..colmap import model as colmap_model
 from ..colmap.database import DatabaseError
 from ..colmap.project import ColmapProject, ProjectError, Timeouts, write_json_atomically
 from ..keyframes import Keyframe
-from ..refinement.refiner import ModelRefinement, RefinementOptions
+from ..refinement.refiner import FINISH_MAX_SECONDS, ModelRefinement, RefinementOptions
 from ..features.sift import SiftExtractor
 from ..matching.backend import PoseGuidedBackend
 from ..matching.guided import GuidedOptions
@@ -86,9 +86,6 @@ path:=/colmap_bridge/refined_path (docs/live.md, "Refinement").
 # ~refined_path is published when a keyframe moved more than this [m, deg]: half the node's
 # ~correction_min_translation and ~correction_min_rotation_deg defaults.
 PATH_MIN_TRANSLATION, PATH_MIN_ROTATION_DEG = 0.001, 0.05
-# The refinement's time budget in a finish [s]: the kitchen's takes 1.5-3 s here (25,000
-# observations), a 3-minute walk's (330,000) did not end in 120 s (docs/live.md, "Measured").
-REFINE_MAX_SECONDS = 5.0
 
 
 def _param(name, default):
@@ -135,7 +132,7 @@ class Bridge:
                                                                           defaults.max_correction_depth_ratio)),
                                   max_correction_deg=float(_param("refine_max_correction_deg", defaults.max_correction_deg)),
                                   threads=int(_param("threads", -1)),
-                                  max_seconds=float(_param("refine_max_seconds", REFINE_MAX_SECONDS))),
+                                  max_seconds=float(_param("refine_max_seconds", FINISH_MAX_SECONDS))),
                 tool=_param("refine_tool", "") or None, log=self._log)
         self.work_state = LiveWork(self.project, continuity=bool(_param("continuity_pairs", True)),
                                    max_backlog=_param("max_backlog", 2000),

@@ -30,6 +30,12 @@ from ..colmap import model as colmap_model
 from ..colmap.process import Colmap, _death_signal_prefix
 
 
+# The refinement's time budget in a live finish [s] (colmap_bridge's ~refine_max_seconds): the
+# kitchen's takes 1.5-3 s here (25,000 observations), a 3-minute walk's (330,000) did not end in
+# 120 s (docs/live.md, "Measured").
+FINISH_MAX_SECONDS = 5.0
+
+
 class RefinementError(Exception):
     """The refinement could not run (tool missing, failed, timed out); the unrefined model stays."""
 
