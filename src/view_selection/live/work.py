@@ -139,8 +139,8 @@ class LiveWork:
         self.status.update(backlog_pairs=len(backlog), pairs_matched=len(matched))
         if max_backlog is not None and len(backlog) > max_backlog:
             self.deferred = max(self.deferred, len(backlog) - max_backlog)
-            self.log("warn", "%d pairs wait (~max_backlog %d): the rest are matched at the finish"
-                     % (len(backlog), max_backlog))
+            self.log("warn", "more pairs wait than ~max_backlog (%d): the rest are matched at the finish "
+                     "(/diagnostics: backlog pairs)" % max_backlog)  # one text: throttled as one
             backlog = backlog[:max_backlog]
         due = [p for p in backlog if self.pairs.due(p)]
         if not due:
