@@ -160,7 +160,7 @@ class ColmapProject:
         arrived or on a restart), each with the PINHOLE camera of its intrinsics (in COLMAP's
         pixel convention, Keyframe.colmap_camera_params)."""
         cat = self.catalogue()
-        new = [k for k in sorted(keyframes, key=lambda k: k.id) if k.name not in cat.ids]
+        new = sorted((k for k in keyframes if k.name not in cat.ids), key=lambda k: k.id)
         if not new:
             return
         with self.db() as d:

@@ -43,6 +43,7 @@ class LiveWork:
         self.model = LiveModel() if triangulation == "live" else None
         self.fed_poses = {}        # name -> the pose the model has for it
         self.unfed_pairs = []      # verified pairs (image ids) the live model does not have yet
+        self.fed_keyframes = {}    # name -> the Keyframe object last fed with its keypoints
         self.backlog_max = 0
         self.backlog_before = 0
         self.status = {}  # the last batch's figures: keyframes, images extracted and waiting, pairs
@@ -184,7 +185,10 @@ class LiveWork:
         ids, cams, cameras, with_features = cat.ids, cat.image_cameras, cat.cameras, cat.with_features
         self.unfed_pairs.extend(cat.take_new_verified())
         with self.project.db() as d:
+            fed = self.fed_keyframes
             for k in keyframes:
+                if fed.get(k.name) is k:
+                    continue  # the same keyframe object as at its last update: nothing changed
                 iid = ids.get(k.name)
                 if iid is None:
                     continue
@@ -192,12 +196,16 @@ class LiveWork:
                 known = m.images.get(iid)
                 if known is not None and self.fed_poses.get(k.name) == pose and (
                         len(known.keypoints) or k.name not in with_features):
+                    if len(known.keypoints) or k.name in with_features:
+                        fed[k.name] = k
                     continue
                 q, t = geometry.world_to_camera(k.position, k.orientation)
                 mid, w, h, params = cameras[cams[iid]]
                 keypoints = d.keypoints(iid) if (known is None or not len(known.keypoints)) else known.keypoints
                 m.add_image(iid, k.name, cams[iid], (CAMERA_MODELS[mid][0], w, h, params), q, t, keypoints)
                 self.fed_poses[k.name] = pose
+                if len(m.images[iid].keypoints) or k.name in with_features:
+                    fed[k.name] = k  # complete: looked at again only when a new object comes (a new pose)
             # The pairs that verified since the last update; one whose image the model does not
             # have yet (its keyframe not announced, or no features) waits for it.
             waiting = []
