@@ -78,7 +78,8 @@ PARAMETERS = """Parameters (private, ~name):
                      long session's finish stays bounded (5; 0: no limit)
   refine_tool        the refine_model executable ("": beside this node)
   publish_period     [s] ~points and ~cameras are sent at most once per this (0.5; 0: not published)
-  camera_scale       frustum depth of ~cameras in RViz [m, scene units] (0.1, as the node's marker_scale)
+  camera_scale       frustum depth of ~cameras in RViz [m, scene units] (0.15: the node's ~markers'
+                     frusta are 0.1 deep, so that both show where they coincide)
 Publishes ~refined_path (nav_msgs/Path, latched): the refined keyframe poses (optical frame, in the
 node's world frame, at the keyframes' stamps) after each refined model that moved a keyframe by more
 than 1 mm or 0.05 deg; a view_selection node takes them with ~use_path_corrections and
@@ -150,7 +151,7 @@ class Bridge:
         self.model_topics = None  # ~points, ~cameras (live/model_topics.py)
         if float(_param("publish_period", 0.5)) > 0:
             self.model_topics = ModelTopics(self.project.images, lambda: self.world_frame,
-                                            float(_param("publish_period", 0.5)), float(_param("camera_scale", 0.1)),
+                                            float(_param("publish_period", 0.5)), float(_param("camera_scale", 0.15)),
                                             log=self._log)
 
         self.lock = threading.Lock()        # the stream's state

@@ -2,8 +2,8 @@
 
   ~points   sensor_msgs/PointCloud2 (x, y, z float32, rgb), latched: the model's points, coloured
             from the keyframe images, in the node's world frame;
-  ~cameras  visualization_msgs/MarkerArray, latched: one frustum (LINE_LIST) a keyframe of the
-            model at its pose (marker id: the COLMAP image id, ns "cameras").
+  ~cameras  visualization_msgs/MarkerArray, latched: one frustum (LINE_LIST, green) a keyframe of
+            the model at its pose (marker id: the COLMAP image id, ns "cameras").
 
 What is shown comes from live/visualisation.py: the live model as it grows, the finished
 (refined) model after a finish. Updates are taken in the bridge's worker (under its `work` lock,
@@ -136,6 +136,5 @@ def camera_markers(frusta, frame, stamp, depth):
         m.scale.x = 0.08 * depth
         m.color.r, m.color.g, m.color.b, m.color.a = 0.2, 0.9, 0.4, 1.0
         m.points = [Point(x=x, y=y, z=z) for x, y, z in f.lines]
-        m.text = f.name
         out.markers.append(m)
     return out

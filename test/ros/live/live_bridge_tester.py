@@ -432,7 +432,7 @@ class LiveBridge(unittest.TestCase):
         self.assertEqual(len(msg.markers) - 1, len(frusta))
         self.assertEqual(sorted(self.sparse_b.images), sorted(frusta))
         node = {k.image_name: k for k in self.selection.keyframes}
-        self.assertEqual(set(node), {m.text for m in frusta.values()})
+        self.assertEqual(set(node), {self.sparse_b.images[i].name for i in frusta})
         for iid, im in self.sparse_b.images.items():
             m = frusta[iid]
             self.assertEqual(self.selection.header.frame_id, m.header.frame_id)
