@@ -43,9 +43,8 @@ class ModelTopics:
         if model is None:
             return
         with self.lock:
-            if self.view.live(model):
-                self.lock.notify_all()
-            elif self.sent != (self.view.cloud_version, self.view.cameras_version):
+            self.view.live(model)
+            if self.sent != (self.view.cloud_version, self.view.cameras_version):
                 self.lock.notify_all()
 
     def finished(self, live_model, report):

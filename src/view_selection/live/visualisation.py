@@ -191,7 +191,7 @@ class ModelView:
         self.frustum_depth = float(frustum_depth)
         self.live_cloud = CloudBuffer()
         self.finished_cloud = None   # a CloudBuffer of the finished model, while it is shown
-        self.live_poses = {}         # image id -> (qvec, tvec) last shown of the live model
+        self.live_poses = {}         # image id -> its rotation array when last shown (live model)
         self.live_frusta = []
         self.finished_frusta = None
         self.cloud_version = 0       # bumped on every change of what is shown
@@ -242,13 +242,14 @@ class ModelView:
         return out
 
     def _live_cameras(self, model):
-        """The live model's frusta, made again when an image came or a pose moved; True then."""
-        poses = {iid: (im.r, im.t) for iid, im in model.images.items()}
-        if poses.keys() == self.live_poses.keys() and all(
-                np.array_equal(r, self.live_poses[iid][0]) and np.array_equal(t, self.live_poses[iid][1])
-                for iid, (r, t) in poses.items()):
+        """The live model's frusta, made again when an image came or a pose moved; True then. A
+        pose that moved has a new rotation array (_Image.set_pose makes it), so the check is one
+        identity test an image."""
+        images = model.images
+        if len(images) == len(self.live_poses) and all(
+                self.live_poses.get(iid) is im.r for iid, im in images.items()):
             return False
-        self.live_poses = {iid: (r.copy(), t.copy()) for iid, (r, t) in poses.items()}
+        self.live_poses = {iid: im.r for iid, im in images.items()}
         self.live_frusta = [frustum_of(iid, im.name, geometry.quaternion_of(im.r), im.t, model.cameras[im.camera_id],
                                        self.frustum_depth) for iid, im in sorted(model.images.items())]
         return True
