@@ -291,8 +291,7 @@ class Bridge:
                     with self.work_state.clock.measure("triangulation", 1):
                         self.work_state.feed_model(keyframes)
                 if self.model_topics:
-                    with self.work_state.clock.measure("model_topics", 1):
-                        self.model_topics.live(self.work_state.model)
+                    self.model_topics.live(self.work_state.model)
                 return more
             except (ProjectError, DatabaseError, sqlite3.Error, OSError, ValueError) as e:
                 self.work_state.error("project %s: %s" % (self.project.root, e))
@@ -355,7 +354,8 @@ class Bridge:
                 "seconds_from_last_keyframe": (done - last_keyframe) if last_keyframe else None,
                 "stream_messages": self.stream.messages, "sequence": self.stream.sequence,
                 "backlog_max": self.work_state.backlog_max, "deferred_to_finish": self.work_state.deferred,
-                "errors": self.work_state.errors[-5:], "finished_at": time.time(), "matcher": self.matcher})
+                "errors": self.work_state.errors[-5:], "finished_at": time.time(), "matcher": self.matcher,
+                "model_topics": self.model_topics.figures() if self.model_topics else None})
             stages = self.work_state.clock.summary()
             if self.backend:
                 report["matching"] = self.backend.path_counts()
