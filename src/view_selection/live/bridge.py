@@ -33,6 +33,7 @@ from ..refinement.refiner import FINISH_MAX_SECONDS, ModelRefinement, Refinement
 from ..features.sift import SiftExtractor
 from ..matching.backend import PoseGuidedBackend
 from ..matching.guided import GuidedOptions
+from .model_topics import ModelTopics
 from .stream import PairStream
 from .work import LiveWork
 
@@ -78,10 +79,16 @@ PARAMETERS = """Parameters (private, ~name):
                      the adjustment reached by then (report.json: status out_of_time), so that a
                      long session's finish stays bounded (5; 0: no limit)
   refine_tool        the refine_model executable ("": beside this node)
+  publish_period     [s] ~points and ~cameras are sent at most once per this (0.5; 0: not published)
+  camera_scale       frustum depth of ~cameras in RViz [m, scene units] (0.15: the node's ~markers'
+                     frusta are 0.1 deep, so that both show where they coincide)
 Publishes ~refined_path (nav_msgs/Path, latched): the refined keyframe poses (optical frame, in the
 node's world frame, at the keyframes' stamps) after each refined model that moved a keyframe by more
 than 1 mm or 0.05 deg; a view_selection node takes them with ~use_path_corrections and
 path:=/colmap_bridge/refined_path (docs/live.md, "Refinement").
+Publishes ~points (sensor_msgs/PointCloud2: x, y, z, rgb, latched) and ~cameras
+(visualization_msgs/MarkerArray, latched), in the node's world frame: the live model as it grows,
+the finished (refined) model after a finish (docs/live.md, "In RViz").
 """
 
 
@@ -143,6 +150,11 @@ class Bridge:
                                    triangulation=_param("triangulation", "live"), refinement=refinement)
         self.world_frame = ""  # the node's, from its messages
         self.refined_path = rospy.Publisher("~refined_path", Path, queue_size=1, latch=True)
+        self.model_topics = None  # ~points, ~cameras (live/model_topics.py)
+        if float(_param("publish_period", 0.5)) > 0:
+            self.model_topics = ModelTopics(self.project.images, lambda: self.world_frame,
+                                            float(_param("publish_period", 0.5)), float(_param("camera_scale", 0.15)),
+                                            log=self._log)
 
         self.lock = threading.Lock()        # the stream's state
         self.wake = threading.Condition(self.lock)
@@ -280,6 +292,8 @@ class Bridge:
                 if self.work_state.model is not None:
                     with self.work_state.clock.measure("triangulation", 1):
                         self.work_state.feed_model(keyframes)
+                if self.model_topics:
+                    self.model_topics.live(self.work_state.model)
                 return more
             except (ProjectError, DatabaseError, sqlite3.Error, OSError, ValueError) as e:
                 self.work_state.error("project %s: %s" % (self.project.root, e))
@@ -331,6 +345,8 @@ class Bridge:
                     report = self.work_state.build_model(keyframes, pairs, self.model)
                 finally:
                     self.project.deadline = None
+                if self.model_topics and not shutting_down:
+                    self.model_topics.finished(self.work_state.model, report)
             done = time.monotonic()
             report["finish_phases"].update(sync=round(synced - start, 3), selection=round(asked - synced, 3),
                                            cpu=round(time.process_time() - cpu_start, 3))
@@ -340,7 +356,8 @@ class Bridge:
                 "seconds_from_last_keyframe": (done - last_keyframe) if last_keyframe else None,
                 "stream_messages": self.stream.messages, "sequence": self.stream.sequence,
                 "backlog_max": self.work_state.backlog_max, "deferred_to_finish": self.work_state.deferred,
-                "errors": self.work_state.errors[-5:], "finished_at": time.time(), "matcher": self.matcher})
+                "errors": self.work_state.errors[-5:], "finished_at": time.time(), "matcher": self.matcher,
+                "model_topics": self.model_topics.figures() if self.model_topics else None})
             stages = self.work_state.clock.summary()
             if self.backend:
                 report["matching"] = self.backend.path_counts()

@@ -69,6 +69,20 @@ class LiveModel:
         self.by_image = {}    # image id -> set of roots with an observation in it
         self.conflicts = 0    # matches left out: they would give a track two keypoints of one image
         self.matched_pairs = set()
+        self.changed = None   # with watch_points(): roots whose point was made, moved or removed since taken
+
+    def watch_points(self):
+        """From now on, record the roots whose point changes, for take_changed() (what the bridge
+        publishes is updated with them: live/visualisation.py). Off by default: nothing takes them
+        offline."""
+        if self.changed is None:
+            self.changed = set(self.points)
+
+    def take_changed(self):
+        """The roots whose point was made, moved or removed since the last call (a root no longer
+        in `points` lost its point)."""
+        changed, self.changed = self.changed, set()
+        return changed or set()
 
     # -- images ------------------------------------------------------------------------------
     def add_image(self, iid, name, camera_id, camera, qvec, tvec, keypoints):
@@ -127,6 +141,8 @@ class LiveModel:
             self.members.pop(rb, None)
             if self.points.pop(rb, None) is not None or rb in self.full:
                 self.full.add(ra)  # two points (or one to redo) become one: triangulated from scratch
+                if self.changed is not None:
+                    self.changed.add(rb)
             self.full.discard(rb)
             self.full_size.pop(rb, None)
             self.failed_size.pop(rb, None)
@@ -167,7 +183,8 @@ class LiveModel:
             if len(obs) >= 2:
                 tracks.append((root, obs))
             else:
-                self.points.pop(root, None)
+                if self.points.pop(root, None) is not None and self.changed is not None:
+                    self.changed.add(root)
                 self.full_size.pop(root, None)
         if extend:
             self._extend(extend)
@@ -220,6 +237,8 @@ class LiveModel:
             else:
                 self.points.pop(root, None)
                 self.failed_size[root] = len(self.members.get(root, obs))
+        if self.changed is not None:
+            self.changed.update(root for root, _ in tracks)  # made, moved or removed
 
     # -- the COLMAP model --------------------------------------------------------------------
     def to_model(self, image_ids=None):
