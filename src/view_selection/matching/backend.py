@@ -149,8 +149,9 @@ class PoseGuidedBackend:
                         fallback.append((a, b))
                         continue
                     d.write_matches(ids[a], ids[b], result.matches)
-                    d.write_two_view_geometry(ids[a], ids[b], result.inliers, db.CALIBRATED, F=result.F, E=result.E,
-                                              qvec=_quaternion(result.R), tvec=result.t)
+                    g = result.geometry  # estimated from the matches, in the database's pixel convention
+                    d.write_two_view_geometry(ids[a], ids[b], g.inliers, db.CALIBRATED, F=g.F, E=g.E,
+                                              qvec=_quaternion(g.R), tvec=g.t)
         done = [p for p in pairs if p not in fallback and p not in self.errors]
         self.project.ledger("matched", ["%s %s" % p for p in done])
         if fallback:
