@@ -433,9 +433,10 @@ Gauge gaugeOf(const State& s, const std::map<int, State::Pose>& reference, const
 /// observations left out), replacing its points, by the package's one triangulation
 /// (triangulation.h, the live model's too) with `max_error` and min_triangulation_angle_deg.
 /// A point takes the colour of an old point that shared an observation.
-/// Returns false, with `s` untouched, when `deadline` passed before every track was done.
+/// Returns false, with `s` untouched, when `deadline` passed before every track was done
+/// (looked at before the first track and every 1024th after it).
 bool retriangulate(State& s, const Tracks& tracks, const std::set<int>& excluded, const RefinementConfig& config,
-                   double max_error, const Deadline& deadline = Deadline{}) {
+                   double max_error, const Deadline& deadline) {
   std::map<std::pair<int, int>, int64_t> old_point;  // (image, 2D index) -> old point id
   for (const auto& [id, track] : s.tracks)
     for (const auto& e : track) old_point[{e.image_id, e.point2D_idx}] = id;
@@ -448,7 +449,7 @@ bool retriangulate(State& s, const Tracks& tracks, const std::set<int>& excluded
   int64_t next = 1;
   size_t done = 0;
   for (const auto& track : tracks.tracks) {
-    if (++done % 1024 == 0 && deadline.passed()) return false;
+    if (done++ % 1024 == 0 && deadline.passed()) return false;
     std::vector<io::ColmapTrackElement> obs;
     for (const Observation& o : track) {
       const auto im = s.images.find(o.image_id);
@@ -726,7 +727,14 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
     // Nothing may move: the matches are triangulated at the given poses, nothing adjusted (what
     // the model's points would be at these poses with these matches).
     State s = initial;
-    retriangulate(s, tracks, {}, config, config.triangulation_max_error);
+    if (!retriangulate(s, tracks, {}, config, config.triangulation_max_error, deadline)) {
+      std::ostringstream msg;
+      msg << "no image may move, and the time budget of " << config.max_seconds
+          << " s was spent before the matches were triangulated: the model as it came";
+      rep.status = "out_of_time";
+      rep.message = msg.str();
+      return finish(input, initial);
+    }
     filter(s, config, {});
     rep.status = "triangulated";
     rep.retriangulations = 1;
@@ -802,11 +810,19 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
   // Kept images sit at their input poses; their observations that fit the refined points stay.
   std::set<int> none;
   for (const auto& [id, why] : kept) s.poses[id] = reference.at(id);
-  if (!kept.empty() && with_tracks) {
-    // Kept images at their input poses take part again: the tracks triangulated once more.
-    retriangulate(s, tracks, {}, config, config.triangulation_max_error);
+  // Kept images at their input poses take part again: the tracks triangulated once more, within
+  // what is left of the budget. Out of time, the points stay the pass's; when those are the
+  // input's own (no triangulation ran), the kept images' input observations join them below.
+  const bool kept_triangulated = !kept.empty() && with_tracks &&
+                                 retriangulate(s, tracks, {}, config, config.triangulation_max_error, deadline);
+  if (!kept.empty() && with_tracks && !kept_triangulated) result.out_of_time = true;
+  if (kept_triangulated) {
     ++result.retriangulations;
     const auto [obs, pts] = filter(s, config, none);
+    result.observations_filtered += obs;
+    result.points_filtered += pts;
+  } else if (!kept.empty() && with_tracks && result.retriangulations > 0) {
+    const auto [obs, pts] = filter(s, config, none);  // points of the matches: the kept images see none
     result.observations_filtered += obs;
     result.points_filtered += pts;
   } else if (!kept.empty()) {

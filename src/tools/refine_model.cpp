@@ -72,8 +72,9 @@ Cameras must be PINHOLE or SIMPLE_PINHOLE.
   --prior-loss-scale S            Cauchy loss on the priors at S sigmas (default 3)
   --no-align         do not align the result to the input poses
   --max-seconds S    the time the refinement may take (default 0: no limit): once spent, the solve
-                     under way stops at its best state, no further round, triangulation or pass
-                     begins, and the result is what was reached (status out_of_time)
+                     under way stops at its best state, a triangulation under way is given up,
+                     no further round, triangulation or pass begins, and the result is what was
+                     reached (status out_of_time)
   --threads N        Ceres threads (default 0: one per core)
   --dense-up-to N    Ceres' dense Schur solver up to N images (default 50), ...
   --sparse-up-to N   ... the sparse one up to N (default 1000), the iterative one above

@@ -81,9 +81,11 @@ struct RefinementConfig {
   /// With every image movable: align the result to the input poses (Sim(3)); see above.
   bool align_to_input = true;
   /// [s] wall time the refinement may take, 0: no limit. Once it is spent, the solve under way
-  /// stops at its best state so far, no further round, triangulation or pass begins, and the
-  /// result is what the adjustments reached (status out_of_time): a live finish's refinement
-  /// stays within a bound however long the session was (issue 28).
+  /// stops at its best state so far, a triangulation under way is given up (the points stay
+  /// what they were; it looks at the clock every 1024 tracks), no further round, triangulation
+  /// or pass begins, and the result is what the adjustments reached (status out_of_time; with
+  /// no image movable, the model as it came): a live finish's refinement stays within a bound
+  /// however long the session was (issue 28). Reading and writing the model are not bounded.
   double max_seconds = 0.0;
   int threads = 0;  ///< Ceres threads; 0: one per core
   /// Ceres' dense Schur solver up to this many images, the sparse one up to sparse_up_to, the

@@ -150,9 +150,10 @@ class PoseGuidedBackend:
                         fallback.append((a, b))
                         continue
                     d.write_matches(ids[a], ids[b], result.matches)
-                    d.write_two_view_geometry(ids[a], ids[b], result.inliers, db.CALIBRATED, F=result.F, E=result.E,
-                                              qvec=_quaternion(result.R), tvec=result.t)
-                    written.append(((a, b), len(result.inliers)))
+                    g = result.geometry  # estimated from the matches, in the database's pixel convention
+                    d.write_two_view_geometry(ids[a], ids[b], g.inliers, db.CALIBRATED, F=g.F, E=g.E,
+                                              qvec=_quaternion(g.R), tvec=g.t)
+                    written.append(((a, b), len(g.inliers)))
             for pair, rows in written:  # after the commit: the catalogue holds what the database does
                 self.project.catalogue().geometry_written(pair, rows)
         done = [p for p in pairs if p not in fallback and p not in self.errors]
