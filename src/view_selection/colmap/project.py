@@ -76,7 +76,6 @@ class ColmapProject:
         self.threads = str(int(threads))
         self.timeouts = timeouts or Timeouts()
         self.init_pair = None  # (name, name): the mapper starts from these two images
-        self.cancelled = False
         self.deadline = None  # time.monotonic() by which every COLMAP call must be done, or None
         self.seconds = self.colmap.seconds  # per stage: extraction, matching, model
         for stage in ("extraction", "matching", "model"):
@@ -119,10 +118,19 @@ class ColmapProject:
         except ColmapError as e:
             raise ProjectError(str(e), timed_out=e.timed_out)
 
+    @property
+    def cancelled(self):
+        """Set by cancel(), kept until the caller clears it: no COLMAP command runs meanwhile
+        (the flag is the Colmap's, so a cancel between a check and a start is not lost)."""
+        return self.colmap.cancelled
+
+    @cancelled.setter
+    def cancelled(self, value):
+        self.colmap.cancelled = bool(value)
+
     def cancel(self):
         """Kills the COLMAP command running now (from another thread), and refuses to start
         another until `cancelled` is cleared; the one killed raises ProjectError."""
-        self.cancelled = True
         self.colmap.cancel()
 
     def has_image(self, name):
