@@ -18,6 +18,7 @@ import time
 from ..keyframes import pair_of
 from .. import geometry
 from . import database as db
+from . import durable
 from . import model as colmap_model
 from .process import Colmap, ColmapError
 
@@ -47,23 +48,12 @@ class Timeouts:
 
 
 def write_json_atomically(path, data):
-    tmp = path + ".tmp"
-    with open(tmp, "w") as f:
-        json.dump(data, f, indent=2, sort_keys=True, default=str)
-        f.write("\n")
-    os.replace(tmp, path)
+    """`data` as JSON in `path`: written beside it, fsynced, renamed over it, the folder fsynced
+    (durable.write_atomically: the old report or the new, also after a power loss)."""
+    durable.write_atomically(path, json.dumps(data, indent=2, sort_keys=True, default=str) + "\n")
 
 
-def replace_folder(made, output):
-    """Moves `made` to `output`, replacing what was there (the old one stays until then)."""
-    old = None
-    if os.path.exists(output):
-        old = output + ".old.%d" % os.getpid()
-        os.rename(output, old)
-    os.makedirs(os.path.dirname(output), exist_ok=True)
-    shutil.move(made, output)
-    if old:
-        shutil.rmtree(old, ignore_errors=True)
+replace_folder = durable.replace_folder  # sparse/0 swapped in one step, never absent
 
 
 class ColmapProject:
@@ -141,9 +131,9 @@ class ColmapProject:
         database has it, in order (what was done when; each appears once)."""
         if not items:
             return
-        with open(os.path.join(self.root, "ledger.txt"), "a") as f:
-            stamp = "%.3f" % time.time()
-            f.write("".join("%s %s %s\n" % (stamp, what, item) for item in items))
+        stamp = "%.3f" % time.time()
+        durable.append_durably(os.path.join(self.root, "ledger.txt"),
+                               "".join("%s %s %s\n" % (stamp, what, item) for item in items))
 
     def image_ids(self):
         with self.db() as d:
