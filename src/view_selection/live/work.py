@@ -47,35 +47,82 @@ class LiveWork:
         del self.errors[:-20]
 
     # -- running COLMAP on a batch, with the culprit found --------------------------------------
-    def _attempt(self, items, run, done, attempts, kind, ledger_kind, budget=None):
+    # A run of several items that timed out names no culprit and charges nobody: its items are
+    # suspected and each is tried alone. Two runs alone in a row that time out say COLMAP hangs
+    # on everything now: the rest stay suspected, uncharged, for the next batch (so one call
+    # costs at most the batch's timeout and two single-item timeouts).
+    ALONE_TIMEOUTS_IN_A_ROW = 2
+
+    def _attempt(self, items, run, done, attempts, kind, ledger_kind):
         """Runs `run(items)`; the items `done()` does not list afterwards failed; returns them.
 
-        When the run itself failed (COLMAP exited non-zero) with several items, each half is
-        tried on its own, so one bad item costs its neighbours nothing (about 2 log2 n runs). The
-        halving has a budget of runs (2 log2 n + 2): when COLMAP fails on everything, the rest are
-        recorded as failed without running. A run that timed out is not halved: a hung COLMAP
-        would cost a timeout per half."""
-        if budget is None:
-            budget = [2 * max(1, len(items) - 1).bit_length() + 2]
-        error, timed_out = None, False
+        Items suspected before (a failure, or a run that hung) are each tried alone; the others
+        in one run. When that run fails (COLMAP exited non-zero) with several items, each half
+        is tried on its own, so one bad item costs its neighbours nothing (about 2 log2 n runs;
+        the halving has a budget of 2 log2 n + 2 runs: when COLMAP fails on everything, the rest
+        are charged without running). When a run of several times out, it is not halved (a
+        hung COLMAP would cost a timeout per half): its items are suspected, not charged, and
+        each is tried alone, so an item that hangs COLMAP every time is the only one charged
+        (issue 35: it took up to 23 neighbours with it)."""
+        alone = [i for i in items if attempts.suspect(i)]
+        batch = [i for i in items if not attempts.suspect(i)]
+        failed = []
+        if batch:
+            budget = [2 * max(1, len(batch) - 1).bit_length() + 2]
+            failed += self._halving(batch, run, done, attempts, kind, ledger_kind, budget, alone)
+        in_a_row = 0
+        for n, i in enumerate(alone):
+            if self.project.cancelled or in_a_row >= self.ALONE_TIMEOUTS_IN_A_ROW:
+                failed += alone[n:]  # still suspected, not charged: tried alone next time
+                break
+            f, error, timed_out = self._run([i], run, done, attempts)
+            in_a_row = in_a_row + 1 if timed_out else 0
+            self._charge(f, error, attempts, kind, ledger_kind)
+            failed += f
+        return failed
+
+    def _halving(self, items, run, done, attempts, kind, ledger_kind, budget, hung):
+        """_attempt's batch: run, halved where it fails; the items of a run of several that timed
+        out are suspected and go to `hung` (tried alone by the caller); returns the items
+        charged."""
         if budget[0] <= 0:
-            error = "not tried: COLMAP failed on the whole batch"
+            failed, error, timed_out = list(items), "not tried: COLMAP failed on the whole batch", False
         else:
             budget[0] -= 1
-            try:
-                run(items)
-            except ProjectError as e:
-                error, timed_out = str(e), getattr(e, "timed_out", False)
-                self.error(error)
+            failed, error, timed_out = self._run(items, run, done, attempts)
+        if timed_out and len(failed) > 1 and not self.project.cancelled:
+            for i in failed:
+                attempts.suspected(i)
+            hung += failed
+            return []
+        if error is not None and len(failed) > 1 and budget[0] > 0 and not self.project.cancelled:
+            half = len(failed) // 2
+            return (self._halving(failed[:half], run, done, attempts, kind, ledger_kind, budget, hung) +
+                    self._halving(failed[half:], run, done, attempts, kind, ledger_kind, budget, hung))
+        self._charge(failed, error, attempts, kind, ledger_kind)
+        return failed
+
+    def _run(self, items, run, done, attempts):
+        """One run of `run(items)`: (the items done() does not list afterwards, the error or None,
+        whether it timed out). What is done is forgiven."""
+        error, timed_out = None, False
+        try:
+            run(items)
+        except ProjectError as e:
+            error, timed_out = str(e), getattr(e, "timed_out", False)
+            self.error(error)
         now = done()
         for i in items:
             if i in now:
                 attempts.succeeded(i)
-        failed = [i for i in items if i not in now]
-        if error is not None and len(failed) > 1 and not timed_out and budget[0] > 0 and not self.project.cancelled:
-            half = len(failed) // 2
-            return (self._attempt(failed[:half], run, done, attempts, kind, ledger_kind, budget) +
-                    self._attempt(failed[half:], run, done, attempts, kind, ledger_kind, budget))
+        return [i for i in items if i not in now], error, timed_out
+
+    def _charge(self, failed, error, attempts, kind, ledger_kind):
+        """A failure for each item (its own reason where the backend knows it); an item that
+        reaches ~max_attempts is given up, ledgered and logged. A run the shutdown cancelled
+        charges nobody."""
+        if error is not None and self.project.cancelled:
+            return
         default = error or ("no features were extracted (an image that cannot be read?)" if kind == "image"
                             else "no two-view geometry was written for it")
         errors = getattr(self.backend, "errors", None) or {}
@@ -85,7 +132,6 @@ class LiveWork:
                 label = i if isinstance(i, str) else "%s %s" % i
                 self.project.ledger(ledger_kind, [label])
                 self.error("%s %s skipped after %d attempts: %s" % (kind, label, attempts.failures[i], reason))
-        return failed
 
     # -- features ----------------------------------------------------------------------------
     def extract(self, keyframes):
