@@ -386,45 +386,60 @@ class Bridge:
                 self.finishing = False
 
     def diagnostics_loop(self):
+        """Once a second until shutdown. Whatever one message raises is logged (throttled) and
+        the next one is tried: the thread must outlive any bug in its figures."""
         while not self.stopping and not rospy.is_shutdown():
             try:
                 self.publish_diagnostics()
             except rospy.ROSException:
                 return  # shutting down
+            except Exception as e:  # noqa: BLE001: anything, so that the thread carries on
+                rospy.logerr_throttle(10.0, "colmap_bridge: diagnostics: %s: %s" % (type(e).__name__, e))
             time.sleep(1.0)
 
     def publish_diagnostics(self, _event=None):
-        """/diagnostics once a second: what the project holds, the backlog, the CPU per stage,
-        what was skipped (WARN) and the last error within a minute (ERROR)."""
+        self.diagnostics.publish(DiagnosticArray(header=Header(stamp=rospy.Time.now()),
+                                                 status=[self.diagnostics_status()]))
+
+    def diagnostics_status(self):
+        """/diagnostics: what the project holds, the backlog, the CPU per stage, what was skipped
+        (WARN) and the last error within a minute (ERROR). The worker changes its figures
+        meanwhile: each is copied at once (dict(), list(): one step under the GIL) before it is
+        read. Its cost does not grow with the session (dev/benchmark_diagnostics: running
+        totals, nothing per pair or per keyframe)."""
         w = self.work_state
         with self.lock:
             announced, keyframes = len(self.stream.announced), len(self.stream.keyframes)
             sequence = self.stream.sequence
         status = DiagnosticStatus(name="colmap_bridge: %s" % self.project.root, hardware_id=self.node or "")
-        skipped = w.skipped()
-        recent = [e for e in w.errors if time.time() - e["at"] < 60.0]
+        images_skipped, pairs_skipped = w.images.given_up_count(), w.pairs.given_up_count()
+        now = time.time()
+        recent = [e for e in list(w.errors) if now - e["at"] < 60.0]
+        figures = dict(w.status)
         if recent:
             status.level, status.message = DiagnosticStatus.ERROR, recent[-1]["error"][:200]
-        elif skipped["images"] or skipped["pairs"]:
+        elif images_skipped or pairs_skipped:
             status.level, status.message = DiagnosticStatus.WARN, "%d images, %d pairs skipped" % (
-                len(skipped["images"]), len(skipped["pairs"]))
+                images_skipped, pairs_skipped)
         else:
-            status.level, status.message = DiagnosticStatus.OK, "backlog %d pairs" % w.status.get("backlog_pairs", 0)
+            status.level, status.message = DiagnosticStatus.OK, "backlog %d pairs" % figures.get("backlog_pairs", 0)
         values = {"keyframes": keyframes, "pairs announced": announced, "stream sequence": sequence,
                   "matcher": self.matcher}
-        values.update({k.replace("_", " "): v for k, v in w.status.items()})
+        values.update({k.replace("_", " "): v for k, v in figures.items()})
         stages = w.clock.summary()
         if self.backend:
             stages.update(self.backend.clock.summary())
-            values.update({"pairs guided": self.backend.path_counts()["guided"],
-                           "pairs fallback": self.backend.path_counts()["fallback"]})
+            totals = self.backend.path_totals()
+            values.update({"pairs guided": totals["guided"], "pairs fallback": totals["fallback"]})
         for stage, figures in stages.items():
             values["%s cpu [s]" % stage] = figures["cpu_seconds"]
-        if self.last_report:
+        report = self.last_report
+        if report:
             values["last model"] = "%s points, %.1f s after the last keyframe" % (
-                self.last_report.get("points"), self.last_report.get("seconds_from_last_keyframe") or 0.0)
+                report.get("points"), report.get("seconds_from_last_keyframe") or 0.0)
         status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
-        self.diagnostics.publish(DiagnosticArray(header=Header(stamp=rospy.Time.now()), status=[status]))
+        return status
+
     def publish_refined_path(self, keyframes, model_path):
         """~refined_path: every keyframe of the model at its refined pose (camera-to-world, the
         optical frame), stamped with its image's stamp, in the node's world frame: the shape of a

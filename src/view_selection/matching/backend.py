@@ -65,6 +65,7 @@ class PoseGuidedBackend:
         self.errors = {}              # item -> why it failed in the last run
         self.warnings = []            # what the last run did that a user should know
         self.paths = {}               # pair -> PairResult.summary()
+        self._path_totals = collections.Counter()  # path -> pairs: the diagnostics' figures, kept as they change
         self.clock = StageClock()
 
     # -- what the project has ----------------------------------------------------------------
@@ -144,7 +145,7 @@ class PoseGuidedBackend:
                         self.errors[(a, b)] = "no pose for %s" % (a if ka is None else b)
                         continue
                     result = guided.match_pair(self.features(a, d), self.features(b, d), ka, kb, self.options)
-                    self.paths[(a, b)] = result.summary()
+                    self._count_path((a, b), result.summary())
                     if result.path == guided.FALLBACK:
                         fallback.append((a, b))
                         continue
@@ -157,6 +158,19 @@ class PoseGuidedBackend:
             with self.clock.measure("fallback_matching", len(fallback)):
                 self.project.match(fallback)  # COLMAP's own; it writes the ledger
         return len(pairs)
+
+    def _count_path(self, pair, summary):
+        old = self.paths.get(pair)
+        if old is not None:
+            self._path_totals[old["path"]] -= 1
+        self.paths[pair] = summary
+        self._path_totals[summary["path"]] += 1
+
+    def path_totals(self):
+        """{'guided': n, 'fallback': n} of the pairs matched so far, without looking at each pair
+        (the diagnostics ask once a second; path_counts() formats every pair)."""
+        totals = dict(self._path_totals)
+        return {"guided": totals.get(guided.GUIDED, 0), "fallback": totals.get(guided.FALLBACK, 0)}
 
     def path_counts(self):
         """Which path the pairs matched so far took: {'guided': n, 'fallback': n}, the fallbacks'
