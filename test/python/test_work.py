@@ -27,10 +27,10 @@ class FailingProject:
     def has_image(self, name):
         return True
 
-    def extracted(self):
+    def extracted(self, refresh=()):
         return set(self.features)
 
-    def matched(self):
+    def matched(self, refresh=()):
         return set(self.geometries)
 
     def extract(self, keyframes):
@@ -201,3 +201,37 @@ def test_a_cancelled_run_charges_nobody():
     project.match = cancelled
     work.match(kfs, chain(kfs))
     assert work.pairs.failures == {} and work.skipped(all_failed=True)["pairs"] == []
+
+
+def test_the_finish_matches_every_wanted_pair_whatever_max_backlog_is():
+    # A small ~max_backlog (5 of 40 pairs), so that the recording's batches leave most pairs for
+    # the finish: its matching must take them all (issue 34: the finish once matched at most
+    # ~max_backlog and said nothing).
+    kfs = keyframes(41)
+    pairs = chain(kfs)
+    project = FailingProject()
+    project.features = {k.name for k in kfs}
+    work = LiveWork(project, continuity=False, max_backlog=5, max_batch_pairs=3)
+    assert work.match(kfs, pairs)  # a batch while recording: 3 pairs, more waiting
+    assert len(project.matched()) == 3 and work.deferred == 40 - 5
+    seen = []
+    runs = work.match_all(kfs, pairs, batch=8, progress=lambda done, total: seen.append((done, total)))
+    assert project.matched() == set(pairs)
+    assert runs == 5 and seen[-1] == (37, 37)
+    assert work.lost_pairs(set(pairs), project.matched(), project.extracted(), []) == []
+
+
+def test_a_wanted_pair_not_in_the_model_is_named_with_its_reason():
+    kfs = keyframes(6)
+    pairs = chain(kfs)
+    project = FailingProject(bad_pairs=[pairs[0]], bad_images=["004.png"])
+    work = LiveWork(project, continuity=False, max_attempts=1)
+    work.extract(kfs)
+    work.match_all(kfs, pairs)
+    lost = {x["pair"]: x["reason"] for x in work.lost_pairs(set(pairs), project.matched(), project.extracted(),
+                                                            ["005.png"])}
+    assert set(lost) == {"000.png 001.png", "003.png 004.png", "004.png 005.png"}
+    assert "exit 3" in lost["000.png 001.png"] and lost["000.png 001.png"].startswith("failed 1 time")
+    assert lost["003.png 004.png"].startswith("the image 004.png has no features")
+    assert lost["004.png 005.png"] == "the image 004.png has no features: 'colmap feature_extractor' failed (exit 1)" \
+        or lost["004.png 005.png"].startswith("the image 005.png never arrived")

@@ -45,7 +45,9 @@ PARAMETERS = """Parameters (private, ~name):
   nice               niceness of the bridge and its COLMAP children (10: the node keeps priority)
   batch_period       [s] between two batches when there is nothing to do (1.0)
   poll_period        [s] between two ~get_pairs polls (2.0)
-  max_backlog        pairs kept waiting; more wait for the finish, counted (2000)
+  max_backlog        pairs a batch looks at while the recording goes on; more wait for the finish,
+                     counted; the finish matches every wanted pair whatever this is (2000;
+                     0: everything at the finish)
   max_batch_pairs    pairs per matching run while the recording goes on (24)
   max_attempts       tries of an image or pair that fails before it is skipped (3)
   finish_after_idle  [s] build the model once no keyframe came for this long, again after more

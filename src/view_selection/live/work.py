@@ -11,6 +11,12 @@ from ..keyframes import continuity_pairs, pair_of
 from .attempts import Attempts
 
 
+# Pairs a run of the finish's matching takes (match_all): large enough that COLMAP's fallback
+# matcher starts seldom, small enough that a run that fails is halved over few pairs and that
+# progress is reported as it goes.
+FINISH_BATCH_PAIRS = 256
+
+
 class LiveWork:
     def __init__(self, project: ColmapProject, continuity=True, max_backlog=2000, max_batch_pairs=24,
                  max_attempts=3, log=None, backend=None, triangulation="live", refinement=None):
@@ -36,7 +42,9 @@ class LiveWork:
         self.log = log or (lambda level, text: None)
         self.model = LiveModel() if triangulation == "live" else None
         self.fed_poses = {}        # name -> the pose the model has for it
+        self.unfed_pairs = []      # verified pairs (image ids) the live model does not have yet
         self.backlog_max = 0
+        self.backlog_before = 0
         self.status = {}  # the last batch's figures: keyframes, images extracted and waiting, pairs
         self.deferred = 0  # pairs beyond ~max_backlog at some point, left for the finish
         self.errors = []   # the last few, for the report
@@ -145,7 +153,7 @@ class LiveWork:
             return 0
         by_name = {k.name: k for k in todo}
         self._attempt([k.name for k in todo], lambda names: self.backend.extract([by_name[n] for n in names]),
-                      self.backend.extracted, self.images, "image", "skipped-image")
+                      lambda: self.backend.extracted(refresh=list(by_name)), self.images, "image", "skipped-image")
         for warning in getattr(self.backend, "warnings", None) or []:
             self.log("warn", warning)
         return len(todo)
@@ -160,23 +168,53 @@ class LiveWork:
 
     def match(self, keyframes, pairs, limit=None):
         """Matches at most `limit` (~max_batch_pairs) of the wanted pairs not matched yet whose
-        images have features and that are due; True when more are waiting."""
-        limit = self.max_batch_pairs if limit is None else limit
-        backlog = sorted(self.wanted_pairs(keyframes, pairs) - self.backend.matched())
+        images have features and that are due; True when more are waiting.
+
+        While the recording goes on, at most ~max_backlog of the waiting pairs are considered
+        (the oldest by name; the rest are counted in `deferred`); the finish (match_all) takes
+        every one of them: ~max_backlog bounds what a batch looks at, never what the model gets."""
+        return self._match(keyframes, pairs, self.max_batch_pairs if limit is None else limit, self.max_backlog)
+
+    def _match(self, keyframes, pairs, limit, max_backlog=None):
+        matched = self.backend.matched()
+        backlog = sorted(self.wanted_pairs(keyframes, pairs) - matched)
         have = self.backend.extracted()
         backlog = [p for p in backlog if p[0] in have and p[1] in have and not self.pairs.given_up(p)]
         self.backlog_max = max(self.backlog_max, len(backlog))
-        self.status.update(backlog_pairs=len(backlog), pairs_matched=len(self.backend.matched()))
-        if len(backlog) > self.max_backlog:
-            self.deferred = max(self.deferred, len(backlog) - self.max_backlog)
-            self.log("warn", "%d pairs wait (~max_backlog %d): the rest are matched at the finish"
-                     % (len(backlog), self.max_backlog))
-            backlog = backlog[:self.max_backlog]
+        self.backlog_before = len(backlog)  # before this run
+        self.status.update(backlog_pairs=len(backlog), pairs_matched=len(matched))
+        if max_backlog is not None and len(backlog) > max_backlog:
+            self.deferred = max(self.deferred, len(backlog) - max_backlog)
+            self.log("warn", "more pairs wait than ~max_backlog (%d): the rest are matched at the finish "
+                     "(/diagnostics: backlog pairs)" % max_backlog)  # one text: throttled as one
+            backlog = backlog[:max_backlog]
         due = [p for p in backlog if self.pairs.due(p)]
         if not due:
             return False
-        self._attempt(due[:limit], self.backend.match, self.backend.matched, self.pairs, "pair", "skipped-pair")
+        batch = due[:limit]
+        failed = self._attempt(batch, self.backend.match, lambda: self.backend.matched(refresh=batch), self.pairs,
+                               "pair", "skipped-pair")
+        self.status.update(backlog_pairs=len(backlog) - len(batch) + len(failed),
+                           pairs_matched=len(matched) + len(batch) - len(failed))
         return len(due) > limit
+
+    def match_all(self, keyframes, pairs, batch=FINISH_BATCH_PAIRS, progress=None):
+        """Every wanted pair that is due and whose images have features, in runs of `batch` pairs
+        (each halved where it fails, as in a batch), until none is left: the finish's matching,
+        whatever ~max_backlog is. A pair that fails is not due again until its wait is over, so
+        this ends. progress(done, total): after each run. Returns how many runs were made."""
+        runs = 0
+        total = None
+        while not self.project.cancelled:
+            more = self._match(keyframes, pairs, batch)
+            if total is None:
+                total = self.backlog_before
+            runs += 1
+            if progress is not None:
+                progress(total - self.status.get("backlog_pairs", 0), total)
+            if not more:
+                break
+        return runs
 
     # -- the live model ----------------------------------------------------------------------
     def feed_model(self, keyframes, final=False):
@@ -186,9 +224,10 @@ class LiveWork:
         from .. import geometry
         from ..colmap.model import CAMERA_MODELS
         m = self.model
+        cat = self.project.catalogue()  # what the database holds, in memory: no table is read whole
+        ids, cams, cameras, with_features = cat.ids, cat.image_cameras, cat.cameras, cat.with_features
+        self.unfed_pairs.extend(cat.take_new_verified())
         with self.project.db() as d:
-            ids, cams, cameras = d.image_ids(), d.image_cameras(), d.cameras()
-            with_features = {ids[n] for n in d.images_with_features() if n in ids}
             for k in keyframes:
                 iid = ids.get(k.name)
                 if iid is None:
@@ -196,16 +235,24 @@ class LiveWork:
                 pose = (k.position, k.orientation)
                 known = m.images.get(iid)
                 if known is not None and self.fed_poses.get(k.name) == pose and (
-                        len(known.keypoints) or iid not in with_features):
+                        len(known.keypoints) or k.name not in with_features):
                     continue
                 q, t = geometry.world_to_camera(k.position, k.orientation)
                 mid, w, h, params = cameras[cams[iid]]
                 keypoints = d.keypoints(iid) if (known is None or not len(known.keypoints)) else known.keypoints
                 m.add_image(iid, k.name, cams[iid], (CAMERA_MODELS[mid][0], w, h, params), q, t, keypoints)
                 self.fed_poses[k.name] = pose
-            for (a, b), n in d.inlier_counts().items():
-                if n > 0 and (a, b) not in m.matched_pairs and a in m.images and b in m.images:
+            # The pairs that verified since the last update; one whose image the model does not
+            # have yet (its keyframe not announced, or no features) waits for it.
+            waiting = []
+            for a, b in self.unfed_pairs:
+                if (a, b) in m.matched_pairs:
+                    continue
+                if a in m.images and b in m.images:
                     m.add_matches(a, b, d.matches(a, b, "two_view_geometries"))
+                else:
+                    waiting.append((a, b))
+            self.unfed_pairs = waiting
         changed = m.update(final=final)
         self.status.update(points=len(m.points), tracks=len(m.members))
         return changed
@@ -216,9 +263,39 @@ class LiveWork:
         return {"images": images, "pairs": [dict(s, item="%s %s" % s["item"]) for s in pairs]}
 
     # -- the model ---------------------------------------------------------------------------
-    def build_model(self, keyframes, final_pairs, model="known_poses", seed=0):
+    def lost_pairs(self, wanted, matched, extracted, missing):
+        """[{'pair': 'a b', 'reason'}] of the wanted pairs that were not matched at all (a pair
+        matched and found not to verify is not lost: COLMAP's verification said no), each with
+        why: an image missing or without features, the pair given up after its attempts, or not
+        tried (the work was cancelled or ran out of time)."""
+        missing = set(missing)
+        out = []
+        for pair in sorted(set(wanted) - set(matched)):
+            reason = None
+            for name in pair:
+                if name in missing:
+                    reason = "the image %s never arrived" % name
+                elif name not in extracted:
+                    error = self.images.errors.get(name)
+                    reason = "the image %s has no features%s" % (name, ": " + error if error else "")
+                if reason:
+                    break
+            if reason is None:
+                error = self.pairs.errors.get(pair)
+                if error is not None:
+                    reason = "failed %d time(s): %s" % (self.pairs.failures.get(pair, 0), error)
+                elif self.project.cancelled:
+                    reason = "not tried: the work was cancelled"
+                else:
+                    reason = "not tried"
+            out.append({"pair": "%s %s" % pair, "reason": reason})
+        return out
+
+    def build_model(self, keyframes, final_pairs, model="known_poses", seed=0, progress=None):
         """What is left of `final_pairs` (names) extracted and matched, then the model; returns
         the report's model part. The bridge's finish and colmap_from_selection share it.
+        Every wanted pair is matched (match_all); one that is not in the model is listed in
+        pairs_lost with its reason. progress(stage, done, total): as the matching goes.
         Items given up are left out and listed; a keyframe without features or image is not in
         the model, and the report says which."""
         import os
@@ -240,7 +317,8 @@ class LiveWork:
         made = None  # the live model written, when it is
         self.extract(keyframes)
         phases["extraction"], t0 = time.monotonic() - t0, time.monotonic()
-        self.match(keyframes, final, limit=len(final) + len(extra) + 1)
+        self.match_all(keyframes, final, progress=(lambda done, total: progress("matching", done, total))
+                       if progress else None)
         phases["matching"], t0 = time.monotonic() - t0, time.monotonic()
         missing = [k.name for k in keyframes if not project.has_image(k.name)]
         extracted = project.extracted()
@@ -248,11 +326,17 @@ class LiveWork:
         with project.db() as d:
             featureless = sorted(d.images_without_keypoints())
         wanted = set(final) | set(extra)
+        lost = self.lost_pairs(wanted, matched, extracted, missing)
+        if lost:
+            self.error("%d of %d wanted pairs are not in the model (report.json: pairs_lost), e.g. %s: %s"
+                       % (len(lost), len(wanted), lost[0]["pair"], lost[0]["reason"]))
         out = {"keyframes": len(keyframes), "images_missing": missing,
                "images_without_features": [k.name for k in keyframes if k.name not in extracted and k.name not in missing],
                "images_with_no_features": featureless,
                "final_pairs": len(final), "continuity_pairs": len(extra), "pairs_matched": len(matched),
                "final_pairs_matched": len(set(final) & matched), "pairs_wasted": len(matched - wanted),
+               "pairs_wanted": len(wanted), "pairs_lost": lost,
+               "pairs_not_verified": sum(1 for p, n in project.inlier_counts().items() if p in wanted and n == 0),
                "pairs_verified": project.verified_count(), "model": model, "skipped": self.skipped(all_failed=True)}
         if model == "mapper":
             path = project.mapper_model(seed)

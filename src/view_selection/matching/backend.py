@@ -74,11 +74,11 @@ class PoseGuidedBackend:
             self.keyframes[k.name] = k
         self.project.register(keyframes)
 
-    def extracted(self):
-        return self.project.extracted()
+    def extracted(self, refresh=()):
+        return self.project.extracted(refresh)
 
-    def matched(self):
-        return self.project.matched()
+    def matched(self, refresh=()):
+        return self.project.matched(refresh)
 
     def has_image(self, name):
         return self.project.has_image(name)
@@ -102,10 +102,11 @@ class PoseGuidedBackend:
                 if not len(made[k.name]):
                     self.warnings.append("no features in %s (a blank image?): it stays in the model without points"
                                          % k.name)
+            ids = self.project.catalogue().ids
             with self.project.db() as d:
-                ids = d.image_ids()
                 for name, features in made.items():
                     d.write_features(ids[name], *features.to_colmap())
+            self.project.catalogue().features_written(made)  # after the commit
         for name, features in made.items():
             self._remember(name, features)
         self.project.ledger("extracted", list(made))
@@ -121,7 +122,7 @@ class PoseGuidedBackend:
         if name in self.cache:
             self.cache.move_to_end(name)
             return self.cache[name]
-        iid = database.image_ids()[name]
+        iid = self.project.catalogue().ids[name]
         f = Features.from_colmap(database.keypoints(iid), database.descriptors(iid))
         self._remember(name, f)
         return f
@@ -133,10 +134,10 @@ class PoseGuidedBackend:
         geometry (verified, or empty) in the database."""
         pairs = [pair_of(*p) for p in pairs]
         self.errors = {}
-        fallback = []
+        fallback, written = [], []
         with self.clock.measure("guided_matching", len(pairs)):
+            ids = self.project.catalogue().ids
             with self.project.db() as d:
-                ids = d.image_ids()
                 for a, b in pairs:
                     if self.project.cancelled:
                         raise ProjectError("matching cancelled")
@@ -152,6 +153,9 @@ class PoseGuidedBackend:
                     d.write_matches(ids[a], ids[b], result.matches)
                     d.write_two_view_geometry(ids[a], ids[b], result.inliers, db.CALIBRATED, F=result.F, E=result.E,
                                               qvec=_quaternion(result.R), tvec=result.t)
+                    written.append(((a, b), len(result.inliers)))
+            for pair, rows in written:  # after the commit: the catalogue holds what the database does
+                self.project.catalogue().geometry_written(pair, rows)
         done = [p for p in pairs if p not in fallback and p not in self.errors]
         self.project.ledger("matched", ["%s %s" % p for p in done])
         if fallback:

@@ -4,7 +4,8 @@ played with rosbag play through view_selection_node at its shipped defaults, bes
 colmap_bridge processes running the real COLMAP 3.8:
 
   - bridge A is SIGKILLed once it has matched something, and started again on its project;
-  - bridge B runs uninterrupted on a project that shares A's images folder.
+  - bridge B runs uninterrupted on a project that shares A's images folder;
+  - bridge C too, with a ~max_backlog of 0, so that every pair waits for the finish.
 
 Two pair-stream consumers of the tester's own follow ~pairs: one drops every third message and
 catches up through ~get_pairs, one joins halfway. After the bag: both consumers hold exactly the
@@ -170,9 +171,11 @@ class LiveBridge(unittest.TestCase):
         run([find_tool('tum_to_bag'), '--dataset', source, '--out', cls.bag, '--quiet'], 600, 'tum_to_bag')
 
         cls.a, cls.b = os.path.join(cls.tmp, 'project_a'), os.path.join(cls.tmp, 'project_b')
-        os.makedirs(cls.b)
+        cls.c = os.path.join(cls.tmp, 'project_c')
         os.makedirs(os.path.join(cls.a, 'images'))
-        os.symlink(os.path.join(cls.a, 'images'), os.path.join(cls.b, 'images'))  # the node writes one folder
+        for other in (cls.b, cls.c):
+            os.makedirs(other)
+            os.symlink(os.path.join(cls.a, 'images'), os.path.join(other, 'images'))  # the node writes one folder
 
         # The node at its shipped defaults, poses from the bag's /camera/pose.
         cls.node = NodeProcess(NODE, {'pose_source': 'topic'}, remaps=TOPICS).start()
@@ -180,9 +183,14 @@ class LiveBridge(unittest.TestCase):
         cls.statistics = Statistics(NODE)
         cls.bridge_a = NodeProcess('/bridge_a', {'project': cls.a, 'node': NODE}, binary=bridge)
         cls.bridge_b = NodeProcess('/bridge_b', {'project': cls.b, 'node': NODE}, binary=bridge)
-        cls.bridge_a.start()
-        cls.bridge_b.start()
-        for b in (cls.bridge_a, cls.bridge_b):
+        # Not the default (2000): this short sequence never has that many pairs waiting, and the
+        # finish must match a backlog beyond ~max_backlog whole (issue 34). With 0 every pair
+        # waits for the finish.
+        cls.bridge_c = NodeProcess('/bridge_c', {'project': cls.c, 'node': NODE, 'max_backlog': 0}, binary=bridge)
+        cls.bridges = (cls.bridge_a, cls.bridge_b, cls.bridge_c)
+        for b in cls.bridges:
+            b.start()
+        for b in cls.bridges:
             cls.wait_service(b.name + '/finish', b)
         cls.dropping = Consumer(NODE, drop_every=3)
 
@@ -233,6 +241,7 @@ class LiveBridge(unittest.TestCase):
         cls.selection = call(NODE + '/get_selection', GetSelection, None, 30.0).selection
         cls.finish_a = call(cls.bridge_a.name + '/finish', Trigger, None, 900.0)
         cls.finish_b = call(cls.bridge_b.name + '/finish', Trigger, None, 900.0)
+        cls.finish_c = call(cls.bridge_c.name + '/finish', Trigger, None, 900.0)
 
     @classmethod
     def wait_service(cls, name, process):
@@ -243,7 +252,7 @@ class LiveBridge(unittest.TestCase):
 
     @classmethod
     def tearDownClass(cls):
-        for p in ('bridge_a', 'bridge_b', 'node'):
+        for p in ('bridge_a', 'bridge_b', 'bridge_c', 'node'):
             proc = getattr(cls, p, None)
             if proc:
                 try:
@@ -271,6 +280,17 @@ class LiveBridge(unittest.TestCase):
             content = database_content(os.path.join(project, 'database.db'))
             self.assertEqual(set(), final - set(content['verified']), project)
             self.assertEqual(set(), set(names.values()) - set(content['descriptors']), project)
+
+    def test_a_backlog_beyond_max_backlog_is_matched_whole_at_the_finish(self):
+        self.assertTrue(self.finish_c.success, self.finish_c.message + self.bridge_c.output()[-3000:])
+        report = json.load(open(os.path.join(self.c, 'report.json')))
+        self.assertGreater(report['deferred_to_finish'], 0, 'the backlog never went beyond ~max_backlog')
+        self.assertEqual([], report['pairs_lost'])
+        self.assertEqual(len(self.final), report['final_pairs'])
+        self.assertEqual(report['final_pairs'], report['final_pairs_matched'])
+        names = self.names()
+        final = {tuple(sorted((names[a], names[b]))) for a, b in self.final}
+        self.assertEqual(set(), final - set(database_content(os.path.join(self.c, 'database.db'))['matches']))
 
     def test_model_has_every_keyframe_at_its_pose(self):
         """sparse/unrefined: every keyframe at its node pose. sparse/0, the refined model (issue
