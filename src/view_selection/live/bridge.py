@@ -306,6 +306,9 @@ class Bridge:
                     "the pairs announced so far (%s)" % why)
 
     def finish(self, why, shutting_down=False):
+        """Builds the model from the node's final selection (or, at shutdown, from what the
+        stream announced) and writes report.json: the orchestration; the report, the message
+        and ~refined_path are each a function of their own. Returns (ok, message)."""
         with self.lock:
             if self.finishing:
                 return False, "a finish is running"
@@ -331,54 +334,16 @@ class Bridge:
                     report = self.work_state.build_model(keyframes, pairs, self.model)
                 finally:
                     self.project.deadline = None
-            done = time.monotonic()
-            report["finish_phases"].update(sync=round(synced - start, 3), selection=round(asked - synced, 3),
-                                           cpu=round(time.process_time() - cpu_start, 3))
-            report.update({
-                "project": self.project.root, "node": self.node, "why": why, "pairs_source": source,
-                "seconds": dict(self.project.seconds, finish=done - start),
-                "seconds_from_last_keyframe": (done - last_keyframe) if last_keyframe else None,
-                "stream_messages": self.stream.messages, "sequence": self.stream.sequence,
-                "backlog_max": self.work_state.backlog_max, "deferred_to_finish": self.work_state.deferred,
-                "errors": self.work_state.errors[-5:], "finished_at": time.time(), "matcher": self.matcher})
-            stages = self.work_state.clock.summary()
-            if self.backend:
-                report["matching"] = self.backend.path_counts()
-                stages.update(self.backend.clock.summary())
-            report["stages"] = stages
+            self.complete_report(report, why, source, last_keyframe,
+                                 timing={"start": start, "synced": synced, "asked": asked, "cpu_start": cpu_start})
             write_json_atomically(os.path.join(self.project.root, "report.json"), report)
             self.last_report = report
-            refined = report.get("refinement", {})
-            # Only corrections a node would apply (its defaults: 2 mm, 0.1 deg) are sent back: a
-            # path that moves nothing would only make a node that takes it announce again, and
-            # the bridge finish again, for nothing.
-            if refined.get("refined") and (refined["translation_max"] > PATH_MIN_TRANSLATION or
-                                           refined["rotation_max_deg"] > PATH_MIN_ROTATION_DEG):
-                self.publish_refined_path(keyframes, report["model_path"])
+            self.publish_corrections(keyframes, report)
             with self.lock:
                 self.finished_at_change = change
-            msg = ("model in %s: %s of %d keyframes, %s points, %d pairs matched (%d wasted), %.1f s after the "
-                   "last keyframe" % (report["model_path"], report.get("registered", 0), len(keyframes),
-                                      report.get("points", 0), report["pairs_matched"], report["pairs_wasted"],
-                                      report["seconds_from_last_keyframe"] or 0.0))
+            msg = self.finish_message(report, len(keyframes))
             skipped = report["skipped"]
-            refinement = report.get("refinement")
-            if refinement and refinement.get("refined"):
-                msg += "; refined: %d keyframes moved (median %.3g, max %.3g; %.2g / %.2g deg), %d kept their pose" % (
-                    refinement["keyframes_refined"], refinement["translation_median"], refinement["translation_max"],
-                    refinement["rotation_median_deg"], refinement["rotation_max_deg"],
-                    len(refinement["keyframes_kept"]))
-            elif refinement:
-                msg += "; not refined: %s" % (refinement.get("error") or refinement.get("message"))
-            if report.get("model_error"):
-                msg += "; " + report["model_error"]
-            if skipped["images"] or skipped["pairs"]:
-                msg += "; skipped: %d images, %d pairs (%s)" % (
-                    len(skipped["images"]), len(skipped["pairs"]),
-                    (skipped["images"] or skipped["pairs"])[0]["error"])
-                rospy.logwarn("colmap_bridge: %s", msg)
-            else:
-                rospy.loginfo("colmap_bridge: %s", msg)
+            (rospy.logwarn if skipped["images"] or skipped["pairs"] else rospy.loginfo)("colmap_bridge: %s", msg)
             return True, msg
         except (ProjectError, DatabaseError, sqlite3.Error, OSError, ValueError) as e:
             self.work_state.error("project %s: %s" % (self.project.root, e))
@@ -386,6 +351,59 @@ class Bridge:
         finally:
             with self.lock:
                 self.finishing = False
+
+    def complete_report(self, report, why, source, last_keyframe, timing):
+        """report.json: build_model's part, and the bridge's (the stream, the timing of the
+        finish's steps, the stages' CPU, the matching paths, the last errors)."""
+        done = time.monotonic()
+        report["finish_phases"].update(sync=round(timing["synced"] - timing["start"], 3),
+                                       selection=round(timing["asked"] - timing["synced"], 3),
+                                       cpu=round(time.process_time() - timing["cpu_start"], 3))
+        report.update({
+            "project": self.project.root, "node": self.node, "why": why, "pairs_source": source,
+            "seconds": dict(self.project.seconds, finish=done - timing["start"]),
+            "seconds_from_last_keyframe": (done - last_keyframe) if last_keyframe else None,
+            "stream_messages": self.stream.messages, "sequence": self.stream.sequence,
+            "backlog_max": self.work_state.backlog_max, "deferred_to_finish": self.work_state.deferred,
+            "errors": self.work_state.errors[-5:], "finished_at": time.time(), "matcher": self.matcher})
+        stages = self.work_state.clock.summary()
+        if self.backend:
+            report["matching"] = self.backend.path_counts()
+            stages.update(self.backend.clock.summary())
+        report["stages"] = stages
+        return report
+
+    def publish_corrections(self, keyframes, report):
+        """~refined_path after a refined model, when it moved a keyframe as far as a node would
+        take (its defaults: 2 mm, 0.1 deg): a path that moves nothing would only make a node
+        that takes it announce again, and the bridge finish again, for nothing."""
+        refined = report.get("refinement", {})
+        if refined.get("refined") and (refined["translation_max"] > PATH_MIN_TRANSLATION or
+                                       refined["rotation_max_deg"] > PATH_MIN_ROTATION_DEG):
+            self.publish_refined_path(keyframes, report["model_path"])
+
+    @staticmethod
+    def finish_message(report, keyframes):
+        """The finish's one line for the log and the ~finish answer."""
+        msg = ("model in %s: %s of %d keyframes, %s points, %d pairs matched (%d wasted), %.1f s after the "
+               "last keyframe" % (report["model_path"], report.get("registered", 0), keyframes,
+                                  report.get("points", 0), report["pairs_matched"], report["pairs_wasted"],
+                                  report["seconds_from_last_keyframe"] or 0.0))
+        refinement = report.get("refinement")
+        if refinement and refinement.get("refined"):
+            msg += "; refined: %d keyframes moved (median %.3g, max %.3g; %.2g / %.2g deg), %d kept their pose" % (
+                refinement["keyframes_refined"], refinement["translation_median"], refinement["translation_max"],
+                refinement["rotation_median_deg"], refinement["rotation_max_deg"],
+                len(refinement["keyframes_kept"]))
+        elif refinement:
+            msg += "; not refined: %s" % (refinement.get("error") or refinement.get("message"))
+        if report.get("model_error"):
+            msg += "; " + report["model_error"]
+        skipped = report["skipped"]
+        if skipped["images"] or skipped["pairs"]:
+            msg += "; skipped: %d images, %d pairs (%s)" % (
+                len(skipped["images"]), len(skipped["pairs"]), (skipped["images"] or skipped["pairs"])[0]["error"])
+        return msg
 
     def diagnostics_loop(self):
         """Once a second until shutdown. Whatever one message raises is logged (throttled) and
