@@ -84,3 +84,21 @@ def test_a_cancel_kills_the_running_command(tmp_path):
     t.join(20.0)
     assert not t.is_alive() and time.monotonic() - t0 < 20.0
     assert "cancelled" in str(result[0].value)
+
+
+def test_the_deadline_is_checked_in_process_and_bounds_a_command(tmp_path):
+    project = ColmapProject(str(tmp_path), colmap="sleep")
+    project.check_deadline("matching")  # no deadline: nothing
+    project.deadline = time.monotonic() + 60.0
+    project.check_deadline("matching")
+    project.deadline = time.monotonic() + 2.5
+    t0 = time.monotonic()
+    with pytest.raises(ProjectError) as e:
+        project.run(["60"], "matching", timeout=60.0)  # killed at the deadline, not at its timeout
+    assert e.value.out_of_time and e.value.timed_out and time.monotonic() - t0 < 20.0
+    with pytest.raises(ProjectError) as e:
+        project.check_deadline("extraction")
+    assert e.value.out_of_time and "extraction" in str(e.value)
+    with pytest.raises(ProjectError) as e:
+        project.run(["1"], "model", timeout=60.0)
+    assert e.value.out_of_time and "no time left" in str(e.value)

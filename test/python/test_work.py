@@ -235,3 +235,21 @@ def test_a_wanted_pair_not_in_the_model_is_named_with_its_reason():
     assert lost["003.png 004.png"].startswith("the image 004.png has no features")
     assert lost["004.png 005.png"] == "the image 004.png has no features: 'colmap feature_extractor' failed (exit 1)" \
         or lost["004.png 005.png"].startswith("the image 005.png never arrived")
+
+
+def test_out_of_time_stops_the_work_and_charges_nobody():
+    kfs = keyframes(8)
+    project = FailingProject()
+    project.features = {k.name for k in kfs}
+    work = LiveWork(project, continuity=False)
+
+    def out_of_time(pairs):
+        raise ProjectError("out of time in matching: the finish's budget at shutdown is spent", out_of_time=True)
+
+    project.match = out_of_time
+    try:
+        work.match(kfs, chain(kfs))
+        assert False, "out of time must stop the finish's work"
+    except ProjectError as e:
+        assert e.out_of_time
+    assert work.pairs.failures == {} and not any(work.pairs.suspect(p) for p in chain(kfs))

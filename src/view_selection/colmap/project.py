@@ -26,11 +26,12 @@ from .process import Colmap, ColmapError
 
 class ProjectError(Exception):
     """A project that cannot be kept: an unusable folder, COLMAP missing or failing (timed_out:
-    a COLMAP command was killed at its time limit)."""
+    a COLMAP command was killed at its time limit; out_of_time: the project's deadline passed,
+    which is no item's fault)."""
 
-    def __init__(self, message, timed_out=False):
+    def __init__(self, message, timed_out=False, out_of_time=False):
         super().__init__(message)
-        self.timed_out = timed_out
+        self.timed_out, self.out_of_time = timed_out, out_of_time
 
 
 class Timeouts:
@@ -112,15 +113,24 @@ class ColmapProject:
         (a finish at shutdown has only so long)."""
         if self.cancelled:
             raise ProjectError("'%s' (%s) not started: the project's work was cancelled" % (args[0], stage))
+        cut = False
         if self.deadline is not None:
             left = self.deadline - time.monotonic()
             if left <= 1.0:
-                raise ProjectError("no time left for '%s' (%s)" % (args[0], stage))
-            timeout = min(timeout, left)
+                raise ProjectError("no time left for '%s' (%s)" % (args[0], stage), out_of_time=True)
+            cut, timeout = left < timeout, min(timeout, left)
         try:
             return self.colmap.run(args, stage, timeout)
         except ColmapError as e:
-            raise ProjectError(str(e), timed_out=e.timed_out)
+            raise ProjectError(str(e), timed_out=e.timed_out, out_of_time=e.timed_out and cut)
+
+    def check_deadline(self, stage):
+        """Raises ProjectError (out_of_time) once the project's deadline has passed: the in-process
+        loops (SIFT, guided matching, the live model) call it for each item, as run() bounds a
+        COLMAP command (one clock read)."""
+        if self.deadline is not None and time.monotonic() >= self.deadline:
+            raise ProjectError("out of time in %s: the finish's budget at shutdown is spent" % stage,
+                               out_of_time=True)
 
     @property
     def cancelled(self):

@@ -10,6 +10,7 @@ Threads: rospy's for ~pairs and ~finish; one worker (`loop`) for the batches. `l
 stream's state; `work` serialises COLMAP's work on the project (a batch, or the finish).
 """
 import os
+import signal
 import sqlite3
 import threading
 import time
@@ -84,6 +85,12 @@ than 1 mm or 0.05 deg; a view_selection node takes them with ~use_path_correctio
 path:=/colmap_bridge/refined_path (docs/live.md, "Refinement").
 """
 
+
+# A finish at shutdown stops its work (extraction, matching, the live model's update, the
+# refinement) this long before ~shutdown_budget is spent, to write the model as it stands and
+# report.json: with roslaunch's 3 s beyond the default budget (SIGTERM at 15 s), 5 s for
+# writing. Not measured at scale yet: the live_bridge test's writing phase is a few ms.
+FINISH_WRITE_RESERVE = 2.0
 
 # ~refined_path is published when a keyframe moved more than this [m, deg]: half the node's
 # ~correction_min_translation and ~correction_min_rotation_deg defaults.
@@ -329,11 +336,13 @@ class Bridge:
             with self.work:  # after the batch that may be running
                 self.project.cancelled = False
                 if shutting_down:
-                    self.project.deadline = start + self.shutdown_budget
+                    self.project.deadline = start + self.shutdown_budget - FINISH_WRITE_RESERVE
                 try:
                     report = self.work_state.build_model(keyframes, pairs, self.model)
                 finally:
-                    self.project.deadline = None
+                    with self.lock:  # shutdown() may have given this finish its deadline meanwhile
+                        if not self.stopping:
+                            self.project.deadline = None
             self.complete_report(report, why, source, last_keyframe,
                                  timing={"start": start, "synced": synced, "asked": asked, "cpu_start": cpu_start})
             write_json_atomically(os.path.join(self.project.root, "report.json"), report)
@@ -488,6 +497,23 @@ class Bridge:
             msg.header.stamp = msg.poses[-1].header.stamp
             self.refined_path.publish(msg)
 
+    def out_of_time(self):
+        """The shutdown's deadline passed with a finish still running. Its in-process steps stop
+        by themselves (project.check_deadline); a COLMAP command or a refine_model started before
+        the deadline was set has its own, longer timeout: they are killed (the project's work
+        cancelled, this process's children killed), so that the finish writes what it has."""
+        with self.lock:
+            if not self.finishing:
+                return
+        rospy.logwarn("colmap_bridge: the shutdown's budget is spent: the finish's COLMAP and refine_model are "
+                      "stopped, the model is written as it stands")
+        self.project.cancel()
+        for pid in child_processes():
+            try:
+                os.killpg(pid, signal.SIGKILL) if os.getpgid(pid) == pid else os.kill(pid, signal.SIGKILL)
+            except (ProcessLookupError, PermissionError):
+                pass
+
     def on_finish(self, _req):
         ok, msg = self.finish("~finish called")
         return TriggerResponse(success=ok, message=msg)
@@ -501,9 +527,19 @@ class Bridge:
             self.stopping = True
             self.wake.notify_all()
             finishing = self.finishing
+            # A finish running now (an idle one, started without a deadline) has until the
+            # budget is spent, then writes what it has.
+            self.project.deadline = start + self.shutdown_budget - FINISH_WRITE_RESERVE
+        timer = None
         if not finishing:
             self.project.cancel()  # a batch; a finish that is running is left to complete
+        else:
+            timer = threading.Timer(max(0.0, self.project.deadline - time.monotonic()), self.out_of_time)
+            timer.daemon = True
+            timer.start()
         self.thread.join(timeout=self.shutdown_budget)
+        if timer is not None:
+            timer.cancel()
         with self.lock:
             unfinished = bool(self.stream.keyframes) and self.finished_at_change != self.stream.last_change_time
         if unfinished:
@@ -511,6 +547,21 @@ class Bridge:
             ok, msg = self.finish("shutdown", shutting_down=True)
             if not ok:
                 rospy.logerr("colmap_bridge: no model at shutdown: %s", msg)
+
+
+def child_processes():
+    """The ids of this process's children (COLMAP commands, refine_model), from /proc."""
+    me, out = os.getpid(), []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open("/proc/%s/stat" % entry) as f:
+                    fields = f.read().rsplit(")", 1)[1].split()
+            except (OSError, IndexError):
+                continue
+            if int(fields[1]) == me:
+                out.append(int(entry))
+    return out
 
 
 def main(argv):

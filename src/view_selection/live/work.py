@@ -6,6 +6,7 @@ afterwards, so a batch that fails names its culprit.
 """
 import time
 
+from ..colmap import durable
 from ..colmap.project import ColmapProject, ProjectError
 from ..keyframes import continuity_pairs, pair_of
 from .attempts import Attempts
@@ -117,6 +118,8 @@ class LiveWork:
         try:
             run(items)
         except ProjectError as e:
+            if getattr(e, "out_of_time", False):
+                raise  # the finish's budget is spent: no item's fault, and nothing more is tried
             error, timed_out = str(e), getattr(e, "timed_out", False)
             self.error(error)
         now = done()
@@ -227,8 +230,10 @@ class LiveWork:
         cat = self.project.catalogue()  # what the database holds, in memory: no table is read whole
         ids, cams, cameras, with_features = cat.ids, cat.image_cameras, cat.cameras, cat.with_features
         self.unfed_pairs.extend(cat.take_new_verified())
+        check = getattr(self.project, "check_deadline", lambda stage: None)
         with self.project.db() as d:
             for k in keyframes:
+                check("triangulation")
                 iid = ids.get(k.name)
                 if iid is None:
                     continue
@@ -245,14 +250,20 @@ class LiveWork:
             # The pairs that verified since the last update; one whose image the model does not
             # have yet (its keyframe not announced, or no features) waits for it.
             waiting = []
-            for a, b in self.unfed_pairs:
+            for n, (a, b) in enumerate(self.unfed_pairs):
                 if (a, b) in m.matched_pairs:
                     continue
+                try:
+                    check("triangulation")
+                except ProjectError:
+                    self.unfed_pairs = waiting + self.unfed_pairs[n:]  # they wait for the next time
+                    raise
                 if a in m.images and b in m.images:
                     m.add_matches(a, b, d.matches(a, b, "two_view_geometries"))
                 else:
                     waiting.append((a, b))
             self.unfed_pairs = waiting
+        check("triangulation")
         changed = m.update(final=final)
         self.status.update(points=len(m.points), tracks=len(m.members))
         return changed
@@ -305,9 +316,8 @@ class LiveWork:
         project = self.project
         final = sorted({pair_of(*p) for p in final_pairs})
         extra = sorted(set(continuity_pairs(keyframes)) - set(final)) if self.continuity else []
-        with open(os.path.join(project.root, "pairs.txt.tmp"), "w") as f:  # COLMAP's match list
-            f.write("".join("%s %s\n" % p for p in final))
-        os.replace(os.path.join(project.root, "pairs.txt.tmp"), os.path.join(project.root, "pairs.txt"))
+        durable.write_atomically(os.path.join(project.root, "pairs.txt"),  # COLMAP's match list
+                                 "".join("%s %s\n" % p for p in final))
         # Everything due now, in one run each (halved where a run fails): the finish does not
         # wait for backoffs, and what fails now is reported as skipped.
         for attempts in (self.images, self.pairs):
@@ -315,10 +325,18 @@ class LiveWork:
         import time
         phases, t0 = {}, time.monotonic()
         made = None  # the live model written, when it is
-        self.extract(keyframes)
-        phases["extraction"], t0 = time.monotonic() - t0, time.monotonic()
-        self.match_all(keyframes, final, progress=(lambda done, total: progress("matching", done, total))
-                       if progress else None)
+        # Out of time (the shutdown's budget, project.deadline): what is done so far is the
+        # model, written as it stands, unrefined, and report.json says so (complete: false).
+        incomplete = None
+        try:
+            self.extract(keyframes)
+            phases["extraction"], t0 = time.monotonic() - t0, time.monotonic()
+            self.match_all(keyframes, final, progress=(lambda done, total: progress("matching", done, total))
+                           if progress else None)
+        except ProjectError as e:
+            if not e.out_of_time:
+                raise
+            incomplete = str(e)
         phases["matching"], t0 = time.monotonic() - t0, time.monotonic()
         missing = [k.name for k in keyframes if not project.has_image(k.name)]
         extracted = project.extracted()
@@ -353,8 +371,14 @@ class LiveWork:
                                    "(the node keeps earlier keyframes' images only with ~save_keyframe_images)"
                                    % (len(have), len(keyframes), project.images))
             if self.model is not None:
-                with self.clock.measure("triangulation", 1):
-                    out["tracks_triangulated_at_finish"] = self.feed_model(keyframes, final=True)
+                if incomplete is None:
+                    try:
+                        with self.clock.measure("triangulation", 1):
+                            out["tracks_triangulated_at_finish"] = self.feed_model(keyframes, final=True)
+                    except ProjectError as e:
+                        if not e.out_of_time:
+                            raise
+                        incomplete = str(e)
                 phases["triangulation"], t0 = time.monotonic() - t0, time.monotonic()
                 with project.db() as d:
                     ids = d.image_ids()
@@ -377,7 +401,12 @@ class LiveWork:
                     out["model_error"] = "%s: the model holds the keyframes' poses and no points" % e
                     self.error(out["model_error"])
                     path = project.poses_only_model(have)
-        if self.refinement is not None and model != "mapper" and "model_error" not in out:
+        out["complete"] = incomplete is None
+        if incomplete is not None:
+            out["incomplete"] = ("%s: the model is the live model as it stood (the keyframes and points it had), "
+                                 "not refined" % incomplete)
+            self.error(out["incomplete"])
+        elif self.refinement is not None and model != "mapper" and "model_error" not in out:
             out["refinement"] = self.refinement.apply(project, path)  # issue 29: sparse/0 refined
             made = None  # the statistics are the refined model's, read from sparse/0
             phases["refinement"], t0 = time.monotonic() - t0, time.monotonic()

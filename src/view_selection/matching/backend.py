@@ -90,10 +90,16 @@ class PoseGuidedBackend:
         self.register(keyframes)
         self.errors, self.warnings = {}, []
         made = {}
+        stop = None  # out of time: what was made is written, then it is raised
         with self.clock.measure("extraction", len(keyframes)):
             for k in keyframes:
                 if self.project.cancelled:
                     raise ProjectError("extraction cancelled")
+                try:
+                    self.project.check_deadline("extraction")
+                except ProjectError as e:
+                    stop = e
+                    break
                 try:
                     made[k.name] = self.extractor.extract_file(os.path.join(self.project.images, k.name))
                 except (ValueError, OSError) as e:
@@ -110,6 +116,8 @@ class PoseGuidedBackend:
         for name, features in made.items():
             self._remember(name, features)
         self.project.ledger("extracted", list(made))
+        if stop is not None:
+            raise stop
         return len(keyframes)
 
     def _remember(self, name, features):
@@ -135,12 +143,18 @@ class PoseGuidedBackend:
         pairs = [pair_of(*p) for p in pairs]
         self.errors = {}
         fallback, written = [], []
+        stop = None  # out of time: the pairs matched so far are committed, then it is raised
         with self.clock.measure("guided_matching", len(pairs)):
             ids = self.project.catalogue().ids
             with self.project.db() as d:
                 for a, b in pairs:
                     if self.project.cancelled:
                         raise ProjectError("matching cancelled")
+                    try:
+                        self.project.check_deadline("matching")
+                    except ProjectError as e:
+                        stop = e
+                        break
                     ka, kb = self.keyframes.get(a), self.keyframes.get(b)
                     if ka is None or kb is None:
                         self.errors[(a, b)] = "no pose for %s" % (a if ka is None else b)
@@ -156,8 +170,9 @@ class PoseGuidedBackend:
                     written.append(((a, b), len(result.inliers)))
             for pair, rows in written:  # after the commit: the catalogue holds what the database does
                 self.project.catalogue().geometry_written(pair, rows)
-        done = [p for p in pairs if p not in fallback and p not in self.errors]
-        self.project.ledger("matched", ["%s %s" % p for p in done])
+        self.project.ledger("matched", ["%s %s" % p for p, _ in written])
+        if stop is not None:
+            raise stop
         if fallback:
             with self.clock.measure("fallback_matching", len(fallback)):
                 self.project.match(fallback)  # COLMAP's own; it writes the ledger
