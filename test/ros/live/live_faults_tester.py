@@ -233,9 +233,15 @@ class LiveFaults(unittest.TestCase):
                 self.assertIn('refinement failed', report['refinement']['error'])
             else:  # not tried: out of time before it, or no pair verified
                 self.assertTrue(not report['complete'] or report.get('model_error'), report)
-            # Every keyframe whose image the node wrote here (the earlier ones' it no longer has).
+            # Every keyframe whose image the node wrote here (the earlier ones' it no longer has);
+            # out of time, those the live model had (a keyframe that came at the end has no
+            # features yet).
             self.assertGreaterEqual(report['registered'], 2)
-            self.assertEqual(report['keyframes'] - len(report['images_missing']), report['registered'])
+            with_images = report['keyframes'] - len(report['images_missing'])
+            if report['complete']:
+                self.assertEqual(with_images, report['registered'])
+            else:
+                self.assertLessEqual(report['registered'], with_images)
             self.assertEqual(report['registered'], len(read_model(os.path.join(folder, 'sparse', '0')).images))
             self.assert_node_serves()
         finally:
