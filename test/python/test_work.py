@@ -253,3 +253,17 @@ def test_out_of_time_stops_the_work_and_charges_nobody():
     except ProjectError as e:
         assert e.out_of_time
     assert work.pairs.failures == {} and not any(work.pairs.suspect(p) for p in chain(kfs))
+
+
+def test_items_that_fail_alone_one_after_another_stop_the_runs_alone():
+    kfs = keyframes(20)
+    project = FailingProject(fail_everything=True)
+    project.features = {k.name for k in kfs}
+    work = LiveWork(project, continuity=False, max_batch_pairs=24)
+    now = [0.0]
+    work.pairs.clock = lambda: now[0]
+    work.match(kfs, chain(kfs))  # the batch halved: every pair charged once
+    runs = len(project.runs)
+    now[0] += 1000.0  # past the backoff
+    work.match(kfs, chain(kfs))  # each is a suspect now, tried alone: four in a row fail, the rest wait
+    assert len(project.runs) - runs == LiveWork.ALONE_FAILURES_IN_A_ROW

@@ -59,8 +59,10 @@ class LiveWork:
     # A run of several items that timed out names no culprit and charges nobody: its items are
     # suspected and each is tried alone. Two runs alone in a row that time out say COLMAP hangs
     # on everything now: the rest stay suspected, uncharged, for the next batch (so one call
-    # costs at most the batch's timeout and two single-item timeouts).
+    # costs at most the batch's timeout and two single-item timeouts); so do four failures in a
+    # row of any kind (COLMAP failing on everything: a run each would cost n runs, not log n).
     ALONE_TIMEOUTS_IN_A_ROW = 2
+    ALONE_FAILURES_IN_A_ROW = 4
 
     def _attempt(self, items, run, done, attempts, kind, ledger_kind):
         """Runs `run(items)`; the items `done()` does not list afterwards failed; returns them.
@@ -79,13 +81,15 @@ class LiveWork:
         if batch:
             budget = [2 * max(1, len(batch) - 1).bit_length() + 2]
             failed += self._halving(batch, run, done, attempts, kind, ledger_kind, budget, alone)
-        in_a_row = 0
+        timeouts, failures = 0, 0  # in a row
         for n, i in enumerate(alone):
-            if self.project.cancelled or in_a_row >= self.ALONE_TIMEOUTS_IN_A_ROW:
-                failed += alone[n:]  # still suspected, not charged: tried alone next time
+            if (self.project.cancelled or timeouts >= self.ALONE_TIMEOUTS_IN_A_ROW
+                    or failures >= self.ALONE_FAILURES_IN_A_ROW):
+                failed += alone[n:]  # not tried now (a suspect from a hang stays uncharged)
                 break
             f, error, timed_out = self._run([i], run, done, attempts)
-            in_a_row = in_a_row + 1 if timed_out else 0
+            timeouts = timeouts + 1 if timed_out else 0
+            failures = failures + 1 if f else 0
             self._charge(f, error, attempts, kind, ledger_kind)
             failed += f
         return failed
