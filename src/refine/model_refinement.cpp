@@ -3,6 +3,7 @@
 #include "view_selection/core/exceptions.h"
 #include "view_selection/eval/trajectory_alignment.h"
 #include "view_selection/refine/tracks.h"
+#include "view_selection/refine/triangulation.h"
 
 #include <ceres/ceres.h>
 #include <ceres/product_manifold.h>
@@ -429,11 +430,9 @@ Gauge gaugeOf(const State& s, const std::map<int, State::Pose>& reference, const
 }
 
 /// The points of `tracks` triangulated anew at the poses of `s` (images in `excluded` and their
-/// observations left out), replacing its points: a linear (DLT) point from the rays, three
-/// Gauss-Newton steps on the pixel error, and the worst observation dropped while it is further
-/// than triangulation_max_error (the point again from the rest); kept when it has two
-/// observations left, lies in front of them and is seen at min_triangulation_angle_deg at
-/// least. A point takes the colour of an old point that shared an observation.
+/// observations left out), replacing its points, by the package's one triangulation
+/// (triangulation.h, the live model's too) with `max_error` and min_triangulation_angle_deg.
+/// A point takes the colour of an old point that shared an observation.
 /// Returns false, with `s` untouched, when `deadline` passed before every track was done.
 bool retriangulate(State& s, const Tracks& tracks, const std::set<int>& excluded, const RefinementConfig& config,
                    double max_error, const Deadline& deadline = Deadline{}) {
@@ -443,7 +442,9 @@ bool retriangulate(State& s, const Tracks& tracks, const std::set<int>& excluded
   std::map<int64_t, Eigen::Vector3d> points;
   std::map<int64_t, std::vector<io::ColmapTrackElement>> new_tracks;
   std::map<int64_t, std::array<uint8_t, 3>> colours;
-  const double min_angle = config.min_triangulation_angle_deg * kPi / 180.0;
+  TriangulationRule rule;
+  rule.max_error_px = max_error;
+  rule.min_angle_deg = config.min_triangulation_angle_deg;
   int64_t next = 1;
   size_t done = 0;
   for (const auto& track : tracks.tracks) {
@@ -456,72 +457,18 @@ bool retriangulate(State& s, const Tracks& tracks, const std::set<int>& excluded
         continue;
       obs.push_back({o.image_id, o.point2D_idx});
     }
-    Eigen::Vector3d x = Eigen::Vector3d::Zero();
-    bool ok = false;
-    while (obs.size() >= 2) {
-      Eigen::Matrix4d a = Eigen::Matrix4d::Zero();
-      for (const auto& e : obs) {
-        const State::Pose& pose = s.poses.at(e.image_id);
-        const Eigen::Vector4d& k = s.intrinsics.at(e.image_id);
-        const Eigen::Vector2d xy = s.observed(e);
-        const Eigen::Vector2d n((xy.x() - k[2]) / k[0], (xy.y() - k[3]) / k[1]);
-        Eigen::Matrix<double, 3, 4> pm;
-        pm << pose.rotation.toRotationMatrix(), pose.translation;
-        const Eigen::RowVector4d r0 = n.x() * pm.row(2) - pm.row(0);
-        const Eigen::RowVector4d r1 = n.y() * pm.row(2) - pm.row(1);
-        a += r0.transpose() * r0 + r1.transpose() * r1;
-      }
-      const Eigen::Vector4d h = Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d>(a).eigenvectors().col(0);
-      if (!(std::abs(h.w()) > 1e-12 * h.head<3>().norm())) break;  // at infinity
-      x = h.head<3>() / h.w();
-      for (int step = 0; step < 3; ++step) {  // Gauss-Newton, the poses held
-        Eigen::Matrix3d jtj = Eigen::Matrix3d::Zero();
-        Eigen::Vector3d jtr = Eigen::Vector3d::Zero();
-        for (const auto& e : obs) {
-          const State::Pose& pose = s.poses.at(e.image_id);
-          const Eigen::Vector4d& k = s.intrinsics.at(e.image_id);
-          const Eigen::Matrix3d r = pose.rotation.toRotationMatrix();
-          const Eigen::Vector3d p = r * x + pose.translation;
-          if (!(p.z() > 0.0)) continue;
-          const Eigen::Vector2d res(k[0] * p.x() / p.z() + k[2] - s.observed(e).x(),
-                                    k[1] * p.y() / p.z() + k[3] - s.observed(e).y());
-          Eigen::Matrix<double, 2, 3> d;
-          d << k[0] / p.z(), 0.0, -k[0] * p.x() / (p.z() * p.z()), 0.0, k[1] / p.z(), -k[1] * p.y() / (p.z() * p.z());
-          const Eigen::Matrix<double, 2, 3> j = d * r;
-          jtj += j.transpose() * j;
-          jtr += j.transpose() * res;
-        }
-        const Eigen::Vector3d dx = (jtj + 1e-12 * Eigen::Matrix3d::Identity()).ldlt().solve(-jtr);
-        if (!dx.allFinite()) break;
-        x += dx;
-      }
-      size_t worst = 0;
-      double worst_error = -1.0;
-      bool behind = false;
-      for (size_t q = 0; q < obs.size(); ++q) {
-        const auto [error, depth] = s.reproject(obs[q].image_id, x, s.observed(obs[q]));
-        if (!(depth > 0.0)) behind = true;
-        const double e = std::isfinite(error) ? error : std::numeric_limits<double>::max();
-        if (e > worst_error) {
-          worst_error = e;
-          worst = q;
-        }
-      }
-      if (!behind && worst_error <= max_error) {
-        ok = true;
-        break;
-      }
-      obs.erase(obs.begin() + static_cast<long>(worst));
+    std::vector<TrackObservation> rays;
+    rays.reserve(obs.size());
+    for (const auto& e : obs) {
+      const State::Pose& pose = s.poses.at(e.image_id);
+      rays.push_back({pose.rotation.toRotationMatrix(), pose.translation, s.intrinsics.at(e.image_id), s.observed(e)});
     }
-    if (!ok || !x.allFinite()) continue;
-    double widest = 0.0;
-    for (size_t p = 0; p < obs.size() && widest < min_angle; ++p)
-      for (size_t q = p + 1; q < obs.size() && widest < min_angle; ++q) {
-        const Eigen::Vector3d ra = (s.poses.at(obs[p].image_id).centre() - x).normalized();
-        const Eigen::Vector3d rb = (s.poses.at(obs[q].image_id).centre() - x).normalized();
-        widest = std::max(widest, std::acos(std::clamp(ra.dot(rb), -1.0, 1.0)));
-      }
-    if (widest < min_angle) continue;
+    const TriangulatedPoint point = triangulateTrack(rays, rule);
+    if (!point.ok) continue;
+    const Eigen::Vector3d& x = point.x;
+    std::vector<io::ColmapTrackElement> kept;
+    for (const int q : point.inliers) kept.push_back(obs[static_cast<size_t>(q)]);
+    obs = std::move(kept);
     const int64_t id = next++;
     points[id] = x;
     colours[id] = {{128, 128, 128}};

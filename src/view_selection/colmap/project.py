@@ -192,13 +192,14 @@ class ColmapProject:
         return set(cat.with_features)
 
     def matched(self, refresh=()):
-        """Pairs (name, name), sorted within, that were matched (verified or not); `refresh`:
+        """Pairs (name, name), sorted within, that were matched (verified or not), as a live
+        read-only view (set operations and `in` work on it; copy it to keep it); `refresh`:
         pairs whose rows are read back first (after a step that matched them)."""
         cat = self.catalogue()
         if refresh:
             with self.db() as d:
                 cat.read_pairs(d, refresh)
-        return set(cat.inliers)
+        return cat.inliers.keys()  # a view, not a copy: it grows with the session
 
     def inlier_counts(self):
         """{(name, name): inlier matches} of the pairs matched (0: matched, not verified)."""

@@ -167,8 +167,10 @@ class LiveWork:
 
     # -- matches -----------------------------------------------------------------------------
     def wanted_pairs(self, keyframes, pairs):
-        """The announced pairs (names) plus, with continuity, each keyframe with the one before."""
-        wanted = {pair_of(a, b) for a, b in pairs}
+        """The announced pairs (names) plus, with continuity, each keyframe with the one before.
+        A set is taken as it is (its pairs sorted within, as PairStream.announced_names gives
+        them): a batch does not convert the whole session's pairs again."""
+        wanted = set(pairs) if isinstance(pairs, (set, frozenset)) else {pair_of(a, b) for a, b in pairs}
         if self.continuity:
             wanted |= set(continuity_pairs(keyframes))
         return wanted
@@ -344,7 +346,7 @@ class LiveWork:
         phases["matching"], t0 = time.monotonic() - t0, time.monotonic()
         missing = [k.name for k in keyframes if not project.has_image(k.name)]
         extracted = project.extracted()
-        matched = project.matched()
+        matched = set(project.matched())
         with project.db() as d:
             featureless = sorted(d.images_without_keypoints())
         wanted = set(final) | set(extra)
