@@ -18,6 +18,7 @@ import time
 from ..keyframes import pair_of
 from .. import geometry
 from . import database as db
+from . import durable
 from . import model as colmap_model
 from .catalogue import Catalogue
 from .process import Colmap, ColmapError
@@ -25,11 +26,12 @@ from .process import Colmap, ColmapError
 
 class ProjectError(Exception):
     """A project that cannot be kept: an unusable folder, COLMAP missing or failing (timed_out:
-    a COLMAP command was killed at its time limit)."""
+    a COLMAP command was killed at its time limit; out_of_time: the project's deadline passed,
+    which is no item's fault)."""
 
-    def __init__(self, message, timed_out=False):
+    def __init__(self, message, timed_out=False, out_of_time=False):
         super().__init__(message)
-        self.timed_out = timed_out
+        self.timed_out, self.out_of_time = timed_out, out_of_time
 
 
 class Timeouts:
@@ -48,23 +50,12 @@ class Timeouts:
 
 
 def write_json_atomically(path, data):
-    tmp = path + ".tmp"
-    with open(tmp, "w") as f:
-        json.dump(data, f, indent=2, sort_keys=True, default=str)
-        f.write("\n")
-    os.replace(tmp, path)
+    """`data` as JSON in `path`: written beside it, fsynced, renamed over it, the folder fsynced
+    (durable.write_atomically: the old report or the new, also after a power loss)."""
+    durable.write_atomically(path, json.dumps(data, indent=2, sort_keys=True, default=str) + "\n")
 
 
-def replace_folder(made, output):
-    """Moves `made` to `output`, replacing what was there (the old one stays until then)."""
-    old = None
-    if os.path.exists(output):
-        old = output + ".old.%d" % os.getpid()
-        os.rename(output, old)
-    os.makedirs(os.path.dirname(output), exist_ok=True)
-    shutil.move(made, output)
-    if old:
-        shutil.rmtree(old, ignore_errors=True)
+replace_folder = durable.replace_folder  # sparse/0 swapped in one step, never absent
 
 
 class ColmapProject:
@@ -77,7 +68,6 @@ class ColmapProject:
         self.threads = str(int(threads))
         self.timeouts = timeouts or Timeouts()
         self.init_pair = None  # (name, name): the mapper starts from these two images
-        self.cancelled = False
         self.deadline = None  # time.monotonic() by which every COLMAP call must be done, or None
         self.seconds = self.colmap.seconds  # per stage: extraction, matching, model
         self._catalogue = None  # what the database holds (catalogue.py), read at the first use
@@ -123,20 +113,38 @@ class ColmapProject:
         (a finish at shutdown has only so long)."""
         if self.cancelled:
             raise ProjectError("'%s' (%s) not started: the project's work was cancelled" % (args[0], stage))
+        cut = False
         if self.deadline is not None:
             left = self.deadline - time.monotonic()
             if left <= 1.0:
-                raise ProjectError("no time left for '%s' (%s)" % (args[0], stage))
-            timeout = min(timeout, left)
+                raise ProjectError("no time left for '%s' (%s)" % (args[0], stage), out_of_time=True)
+            cut, timeout = left < timeout, min(timeout, left)
         try:
             return self.colmap.run(args, stage, timeout)
         except ColmapError as e:
-            raise ProjectError(str(e), timed_out=e.timed_out)
+            raise ProjectError(str(e), timed_out=e.timed_out, out_of_time=e.timed_out and cut)
+
+    def check_deadline(self, stage):
+        """Raises ProjectError (out_of_time) once the project's deadline has passed: the in-process
+        loops (SIFT, guided matching, the live model) call it for each item, as run() bounds a
+        COLMAP command (one clock read)."""
+        if self.deadline is not None and time.monotonic() >= self.deadline:
+            raise ProjectError("out of time in %s: the finish's budget at shutdown is spent" % stage,
+                               out_of_time=True)
+
+    @property
+    def cancelled(self):
+        """Set by cancel(), kept until the caller clears it: no COLMAP command runs meanwhile
+        (the flag is the Colmap's, so a cancel between a check and a start is not lost)."""
+        return self.colmap.cancelled
+
+    @cancelled.setter
+    def cancelled(self, value):
+        self.colmap.cancelled = bool(value)
 
     def cancel(self):
         """Kills the COLMAP command running now (from another thread), and refuses to start
         another until `cancelled` is cleared; the one killed raises ProjectError."""
-        self.cancelled = True
         self.colmap.cancel()
 
     def has_image(self, name):
@@ -147,9 +155,9 @@ class ColmapProject:
         database has it, in order (what was done when; each appears once)."""
         if not items:
             return
-        with open(os.path.join(self.root, "ledger.txt"), "a") as f:
-            stamp = "%.3f" % time.time()
-            f.write("".join("%s %s %s\n" % (stamp, what, item) for item in items))
+        stamp = "%.3f" % time.time()
+        durable.append_durably(os.path.join(self.root, "ledger.txt"),
+                               "".join("%s %s %s\n" % (stamp, what, item) for item in items))
 
     def image_ids(self):
         return dict(self.catalogue().ids)

@@ -6,6 +6,7 @@ afterwards, so a batch that fails names its culprit.
 """
 import time
 
+from ..colmap import durable
 from ..colmap.project import ColmapProject, ProjectError
 from ..keyframes import continuity_pairs, pair_of
 from .attempts import Attempts
@@ -56,35 +57,88 @@ class LiveWork:
         del self.errors[:-20]
 
     # -- running COLMAP on a batch, with the culprit found --------------------------------------
-    def _attempt(self, items, run, done, attempts, kind, ledger_kind, budget=None):
+    # A run of several items that timed out names no culprit and charges nobody: its items are
+    # suspected and each is tried alone. Two runs alone in a row that time out say COLMAP hangs
+    # on everything now: the rest stay suspected, uncharged, for the next batch (so one call
+    # costs at most the batch's timeout and two single-item timeouts); so do four failures in a
+    # row of any kind (COLMAP failing on everything: a run each would cost n runs, not log n).
+    ALONE_TIMEOUTS_IN_A_ROW = 2
+    ALONE_FAILURES_IN_A_ROW = 4
+
+    def _attempt(self, items, run, done, attempts, kind, ledger_kind):
         """Runs `run(items)`; the items `done()` does not list afterwards failed; returns them.
 
-        When the run itself failed (COLMAP exited non-zero) with several items, each half is
-        tried on its own, so one bad item costs its neighbours nothing (about 2 log2 n runs). The
-        halving has a budget of runs (2 log2 n + 2): when COLMAP fails on everything, the rest are
-        recorded as failed without running. A run that timed out is not halved: a hung COLMAP
-        would cost a timeout per half."""
-        if budget is None:
-            budget = [2 * max(1, len(items) - 1).bit_length() + 2]
-        error, timed_out = None, False
+        Items suspected before (a failure, or a run that hung) are each tried alone; the others
+        in one run. When that run fails (COLMAP exited non-zero) with several items, each half
+        is tried on its own, so one bad item costs its neighbours nothing (about 2 log2 n runs;
+        the halving has a budget of 2 log2 n + 2 runs: when COLMAP fails on everything, the rest
+        are charged without running). When a run of several times out, it is not halved (a
+        hung COLMAP would cost a timeout per half): its items are suspected, not charged, and
+        each is tried alone, so an item that hangs COLMAP every time is the only one charged
+        (issue 35: it took up to 23 neighbours with it)."""
+        alone = [i for i in items if attempts.suspect(i)]
+        batch = [i for i in items if not attempts.suspect(i)]
+        failed = []
+        if batch:
+            budget = [2 * max(1, len(batch) - 1).bit_length() + 2]
+            failed += self._halving(batch, run, done, attempts, kind, ledger_kind, budget, alone)
+        timeouts, failures = 0, 0  # in a row
+        for n, i in enumerate(alone):
+            if (self.project.cancelled or timeouts >= self.ALONE_TIMEOUTS_IN_A_ROW
+                    or failures >= self.ALONE_FAILURES_IN_A_ROW):
+                failed += alone[n:]  # not tried now (a suspect from a hang stays uncharged)
+                break
+            f, error, timed_out = self._run([i], run, done, attempts)
+            timeouts = timeouts + 1 if timed_out else 0
+            failures = failures + 1 if f else 0
+            self._charge(f, error, attempts, kind, ledger_kind)
+            failed += f
+        return failed
+
+    def _halving(self, items, run, done, attempts, kind, ledger_kind, budget, hung):
+        """_attempt's batch: run, halved where it fails; the items of a run of several that timed
+        out are suspected and go to `hung` (tried alone by the caller); returns the items
+        charged."""
         if budget[0] <= 0:
-            error = "not tried: COLMAP failed on the whole batch"
+            failed, error, timed_out = list(items), "not tried: COLMAP failed on the whole batch", False
         else:
             budget[0] -= 1
-            try:
-                run(items)
-            except ProjectError as e:
-                error, timed_out = str(e), getattr(e, "timed_out", False)
-                self.error(error)
+            failed, error, timed_out = self._run(items, run, done, attempts)
+        if timed_out and len(failed) > 1 and not self.project.cancelled:
+            for i in failed:
+                attempts.suspected(i)
+            hung += failed
+            return []
+        if error is not None and len(failed) > 1 and budget[0] > 0 and not self.project.cancelled:
+            half = len(failed) // 2
+            return (self._halving(failed[:half], run, done, attempts, kind, ledger_kind, budget, hung) +
+                    self._halving(failed[half:], run, done, attempts, kind, ledger_kind, budget, hung))
+        self._charge(failed, error, attempts, kind, ledger_kind)
+        return failed
+
+    def _run(self, items, run, done, attempts):
+        """One run of `run(items)`: (the items done() does not list afterwards, the error or None,
+        whether it timed out). What is done is forgiven."""
+        error, timed_out = None, False
+        try:
+            run(items)
+        except ProjectError as e:
+            if getattr(e, "out_of_time", False):
+                raise  # the finish's budget is spent: no item's fault, and nothing more is tried
+            error, timed_out = str(e), getattr(e, "timed_out", False)
+            self.error(error)
         now = done()
         for i in items:
             if i in now:
                 attempts.succeeded(i)
-        failed = [i for i in items if i not in now]
-        if error is not None and len(failed) > 1 and not timed_out and budget[0] > 0 and not self.project.cancelled:
-            half = len(failed) // 2
-            return (self._attempt(failed[:half], run, done, attempts, kind, ledger_kind, budget) +
-                    self._attempt(failed[half:], run, done, attempts, kind, ledger_kind, budget))
+        return [i for i in items if i not in now], error, timed_out
+
+    def _charge(self, failed, error, attempts, kind, ledger_kind):
+        """A failure for each item (its own reason where the backend knows it); an item that
+        reaches ~max_attempts is given up, ledgered and logged. A run the shutdown cancelled
+        charges nobody."""
+        if error is not None and self.project.cancelled:
+            return
         default = error or ("no features were extracted (an image that cannot be read?)" if kind == "image"
                             else "no two-view geometry was written for it")
         errors = getattr(self.backend, "errors", None) or {}
@@ -94,7 +148,6 @@ class LiveWork:
                 label = i if isinstance(i, str) else "%s %s" % i
                 self.project.ledger(ledger_kind, [label])
                 self.error("%s %s skipped after %d attempts: %s" % (kind, label, attempts.failures[i], reason))
-        return failed
 
     # -- features ----------------------------------------------------------------------------
     def extract(self, keyframes):
@@ -184,11 +237,13 @@ class LiveWork:
         cat = self.project.catalogue()  # what the database holds, in memory: no table is read whole
         ids, cams, cameras, with_features = cat.ids, cat.image_cameras, cat.cameras, cat.with_features
         self.unfed_pairs.extend(cat.take_new_verified())
+        check = getattr(self.project, "check_deadline", lambda stage: None)
         with self.project.db() as d:
             fed = self.fed_keyframes
             for k in keyframes:
                 if fed.get(k.name) is k:
                     continue  # the same keyframe object as at its last update: nothing changed
+                check("triangulation")
                 iid = ids.get(k.name)
                 if iid is None:
                     continue
@@ -209,14 +264,20 @@ class LiveWork:
             # The pairs that verified since the last update; one whose image the model does not
             # have yet (its keyframe not announced, or no features) waits for it.
             waiting = []
-            for a, b in self.unfed_pairs:
+            for n, (a, b) in enumerate(self.unfed_pairs):
                 if (a, b) in m.matched_pairs:
                     continue
+                try:
+                    check("triangulation")
+                except ProjectError:
+                    self.unfed_pairs = waiting + self.unfed_pairs[n:]  # they wait for the next time
+                    raise
                 if a in m.images and b in m.images:
                     m.add_matches(a, b, d.matches(a, b, "two_view_geometries"))
                 else:
                     waiting.append((a, b))
             self.unfed_pairs = waiting
+        check("triangulation")
         changed = m.update(final=final)
         self.status.update(points=len(m.points), tracks=len(m.members))
         return changed
@@ -269,9 +330,8 @@ class LiveWork:
         project = self.project
         final = sorted({pair_of(*p) for p in final_pairs})
         extra = sorted(set(continuity_pairs(keyframes)) - set(final)) if self.continuity else []
-        with open(os.path.join(project.root, "pairs.txt.tmp"), "w") as f:  # COLMAP's match list
-            f.write("".join("%s %s\n" % p for p in final))
-        os.replace(os.path.join(project.root, "pairs.txt.tmp"), os.path.join(project.root, "pairs.txt"))
+        durable.write_atomically(os.path.join(project.root, "pairs.txt"),  # COLMAP's match list
+                                 "".join("%s %s\n" % p for p in final))
         # Everything due now, in one run each (halved where a run fails): the finish does not
         # wait for backoffs, and what fails now is reported as skipped.
         for attempts in (self.images, self.pairs):
@@ -279,10 +339,18 @@ class LiveWork:
         import time
         phases, t0 = {}, time.monotonic()
         made = None  # the live model written, when it is
-        self.extract(keyframes)
-        phases["extraction"], t0 = time.monotonic() - t0, time.monotonic()
-        self.match_all(keyframes, final, progress=(lambda done, total: progress("matching", done, total))
-                       if progress else None)
+        # Out of time (the shutdown's budget, project.deadline): what is done so far is the
+        # model, written as it stands, unrefined, and report.json says so (complete: false).
+        incomplete = None
+        try:
+            self.extract(keyframes)
+            phases["extraction"], t0 = time.monotonic() - t0, time.monotonic()
+            self.match_all(keyframes, final, progress=(lambda done, total: progress("matching", done, total))
+                           if progress else None)
+        except ProjectError as e:
+            if not e.out_of_time:
+                raise
+            incomplete = str(e)
         phases["matching"], t0 = time.monotonic() - t0, time.monotonic()
         missing = [k.name for k in keyframes if not project.has_image(k.name)]
         extracted = project.extracted()
@@ -317,8 +385,14 @@ class LiveWork:
                                    "(the node keeps earlier keyframes' images only with ~save_keyframe_images)"
                                    % (len(have), len(keyframes), project.images))
             if self.model is not None:
-                with self.clock.measure("triangulation", 1):
-                    out["tracks_triangulated_at_finish"] = self.feed_model(keyframes, final=True)
+                if incomplete is None:
+                    try:
+                        with self.clock.measure("triangulation", 1):
+                            out["tracks_triangulated_at_finish"] = self.feed_model(keyframes, final=True)
+                    except ProjectError as e:
+                        if not e.out_of_time:
+                            raise
+                        incomplete = str(e)
                 phases["triangulation"], t0 = time.monotonic() - t0, time.monotonic()
                 with project.db() as d:
                     ids = d.image_ids()
@@ -341,7 +415,12 @@ class LiveWork:
                     out["model_error"] = "%s: the model holds the keyframes' poses and no points" % e
                     self.error(out["model_error"])
                     path = project.poses_only_model(have)
-        if self.refinement is not None and model != "mapper" and "model_error" not in out:
+        out["complete"] = incomplete is None
+        if incomplete is not None:
+            out["incomplete"] = ("%s: the model is the live model as it stood (the keyframes and points it had), "
+                                 "not refined" % incomplete)
+            self.error(out["incomplete"])
+        elif self.refinement is not None and model != "mapper" and "model_error" not in out:
             out["refinement"] = self.refinement.apply(project, path)  # issue 29: sparse/0 refined
             made = None  # the statistics are the refined model's, read from sparse/0
             phases["refinement"], t0 = time.monotonic() - t0, time.monotonic()

@@ -65,6 +65,7 @@ class PoseGuidedBackend:
         self.errors = {}              # item -> why it failed in the last run
         self.warnings = []            # what the last run did that a user should know
         self.paths = {}               # pair -> PairResult.summary()
+        self._path_totals = collections.Counter()  # path -> pairs: the diagnostics' figures, kept as they change
         self.clock = StageClock()
 
     # -- what the project has ----------------------------------------------------------------
@@ -89,10 +90,16 @@ class PoseGuidedBackend:
         self.register(keyframes)
         self.errors, self.warnings = {}, []
         made = {}
+        stop = None  # out of time: what was made is written, then it is raised
         with self.clock.measure("extraction", len(keyframes)):
             for k in keyframes:
                 if self.project.cancelled:
                     raise ProjectError("extraction cancelled")
+                try:
+                    self.project.check_deadline("extraction")
+                except ProjectError as e:
+                    stop = e
+                    break
                 try:
                     made[k.name] = self.extractor.extract_file(os.path.join(self.project.images, k.name))
                 except (ValueError, OSError) as e:
@@ -109,6 +116,8 @@ class PoseGuidedBackend:
         for name, features in made.items():
             self._remember(name, features)
         self.project.ledger("extracted", list(made))
+        if stop is not None:
+            raise stop
         return len(keyframes)
 
     def _remember(self, name, features):
@@ -134,18 +143,24 @@ class PoseGuidedBackend:
         pairs = [pair_of(*p) for p in pairs]
         self.errors = {}
         fallback, written = [], []
+        stop = None  # out of time: the pairs matched so far are committed, then it is raised
         with self.clock.measure("guided_matching", len(pairs)):
             ids = self.project.catalogue().ids
             with self.project.db() as d:
                 for a, b in pairs:
                     if self.project.cancelled:
                         raise ProjectError("matching cancelled")
+                    try:
+                        self.project.check_deadline("matching")
+                    except ProjectError as e:
+                        stop = e
+                        break
                     ka, kb = self.keyframes.get(a), self.keyframes.get(b)
                     if ka is None or kb is None:
                         self.errors[(a, b)] = "no pose for %s" % (a if ka is None else b)
                         continue
                     result = guided.match_pair(self.features(a, d), self.features(b, d), ka, kb, self.options)
-                    self.paths[(a, b)] = result.summary()
+                    self._count_path((a, b), result.summary())
                     if result.path == guided.FALLBACK:
                         fallback.append((a, b))
                         continue
@@ -156,12 +171,26 @@ class PoseGuidedBackend:
                     written.append(((a, b), len(g.inliers)))
             for pair, rows in written:  # after the commit: the catalogue holds what the database does
                 self.project.catalogue().geometry_written(pair, rows)
-        done = [p for p in pairs if p not in fallback and p not in self.errors]
-        self.project.ledger("matched", ["%s %s" % p for p in done])
+        self.project.ledger("matched", ["%s %s" % p for p, _ in written])
+        if stop is not None:
+            raise stop
         if fallback:
             with self.clock.measure("fallback_matching", len(fallback)):
                 self.project.match(fallback)  # COLMAP's own; it writes the ledger
         return len(pairs)
+
+    def _count_path(self, pair, summary):
+        old = self.paths.get(pair)
+        if old is not None:
+            self._path_totals[old["path"]] -= 1
+        self.paths[pair] = summary
+        self._path_totals[summary["path"]] += 1
+
+    def path_totals(self):
+        """{'guided': n, 'fallback': n} of the pairs matched so far, without looking at each pair
+        (the diagnostics ask once a second; path_counts() formats every pair)."""
+        totals = dict(self._path_totals)
+        return {"guided": totals.get(guided.GUIDED, 0), "fallback": totals.get(guided.FALLBACK, 0)}
 
     def path_counts(self):
         """Which path the pairs matched so far took: {'guided': n, 'fallback': n}, the fallbacks'

@@ -369,7 +369,9 @@ class LiveBridge(unittest.TestCase):
     def test_model_has_every_keyframe_at_its_pose(self):
         """sparse/unrefined: every keyframe at its node pose. sparse/0, the refined model (issue
         29): every keyframe, and since this node's poses are exact, corrections within what the
-        refinement's own precision allows (measured: 1-3 mm of ATE on the built-in sequence)."""
+        refinement's own precision allows: measured here (two runs, the same figures) at most
+        6.5 mm and 0.71 deg, median 3.4 mm and 0.60 deg; the limits are 1.5 times those (the
+        largest rotation's 1 deg, 1.4 times)."""
         poses = model_poses(self.colmap, os.path.join(self.a, 'sparse', 'unrefined'), os.path.join(self.tmp, 'model_txt'))
         refined = model_poses(self.colmap, os.path.join(self.a, 'sparse', '0'), os.path.join(self.tmp, 'refined_txt'))
         for k in self.selection.keyframes:
@@ -385,9 +387,14 @@ class LiveBridge(unittest.TestCase):
         r = report['refinement']
         self.assertTrue(r['refined'], r)
         self.assertEqual({k.image_name for k in self.selection.keyframes}, {k['name'] for k in r['keyframes']})
+        rospy.loginfo('refinement with exact poses: the largest correction %.5f m, %.4f deg; median %.5f m, %.4f deg',
+                      max(k['translation'] for k in r['keyframes']), max(k['rotation_deg'] for k in r['keyframes']),
+                      r['translation_median'], r['rotation_median_deg'])
         for k in r['keyframes']:
-            self.assertLess(k['translation'], 0.02, k)
-            self.assertLess(k['rotation_deg'], 1.0, k)
+            self.assertLess(k['translation'], 1.5 * 0.0065, k)
+            self.assertLess(k['rotation_deg'], 1.0, k)  # 1.4 times the measured 0.71
+        self.assertLess(r['translation_median'], 1.5 * 0.0034, r['translation_median'])
+        self.assertLess(r['rotation_median_deg'], 1.5 * 0.60, r['rotation_median_deg'])
 
     def test_offline_gives_the_same_model(self):
         """colmap_from_selection --model known_poses on the node's ~export of the same keyframes
