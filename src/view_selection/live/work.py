@@ -288,7 +288,7 @@ class LiveWork:
         return {"images": images, "pairs": [dict(s, item="%s %s" % s["item"]) for s in pairs]}
 
     # -- the model ---------------------------------------------------------------------------
-    def lost_pairs(self, wanted, matched, extracted, missing):
+    def lost_pairs(self, wanted, matched, extracted, missing, stopped=None):
         """[{'pair': 'a b', 'reason'}] of the wanted pairs that were not matched at all (a pair
         matched and found not to verify is not lost: COLMAP's verification said no), each with
         why: an image missing or without features, the pair given up after its attempts, or not
@@ -309,6 +309,8 @@ class LiveWork:
                 error = self.pairs.errors.get(pair)
                 if error is not None:
                     reason = "failed %d time(s): %s" % (self.pairs.failures.get(pair, 0), error)
+                elif stopped:
+                    reason = "not tried: %s" % stopped
                 elif self.project.cancelled:
                     reason = "not tried: the work was cancelled"
                 else:
@@ -358,7 +360,7 @@ class LiveWork:
         with project.db() as d:
             featureless = sorted(d.images_without_keypoints())
         wanted = set(final) | set(extra)
-        lost = self.lost_pairs(wanted, matched, extracted, missing)
+        lost = self.lost_pairs(wanted, matched, extracted, missing, stopped=incomplete)
         if lost:
             self.error("%d of %d wanted pairs are not in the model (report.json: pairs_lost), e.g. %s: %s"
                        % (len(lost), len(wanted), lost[0]["pair"], lost[0]["reason"]))
