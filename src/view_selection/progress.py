@@ -83,8 +83,10 @@ class Progress:
 
     def note(self, text):
         """A line from elsewhere (e.g. refine_model's own progress), under the same rules; it
-        belongs to the stage under way (or starts one of its own, which ends without a line)."""
+        ends the stage under way and starts one of its own, which ends without a line."""
         now = self.clock()
+        if self.stage:
+            self.end()
         if self.stage is None:
             self.stage, self.unit, self.started, self.stage_shown, self.total = "", "", now, False, 0
         if self._due(now):

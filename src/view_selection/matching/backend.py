@@ -55,7 +55,9 @@ class StageClock:
 
 
 class PoseGuidedBackend:
-    def __init__(self, project, extractor=None, options=None, cache_images=64):
+    def __init__(self, project, extractor=None, options=None, cache_images=64, progress=None):
+        """progress: called as progress(stage, done, total, unit) while images are extracted
+        and pairs matched (view_selection.progress.Progress.report), or None."""
         self.project = project
         self.extractor = extractor or SiftExtractor()
         self.options = options or guided.GuidedOptions()
@@ -66,6 +68,7 @@ class PoseGuidedBackend:
         self.warnings = []            # what the last run did that a user should know
         self.paths = {}               # pair -> PairResult.summary()
         self.clock = StageClock()
+        self.progress = progress or (lambda stage, done, total, unit: None)
 
     # -- what the project has ----------------------------------------------------------------
     def register(self, keyframes):
@@ -90,7 +93,8 @@ class PoseGuidedBackend:
         self.errors, self.warnings = {}, []
         made = {}
         with self.clock.measure("extraction", len(keyframes)):
-            for k in keyframes:
+            for q, k in enumerate(keyframes):
+                self.progress("extracting features", q, len(keyframes), "images")
                 if self.project.cancelled:
                     raise ProjectError("extraction cancelled")
                 try:
@@ -105,6 +109,7 @@ class PoseGuidedBackend:
                 ids = d.image_ids()
                 for name, features in made.items():
                     d.write_features(ids[name], *features.to_colmap())
+        self.progress("extracting features", len(keyframes), len(keyframes), "images")
         for name, features in made.items():
             self._remember(name, features)
         self.project.ledger("extracted", list(made))
@@ -136,7 +141,8 @@ class PoseGuidedBackend:
         with self.clock.measure("guided_matching", len(pairs)):
             with self.project.db() as d:
                 ids = d.image_ids()
-                for a, b in pairs:
+                for q, (a, b) in enumerate(pairs):
+                    self.progress("matching", q, len(pairs), "pairs")
                     if self.project.cancelled:
                         raise ProjectError("matching cancelled")
                     ka, kb = self.keyframes.get(a), self.keyframes.get(b)
@@ -151,11 +157,14 @@ class PoseGuidedBackend:
                     d.write_matches(ids[a], ids[b], result.matches)
                     d.write_two_view_geometry(ids[a], ids[b], result.inliers, db.CALIBRATED, F=result.F, E=result.E,
                                               qvec=_quaternion(result.R), tvec=result.t)
+        self.progress("matching", len(pairs), len(pairs), "pairs")
         done = [p for p in pairs if p not in fallback and p not in self.errors]
         self.project.ledger("matched", ["%s %s" % p for p in done])
         if fallback:
             with self.clock.measure("fallback_matching", len(fallback)):
+                self.progress("matching by COLMAP's matcher", 0, len(fallback), "pairs")  # one run: no count between
                 self.project.match(fallback)  # COLMAP's own; it writes the ledger
+                self.progress("matching by COLMAP's matcher", len(fallback), len(fallback), "pairs")
         return len(pairs)
 
     def path_counts(self):
