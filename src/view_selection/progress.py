@@ -10,6 +10,7 @@ The estimate is the stage's mean rate so far: elapsed / done x (total - done). T
 injected (a function returning seconds, time.monotonic by default), so the rules are tested
 without sleeping.
 """
+import math
 import sys
 import time
 
@@ -20,10 +21,11 @@ TERMINAL_INTERVAL = 0.25
 
 def duration_text(seconds):
     """'40 s', '12 min', '2.5 h': as precise as an estimate deserves."""
+    half_up = lambda x: int(math.floor(x + 0.5))  # as C++'s lround, not Python's half-to-even
     if seconds < 90:
-        return "%d s" % max(1, round(seconds))
+        return "%d s" % max(1, half_up(seconds))
     if seconds < 90 * 60:
-        return "%d min" % round(seconds / 60.0)
+        return "%d min" % half_up(seconds / 60.0)
     return "%.1f h" % (seconds / 3600.0)
 
 

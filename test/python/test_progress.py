@@ -49,7 +49,7 @@ def test_the_estimate_is_the_stages_mean_rate():
     assert p.line() == "matching 1200/2885 pairs, about 84 min left"
     p.report("matching", 1201, 2885, "pairs")
     assert p.line() == "matching 1201/2885 pairs, about 84 min left"
-    assert duration_text(0.2) == "1 s" and duration_text(89) == "89 s" and duration_text(150) == "2 min"
+    assert duration_text(0.2) == "1 s" and duration_text(89) == "89 s" and duration_text(150) == "3 min"
     assert duration_text(5400) == "1.5 h"
 
 
