@@ -25,8 +25,11 @@ def listing(folder):
 
 def a_model(points=True):
     m = colmap_model.Model({1: colmap_model.Camera(1, "PINHOLE", 64, 48, [50.0, 50.0, 32.0, 24.0])})
-    for iid in (1, 2, 3):
-        m.images[iid] = colmap_model.Image(iid, (1.0, 0.0, 0.0, 0.0), (-0.1 * iid, 0.0, 0.0), 1, "rgb/%d.png" % iid)
+    for iid in (1, 2, 3):  # 1 and 2 see the points, 3 sees none
+        seen = points and iid < 3
+        m.images[iid] = colmap_model.Image(iid, (1.0, 0.0, 0.0, 0.0), (-0.1 * iid, 0.0, 0.0), 1, "rgb/%d.png" % iid,
+                                           np.full((8, 2), 10.0) if seen else None,
+                                           np.arange(1, 9) if seen else None)
     if points:
         for pid in range(1, 9):
             m.points[pid] = colmap_model.Point3D(pid, (0.01 * pid, 0.02, 2.0), (128, 128, 128), 0.25 * (pid % 3),
@@ -87,7 +90,7 @@ def test_a_project_is_summarised_from_its_model_and_report(tmp_path, capsys):
     assert code == 0, err
     # The model's own figures: 3 images, 8 points, the mean of the points' errors.
     mean = np.mean([0.25 * (pid % 3) for pid in range(1, 9)])
-    assert "keyframes   3 of 4 in the model, 8 3D points, mean reprojection error %.2f px" % mean in out
+    assert "keyframes   3 of 4 in the model (2 see its points), 8 3D points, mean reprojection error %.2f px" % mean in out
     assert "2 guided by the poses, 1 by COLMAP's matcher" in out
     assert "1 image: rgb/4.png (cannot read rgb/4.png)" in out
     assert "1 pair: rgb/1.png rgb/3.png (matches_importer exit 3)" in out

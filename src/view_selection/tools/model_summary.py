@@ -104,9 +104,11 @@ def summary_lines(project):
         how += ", refined"
     lines.append("model       %s (%s)" % (project.model_path, how))
     given = r.get("keyframes")
-    lines.append("keyframes   %d%s in the model, %d 3D points, mean reprojection error %.2f px, mean track "
-                 "length %.1f" % (stats["registered"], " of %d" % given if given is not None else "", stats["points"],
-                                  stats["reprojection_error"], stats["track_length"]))
+    seeing = sum(1 for im in model.images.values() if (im.point3D_ids >= 0).any())
+    lines.append("keyframes   %d%s in the model (%d see its points), %d 3D points, mean reprojection error %.2f px, "
+                 "mean track length %.1f" % (stats["registered"], " of %d" % given if given is not None else "",
+                                             seeing, stats["points"], stats["reprojection_error"],
+                                             stats["track_length"]))
     m = r.get("matching") or {}
     paths = ("%d guided by the poses, %d by COLMAP's matcher" % (m.get("guided", 0), m.get("fallback", 0)) if m
              else "all by COLMAP's matcher")
