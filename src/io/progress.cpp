@@ -43,7 +43,7 @@ void Progress::report(const std::string& stage, size_t done, size_t total, const
                       const std::string& detail) {
   if (!out_) return;
   const double now = clock_();
-  if (!active_ || stage != stage_) {
+  if (!active_ || stage != stage_ || done < done_) {  // a count that went back: the work run again
     end();
     stage_ = stage;
     unit_ = unit;
@@ -54,9 +54,10 @@ void Progress::report(const std::string& stage, size_t done, size_t total, const
   done_ = done;
   total_ = std::max(total, done);
   detail_ = detail;
-  if (due(now)) {
+  const bool complete = done_ >= total_;
+  if (due(now) || (complete && stage_shown_ && !shown_complete_)) {  // the whole count shows at once
     show(now);
-    shown_complete_ = done_ >= total_;
+    shown_complete_ = complete;
   }
 }
 

@@ -73,15 +73,19 @@ class Progress:
 
     # -- reporting ---------------------------------------------------------------------------
     def report(self, stage, done, total, unit=""):
+        """The work so far. A new stage name, or a count that went back (the same work run again
+        on another batch), starts a new estimate. The stage's whole count shows its last line at
+        once (when anything of it was shown)."""
         now = self.clock()
-        if stage != self.stage:
+        if stage != self.stage or done < self.done:
             self.end()
             self.stage, self.unit, self.started, self.stage_shown = stage, unit, now, False
             self.shown_complete = False
         self.done, self.total = int(done), max(int(total), int(done))
-        if self._due(now):
+        complete = self.done >= self.total
+        if self._due(now) or (complete and self.stage_shown and not self.shown_complete):
             self._show(self.line(now), now)
-            self.shown_complete = self.done >= self.total
+            self.shown_complete = complete
 
     def note(self, text):
         """A line from elsewhere (e.g. refine_model's own progress), under the same rules; it

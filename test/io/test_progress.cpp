@@ -130,6 +130,26 @@ TEST(Progress, ANewStageStartsANewEstimate) {
                                       "matching 10/10 pairs, 11 s"}));
 }
 
+TEST(Progress, TheWholeCountShowsAtOnceAndACountThatGoesBackStartsAgain) {
+  Fixture f;
+  Progress p = f.progress(false);
+  for (size_t done = 0; done <= 12; ++done) {  // 12 images, 1 s each: a line at 10 s, and the last at once
+    p.report("extracting features", done, 12, "images");
+    f.now += 1.0;
+  }
+  EXPECT_EQ(lines(f.out.str()), (std::vector<std::string>{"extracting features 10/12 images, about 2 s left",
+                                                          "extracting features 12/12 images, 12 s"}));
+  for (size_t done = 0; done <= 4; ++done) {  // the same stage again on another batch: a new estimate from 0
+    p.report("extracting features", done, 4, "images");
+    f.now += 4.0;
+  }
+  p.end();
+  EXPECT_EQ(lines(f.out.str()),
+            (std::vector<std::string>{"extracting features 10/12 images, about 2 s left",
+                                      "extracting features 12/12 images, 12 s", "extracting features 3/4 images, about 4 s left",
+                                      "extracting features 4/4 images, 16 s"}));
+}
+
 TEST(Progress, ClearEndsTheDrawnLineBeforeOtherOutput) {
   Fixture f;
   Progress p = f.progress(true);

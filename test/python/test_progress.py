@@ -111,3 +111,18 @@ def test_clear_ends_the_drawn_line_before_other_output():
     p.report("matching", 5, 10, "pairs")
     assert out.getvalue() == "\rmatching 4/10 pairs, about 3 s left\033[K\na log line\n" \
                              "\rmatching 5/10 pairs, about 3 s left\033[K"
+
+
+def test_the_whole_count_shows_at_once_and_a_count_that_goes_back_starts_again():
+    p, clock, out = reporter(False)
+    for done in range(0, 13):  # 12 images, 1 s each: a line at 10 s, and the last at once
+        p.report("extracting features", done, 12, "images")
+        clock.now += 1.0
+    assert out.getvalue().splitlines() == ["extracting features 10/12 images, about 2 s left",
+                                           "extracting features 12/12 images, 12 s"]
+    for done in range(0, 5):  # the same stage again on another batch: a new estimate from 0
+        p.report("extracting features", done, 4, "images")
+        clock.now += 4.0
+    p.end()
+    assert out.getvalue().splitlines()[2:] == ["extracting features 3/4 images, about 4 s left",
+                                               "extracting features 4/4 images, 16 s"]

@@ -36,8 +36,10 @@ class Progress {
   /// A reporter that shows nothing.
   static Progress silent();
 
-  /// The work so far; a new `stage` starts a new estimate (and ends the stage before). `detail`
-  /// follows the count ("1200/5000 frames (312 keyframes)").
+  /// The work so far. A new `stage`, or a count that went back (the same work run again on
+  /// another batch), starts a new estimate and ends the stage before. The stage's whole count
+  /// shows its last line at once (when anything of it was shown). `detail` follows the count
+  /// ("1200/5000 frames (312 keyframes)").
   void report(const std::string& stage, size_t done, size_t total, const std::string& unit = "",
               const std::string& detail = "");
   /// The stage's last line, when anything of it was shown (and not its whole count already);
