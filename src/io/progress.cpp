@@ -63,10 +63,11 @@ void Progress::report(const std::string& stage, size_t done, size_t total, const
 
 void Progress::end() {
   if (!out_) return;
-  if (active_ && stage_shown_ && !shown_complete_) {
-    done_ = total_;
+  if (active_ && stage_shown_ && !shown_complete_) {  // how far it got ("1/4 rounds": it ended early)
     detail_.clear();
+    final_ = true;
     show(clock_());
+    final_ = false;
   }
   clear();
   active_ = stage_shown_ = shown_complete_ = false;
@@ -87,7 +88,7 @@ std::string Progress::line() const {
   std::string text = stage_ + " " + std::to_string(done_) + "/" + std::to_string(total_);
   if (!unit_.empty()) text += " " + unit_;
   if (!detail_.empty()) text += " (" + detail_ + ")";
-  if (done_ >= total_)
+  if (final_ || done_ >= total_)
     text += ", " + durationText(clock_() - started_);
   else if (const auto left = estimate())
     text += ", about " + durationText(*left) + " left";

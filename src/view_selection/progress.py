@@ -53,12 +53,13 @@ class Progress:
         self.on_line = False      # a terminal line is drawn and not ended
 
     # -- what the line says ------------------------------------------------------------------
-    def line(self, now=None):
-        """'matching 1200/2885 pairs, about 40 s left' for the stage as it is."""
+    def line(self, now=None, final=False):
+        """'matching 1200/2885 pairs, about 40 s left' for the stage as it is; `final`, or with
+        the whole count: the time it took instead ('matching 1/4 rounds, 43 s': it ended early)."""
         now = self.clock() if now is None else now
         text = "%s %d/%d%s" % (self.stage, self.done, self.total, " " + self.unit if self.unit else "")
         left = self.estimate(now)
-        if self.done >= self.total:
+        if final or self.done >= self.total:
             text += ", %s" % duration_text(now - self.started)
         elif left is not None:
             text += ", about %s left" % duration_text(left)
@@ -101,10 +102,9 @@ class Progress:
 
     def end(self):
         """The stage's last line, when the stage was shown at all (and its last line was not the
-        complete count already); then a new line."""
+        complete count already): how far it got and the time it took; then a new line."""
         if self.stage and self.stage_shown and not self.shown_complete:
-            self.done = self.total
-            self._show(self.line(), self.clock())
+            self._show(self.line(final=True), self.clock())
         self.clear()
         self.stage, self.stage_shown = None, False
 

@@ -42,8 +42,9 @@ class Progress {
   /// ("1200/5000 frames (312 keyframes)").
   void report(const std::string& stage, size_t done, size_t total, const std::string& unit = "",
               const std::string& detail = "");
-  /// The stage's last line, when anything of it was shown (and not its whole count already);
-  /// then the line is ended.
+  /// The stage's last line, when anything of it was shown (and not its whole count already):
+  /// how far it got and the time it took ("1/4 rounds, 43 s": it ended early); then the line
+  /// is ended.
   void end();
   /// Ends the line drawn in place, so that what is printed next starts on its own.
   void clear();
@@ -70,6 +71,7 @@ class Progress {
   bool stage_shown_ = false;     ///< a line of this stage was shown
   bool shown_complete_ = false;  ///< ... and the last one had the whole count
   bool on_line_ = false;         ///< a line is drawn in place and not ended
+  bool final_ = false;           ///< the line being shown is the stage's last
 };
 
 }  // namespace view_selection::io

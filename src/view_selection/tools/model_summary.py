@@ -112,9 +112,10 @@ def summary_lines(project):
     m = r.get("matching") or {}
     paths = ("%d guided by the poses, %d by COLMAP's matcher" % (m.get("guided", 0), m.get("fallback", 0)) if m
              else "all by COLMAP's matcher")
-    lines.append("pairs       %d matched (%s), %d verified in the database, %d wasted (matched, not wanted at "
-                 "the end)" % (project.counts["pairs_with_geometry"], paths, project.counts["pairs_verified"],
-                               r.get("pairs_wasted", 0)))
+    wanted = r.get("final_pairs", 0) + r.get("continuity_pairs", 0)
+    lines.append("pairs       %d matched%s (%s), %d verified in the database, %d wasted (matched, not wanted at "
+                 "the end)" % (project.counts["pairs_with_geometry"], " of %d wanted" % wanted if wanted else "", paths,
+                               project.counts["pairs_verified"], r.get("pairs_wasted", 0)))
     if m.get("band_px"):
         lines.append("            guided search band median %.1f px, 90th percentile %.1f px"
                      % (m["band_px"]["median"], m["band_px"]["p90"]))
