@@ -1,7 +1,7 @@
 """model_summary on folders that are not a finished project: a clear error, exit 1 and nothing
 written (no model.png, no file touched); and on a small project written here, the figures come
 from sparse/0 and the report's skipped items are named. The run on a real project with COLMAP is
-in test/python_colmap/test_model_summary.py."""
+in test/python_colmap/test_model_summary_real.py."""
 import json
 import os
 
