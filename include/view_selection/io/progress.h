@@ -31,6 +31,11 @@ class Progress {
   /// Reports to `out`: rewritten in place when `terminal`, else plain lines every `interval` s.
   Progress(std::ostream& out, bool terminal, std::function<double()> clock = steadySeconds,
            double interval = kLogInterval, double redraw = kTerminalInterval);
+  /// Ends a line drawn in place (an error thrown through the work then starts on its own line).
+  ~Progress() { clear(); }
+  Progress(const Progress&) = default;
+  Progress& operator=(const Progress&) = default;
+
   /// Reports to stderr, in place when stderr is a terminal (isatty); `enabled` false: silent.
   static Progress toStderr(bool enabled = true, double interval = kLogInterval);
   /// A reporter that shows nothing.
