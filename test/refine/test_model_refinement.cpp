@@ -15,6 +15,8 @@
 #include <fstream>
 #include <map>
 #include <random>
+#include <set>
+#include <sstream>
 
 namespace {
 
@@ -209,6 +211,35 @@ TEST_F(Refinement, DriftedPosesComeCloserToTheExactOnes) {
   // Every track names 2D points that point back at it (a model COLMAP reads).
   for (const auto& [id, p] : out.points)
     for (const auto& e : p.track) EXPECT_EQ(id, out.images.at(e.image_id).points2D[static_cast<size_t>(e.point2D_idx)].point3D_id);
+}
+
+TEST_F(Refinement, ProgressNamesEachStageAndChangesNothing) {
+  // refine_model's progress: each adjustment's rounds (and Ceres' iterations) under its pass and
+  // stage; the refinement with a reporter is the one without (one thread: the same solves).
+  std::vector<refine::Match> matches;
+  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.0, 4.0, &matches);
+  refine::RefinementConfig config;
+  config.threads = 1;
+  refine::RefinementReport quiet, reported;
+  const io::ColmapModel plain = refine::refineModel(input, refine::allImages(input), config, &quiet, nullptr, &matches);
+  std::ostringstream out;
+  double now = 0.0;
+  io::Progress progress(out, false, [&] { return now += 1.0; }, 0.5);  // a line at every report
+  const io::ColmapModel shown =
+      refine::refineModel(input, refine::allImages(input), config, &reported, nullptr, &matches, &progress);
+  EXPECT_EQ(quiet.status, reported.status);
+  EXPECT_EQ(quiet.iterations, reported.iterations);
+  EXPECT_EQ(ate(plain, exact), ate(shown, exact));
+  std::istringstream in(out.str());
+  std::set<std::string> stages;
+  size_t iterations = 0;
+  for (std::string line; std::getline(in, line);) {
+    ASSERT_EQ(line.rfind("adjusting (pass 1, stage ", 0), 0u) << line;  // 600 tracks: under a triangulation's 1024
+    stages.insert(line.substr(0, line.find(')') + 1));
+    if (line.find("rounds (iteration ") != std::string::npos) ++iterations;
+  }
+  EXPECT_EQ(stages, (std::set<std::string>{"adjusting (pass 1, stage 1 of 2)", "adjusting (pass 1, stage 2 of 2)"}));
+  EXPECT_GT(iterations, 2u);
 }
 
 TEST_F(Refinement, TheIterativeSolverOfLargeModelsAlsoBringsThePosesCloser) {

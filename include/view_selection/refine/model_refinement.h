@@ -15,6 +15,7 @@
 #pragma once
 
 #include "view_selection/io/colmap_model.h"
+#include "view_selection/io/progress.h"
 #include "view_selection/refine/tracks.h"
 
 #include <set>
@@ -150,11 +151,12 @@ struct RefinementReport {
 /// SIMPLE_PINHOLE or PINHOLE, or non-finite input. `matches` (verified matches of the project
 /// as (image id, 2D point index) pairs, the 2D points of the model's images): the points are
 /// triangulated anew from them at the refined poses (config.retriangulations); without them
-/// the input's points and tracks are refined as they are.
+/// the input's points and tracks are refined as they are. `progress`, when given, shows each
+/// triangulation's tracks and each adjustment's rounds (and Ceres' iterations) as they go.
 io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& movable,
                             const RefinementConfig& config, RefinementReport* report,
                             const io::ColmapModel* reference = nullptr,
-                            const std::vector<Match>* matches = nullptr);
+                            const std::vector<Match>* matches = nullptr, io::Progress* progress = nullptr);
 
 /// Every image id of `model`.
 std::set<int> allImages(const io::ColmapModel& model);

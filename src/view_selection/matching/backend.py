@@ -55,7 +55,9 @@ class StageClock:
 
 
 class PoseGuidedBackend:
-    def __init__(self, project, extractor=None, options=None, cache_images=64):
+    def __init__(self, project, extractor=None, options=None, cache_images=64, progress=None):
+        """progress: called as progress(stage, done, total, unit) while images are extracted
+        and pairs matched (view_selection.progress.Progress.report), or None."""
         self.project = project
         self.extractor = extractor or SiftExtractor()
         self.options = options or guided.GuidedOptions()
@@ -67,6 +69,7 @@ class PoseGuidedBackend:
         self.paths = {}               # pair -> PairResult.summary()
         self._path_totals = collections.Counter()  # path -> pairs: the diagnostics' figures, kept as they change
         self.clock = StageClock()
+        self.progress = progress or (lambda stage, done, total, unit: None)
 
     # -- what the project has ----------------------------------------------------------------
     def register(self, keyframes):
@@ -92,7 +95,8 @@ class PoseGuidedBackend:
         made = {}
         stop = None  # out of time: what was made is written, then it is raised
         with self.clock.measure("extraction", len(keyframes)):
-            for k in keyframes:
+            for q, k in enumerate(keyframes):
+                self.progress("extracting features", q, len(keyframes), "images")
                 if self.project.cancelled:
                     raise ProjectError("extraction cancelled")
                 try:
@@ -113,6 +117,7 @@ class PoseGuidedBackend:
                 for name, features in made.items():
                     d.write_features(ids[name], *features.to_colmap())
             self.project.catalogue().features_written(made)  # after the commit
+        self.progress("extracting features", len(keyframes), len(keyframes), "images")
         for name, features in made.items():
             self._remember(name, features)
         self.project.ledger("extracted", list(made))
@@ -147,7 +152,8 @@ class PoseGuidedBackend:
         with self.clock.measure("guided_matching", len(pairs)):
             ids = self.project.catalogue().ids
             with self.project.db() as d:
-                for a, b in pairs:
+                for q, (a, b) in enumerate(pairs):
+                    self.progress("matching", q, len(pairs), "pairs")
                     if self.project.cancelled:
                         raise ProjectError("matching cancelled")
                     try:
@@ -171,12 +177,15 @@ class PoseGuidedBackend:
                     written.append(((a, b), len(g.inliers)))
             for pair, rows in written:  # after the commit: the catalogue holds what the database does
                 self.project.catalogue().geometry_written(pair, rows)
+        self.progress("matching", len(pairs), len(pairs), "pairs")
         self.project.ledger("matched", ["%s %s" % p for p, _ in written])
         if stop is not None:
             raise stop
         if fallback:
             with self.clock.measure("fallback_matching", len(fallback)):
+                self.progress("matching by COLMAP's matcher", 0, len(fallback), "pairs")  # one run: no count between
                 self.project.match(fallback)  # COLMAP's own; it writes the ledger
+                self.progress("matching by COLMAP's matcher", len(fallback), len(fallback), "pairs")
         return len(pairs)
 
     def _count_path(self, pair, summary):

@@ -44,6 +44,7 @@ from ..export_folder import ExportError, ExportFolder
 from ..live.work import LiveWork
 from ..refinement.refiner import ModelRefinement, RefinementOptions
 from ..matching.backend import PoseGuidedBackend
+from ..progress import Progress
 
 
 def log(msg):
@@ -101,6 +102,13 @@ def link_images(export, images, project):
 
 def main(argv=None):
     args = parse_args(sys.argv[1:] if argv is None else argv)
+    # Long work says how far it is on stderr: extraction and matching by their counts, the
+    # refinement by refine_model's own lines (docstring of view_selection.progress).
+    progress = Progress()
+
+    def say(level, text):
+        progress.clear()
+        log(text)
     try:
         export = ExportFolder(args.export)
         if len(export.keyframes) < 2:
@@ -118,22 +126,24 @@ def main(argv=None):
             cv2.setNumThreads(args.threads)
         known = args.model == "known_poses"
         matcher = args.matcher or ("guided" if known else "colmap")
-        backend = PoseGuidedBackend(project) if matcher == "guided" else None
+        backend = PoseGuidedBackend(project, progress=progress.report) if matcher == "guided" else None
         refinement = None
         if known and args.refine == "on":
             refinement = ModelRefinement(RefinementOptions(retriangulations=args.refine_retriangulations,
                                                            max_seconds=args.refine_max_seconds,
                                                            timeout=3600.0,  # offline: a large model may take long
                                                            threads=args.threads),
-                                         tool=args.refine_tool, log=lambda level, text: log(text))
+                                         tool=args.refine_tool, log=say,
+                                         progress=lambda line: progress.note("refining: " + line))
         work = LiveWork(project, continuity=known and not args.no_continuity,
-                        log=lambda level, text: log(text), backend=backend,
+                        log=say, backend=backend,
                         triangulation=args.triangulation if known else "colmap", refinement=refinement)
         log("%s model of %d keyframes, %d pairs" % ("known-pose" if known else "mapper", len(export.keyframes),
                                                     len(export.pairs)))
         if not known:
             project.init_pair = export.initial_pair() if args.init_pair == "on" else None
         report = work.build_model(export.keyframes, export.pairs, args.model, seed=args.seed)
+        progress.end()
         report.update({"export": export.folder, "images": images, "seconds": project.seconds,
                        "init_pair": args.init_pair, "matcher": matcher})
         stages = work.clock.summary()
@@ -157,5 +167,6 @@ def main(argv=None):
             return 3
         return 0
     except (ExportError, ProjectError, DatabaseError, sqlite3.Error, OSError) as e:
+        progress.clear()
         print("colmap_from_selection: error: %s" % e, file=sys.stderr)
         return 1
