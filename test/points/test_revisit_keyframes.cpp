@@ -84,6 +84,25 @@ TEST(RevisitKeyframes, ThreePassesKeepTheFirstPassesKeyframes) {
   EXPECT_EQ(walk.round(1.0, 0.015, false), 0u);
 }
 
+// A session continued from its saved state finds the earlier pass's keyframes as the
+// uninterrupted one does (the rule reads only the keyframes; restore indexes them again).
+TEST(RevisitKeyframes, RestoredSessionDecidesAsTheUninterruptedOne) {
+  Walk whole, continued;
+  whole.round(1.0, 0.0, true);
+  continued.selector.restore(whole.selector.state());
+  continued.stamp = whole.stamp;
+  for (Walk* w : {&whole, &continued}) {
+    EXPECT_EQ(w->round(1.0, 0.015, true), 0u);
+    EXPECT_GT(w->round(1.8, 0.0, true), 0u);
+  }
+  EXPECT_GT(continued.selector.revisitsSkipped(), 0u);
+  ASSERT_EQ(continued.selector.matrix().size(), whole.selector.matrix().size());
+  for (size_t i = 0; i < whole.selector.matrix().size(); ++i)
+    EXPECT_EQ(continued.selector.matrix().keyframe(static_cast<ViewId>(i)).stamp,
+              whole.selector.matrix().keyframe(static_cast<ViewId>(i)).stamp);
+  EXPECT_EQ(continued.selector.select().pairs, whole.selector.select().pairs);
+}
+
 // The rule is the scale_free policy's alone: every_nth (and every_frame, motion, external)
 // keep what they kept.
 TEST(RevisitKeyframes, OtherPoliciesKeepEveryFrameTheyChoose) {
