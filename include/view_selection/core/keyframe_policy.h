@@ -22,7 +22,9 @@ enum class KeyframeMode {
   kExternal,    ///< the caller's verdict for each frame (Frame::external_keyframe)
   /// the first frame, then one whose view of the last keyframe's points has changed enough:
   /// fewer than keyframe_overlap of them matchable, or the parallax of the nearer ones (90th
-  /// percentile) at least keyframe_parallax_deg (angles and ratios only: any unit alike)
+  /// percentile) at least keyframe_parallax_deg (angles and ratios only: any unit alike), and
+  /// no earlier keyframe near it has the view by the same measure (the revisit rule:
+  /// ViewSelector::coveringKeyframe, docs/design.md)
   kScaleFree,
 };
 
