@@ -473,6 +473,10 @@ void printSummary(const Options& o, const TumDataset& dataset, const ViewSelecto
   std::printf("keyframes   %zu (%s), %zu sample points each (median), source: %s\n", n,
               describeKeyframeRule(o.config.keyframes).c_str(), median_points,
               selector.pointSource().name().c_str());
+  if (o.config.keyframes.mode == KeyframeMode::kScaleFree)
+    std::printf("revisits    %zu frames a new view against the last keyframe, not against an "
+                "earlier one near them: no keyframe\n",
+                selector.revisitsSkipped());
   // The feature source's own line: --points features (auto takes most keyframes from depth).
   if (selector.pointSource().name() == "features")
     if (const FeaturePointSource* fs = featureSourceOf(selector.pointSource()))
