@@ -252,6 +252,58 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
         shutil.rmtree(work, ignore_errors=True)
 
 
+_RENAME_EXCHANGE = 2  # linux/fs.h
+
+
+def _exchange(a, b):
+    """Swaps the names a and b in one step (renameat2 RENAME_EXCHANGE); False where the C
+    library or the filesystem cannot."""
+    import ctypes
+    import errno
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        renameat2 = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    renameat2.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    at_fdcwd = -100
+    if renameat2(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP, errno.EPERM):
+        return False
+    raise OSError(err, os.strerror(err), b)
+
+
+def swap_folder(made, output):
+    """`made` becomes `output`; a reader of `output` finds the old folder or the new one, whole,
+    at every moment: the new one is complete beside it before the two names are exchanged
+    (renameat2 RENAME_EXCHANGE; where the filesystem cannot, two renames a few microseconds
+    apart), then the old one is removed."""
+    if not os.path.exists(output):
+        os.rename(made, output)
+        return
+    if _exchange(made, output):
+        shutil.rmtree(made, ignore_errors=True)  # the old one, under the new one's former name
+        return
+    old = made + ".old"
+    os.rename(output, old)
+    os.rename(made, output)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def keep_copy(model_path, unrefined):
+    """A copy of the model folder in `unrefined`, written beside it and swapped in (swap_folder):
+    sparse/unrefined is never missing or half written (it was removed, then copied again)."""
+    made = tempfile.mkdtemp(prefix=".unrefined_", dir=os.path.dirname(os.path.abspath(unrefined)))
+    try:
+        os.rmdir(made)
+        shutil.copytree(model_path, made)
+        swap_folder(made, unrefined)
+    finally:
+        shutil.rmtree(made, ignore_errors=True)
+
+
 class ModelRefinement:
     """What colmap_bridge and colmap_from_selection do with the known-pose model: keep it as
     DIR/sparse/unrefined, refine it into DIR/sparse/0 (re-triangulating with the project's
@@ -269,9 +321,7 @@ class ModelRefinement:
         unrefined = os.path.join(os.path.dirname(model_path), "unrefined")
         start = time.monotonic()
         try:
-            if os.path.exists(unrefined):
-                shutil.rmtree(unrefined)
-            shutil.copytree(model_path, unrefined)
+            keep_copy(model_path, unrefined)
             section = refine(model_path, model_path, self.options, database=project.database, tool=self.tool,
                              log_path=project.log_path, deadline=project.deadline,
                              log=lambda text: self.log("info", text))
