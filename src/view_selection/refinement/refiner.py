@@ -96,10 +96,8 @@ def find_refine_tool(explicit=None):
     raise RefinementError("cannot find the refine_model tool (build the package; or give its path)")
 
 
-def run_refine_model(tool, model, output, report, options, fixed=(), reference=None, log_path=None, timeout=None,
-                     matches=None):
-    """One refine_model process; returns its report (dict). RefinementError when it cannot run,
-    fails or exceeds the timeout (then it is killed)."""
+def refine_model_command(tool, model, output, report, options, fixed=(), reference=None, matches=None):
+    """refine_model's command line (the list of images held written beside `output`)."""
     args = [tool, "--input", model, "--output", output, "--report", report, "--quiet"] + options.arguments()
     if reference:
         args += ["--reference", reference]
@@ -111,6 +109,22 @@ def run_refine_model(tool, model, output, report, options, fixed=(), reference=N
         with open(listing, "w") as f:
             f.write("".join(n + "\n" for n in fixed))
         args += ["--fixed", listing]
+    return args
+
+
+def read_report(report):
+    try:
+        with open(report) as f:
+            return json.load(f)
+    except (OSError, ValueError) as e:
+        raise RefinementError("refine_model wrote no readable report (%s)" % e)
+
+
+def run_refine_model(tool, model, output, report, options, fixed=(), reference=None, log_path=None, timeout=None,
+                     matches=None):
+    """One refine_model process; returns its report (dict). RefinementError when it cannot run,
+    fails or exceeds the timeout (then it is killed)."""
+    args = refine_model_command(tool, model, output, report, options, fixed, reference, matches)
     timeout = options.timeout if timeout is None else timeout
     log = open(log_path, "a") if log_path else None
     try:
@@ -138,11 +152,7 @@ def run_refine_model(tool, model, output, report, options, fixed=(), reference=N
             log.close()
     if proc.returncode != 0:
         raise RefinementError("refine_model failed (exit %d): %s" % (proc.returncode, (err or "").strip()[-500:]))
-    try:
-        with open(report) as f:
-            return json.load(f)
-    except (OSError, ValueError) as e:
-        raise RefinementError("refine_model wrote no readable report (%s)" % e)
+    return read_report(report)
 
 
 def poses_only(model):
@@ -167,15 +177,17 @@ def corrections(before, after):
     return out
 
 
-def write_matches(database_path, path):
+def write_matches(database_path, path, pairs=None):
     """The database's verified matches (two-view geometries' inliers) as refine_model's VSMATCH1
-    file: image id and keypoint index of both sides, the ids the model's images have. Returns
-    how many."""
+    file: image id and keypoint index of both sides, the ids the model's images have. `pairs`:
+    only these (image id, image id) pairs (a cropped refinement, refinement/local.py), read one
+    by one. Returns how many."""
     import struct
     from ..colmap import database as cdb
     rows = []
     with cdb.open_database(database_path) as d:
-        for (a, b), n in sorted(d.inlier_counts().items()):
+        wanted = sorted(d.inlier_counts().items()) if pairs is None else [(p, 1) for p in sorted(pairs)]
+        for (a, b), n in wanted:
             if n <= 0:
                 continue
             m = np.asarray(d.matches(a, b, "two_view_geometries"), np.int64).reshape(-1, 2)
@@ -188,12 +200,13 @@ def write_matches(database_path, path):
 
 
 def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, log_path=None, deadline=None,
-           log=None):
+           log=None, pairs=None):
     """Refines the model in `model_dir` into `output` (replaced only at the end; on any error
     `output` is untouched and RefinementError says why). `fixed`: image names that must not
     move. `database`: the project's database, whose verified matches the points are
-    triangulated anew from (None: the model's own points only). `deadline`: time.monotonic()
-    by which it must be done. Returns the report's `refinement` section (dict)."""
+    triangulated anew from (None: the model's own points only; `pairs`: only these image id
+    pairs' matches). `deadline`: time.monotonic() by which it must be done. Returns the
+    report's `refinement` section (dict)."""
     options = options or RefinementOptions()
     log = log or (lambda text: None)
     tool = find_refine_tool(tool)
@@ -210,7 +223,7 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
         matches, count = None, 0
         if database and options.retriangulations > 0:
             matches = os.path.join(work, "matches.bin")
-            count = write_matches(database, matches)
+            count = write_matches(database, matches, pairs)
         made = os.path.join(work, "refined")
         import resource
         children = resource.getrusage(resource.RUSAGE_CHILDREN)
