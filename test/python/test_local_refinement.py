@@ -140,7 +140,7 @@ def test_pose_of_gives_the_refined_pose_until_the_node_moves_the_keyframe():
     k1, k2, k3 = keyframe(1, 0.0), keyframe(2, 1.0), keyframe(3, 2.0)
     assert np.allclose(lr.pose_of(k2, 2)[1], geometry.world_to_camera(k2.position, k2.orientation)[1])
     shifted = geometry.world_to_camera((1.1, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))
-    lr._take(2, shifted[0], shifted[1], (k2.position, k2.orientation), pairs=3)
+    lr._take(2, shifted[0], shifted[1], (k2.position, k2.orientation))
     assert np.allclose(lr.pose_of(k2, 2)[1], shifted[1])
     # after it: moved by its correction (+0.1 in x); before it (the first ones): too
     assert np.allclose(geometry.centre_of(*lr.pose_of(k3, 3)), (2.1, 0.0, 0.0))
@@ -175,3 +175,12 @@ def test_the_model_at_the_node_poses_carries_each_point_with_its_first_image():
     assert sum(4 in p.image_ids.tolist() for p in out.points.values()) < len(out.points) / 2
     cm_images = out.images[4]
     assert (cm_images.point3D_ids >= 0).sum() == sum(4 in p.image_ids.tolist() for p in out.points.values())
+
+
+def test_a_verified_partner_is_held_even_when_it_shares_no_point_and_the_cap_is_reached():
+    order = list(range(1, 31))
+    shared = {5: 40, 6: 30, 7: 20}
+    free, fixed = local.choose_window(order, order, refined=range(1, 27), covisible=lambda f: shared, kind="local",
+                                      size=4, max_fixed=2, partners=lambda f: {2, 28})  # 2: a revisit's pair
+    assert free == [27, 28, 29, 30]
+    assert fixed == [2, 5, 6, 26]  # 28 is free itself; 7 beyond the cap

@@ -29,6 +29,7 @@ from ..colmap import model as colmap_model
 from ..colmap.database import DatabaseError
 from ..colmap.project import ColmapProject, ProjectError, Timeouts, write_json_atomically
 from ..keyframes import Keyframe
+from ..refinement.local import LocalRefinement
 from ..refinement.refiner import FINISH_MAX_SECONDS, ModelRefinement, RefinementOptions
 from ..features.sift import SiftExtractor
 from ..matching.backend import PoseGuidedBackend
@@ -76,6 +77,10 @@ PARAMETERS = """Parameters (private, ~name):
                      the adjustment reached by then (report.json: status out_of_time), so that a
                      long session's finish stays bounded (5; 0: no limit)
   refine_tool        the refine_model executable ("": beside this node)
+  refine_live        with live triangulation: refine while the recording goes on (true): windows of
+                     new keyframes with what they see held, the whole model when the budget allows;
+                     the finish refines only what changed since (refinement/local.py)
+  refine_live_cpu    [cores] the average CPU those runs may take over the session (0.25)
 Publishes ~refined_path (nav_msgs/Path, latched): the refined keyframe poses (optical frame, in the
 node's world frame, at the keyframes' stamps) after each refined model that moved a keyframe by more
 than 1 mm or 0.05 deg; a view_selection node takes them with ~use_path_corrections and
@@ -134,6 +139,8 @@ class Bridge:
                                   threads=int(_param("threads", -1)),
                                   max_seconds=float(_param("refine_max_seconds", FINISH_MAX_SECONDS))),
                 tool=_param("refine_tool", "") or None, log=self._log)
+            if bool(_param("refine_live", True)) and _param("triangulation", "live") == "live":
+                refinement = LocalRefinement(refinement, cpu_share=float(_param("refine_live_cpu", 0.25)))
         self.work_state = LiveWork(self.project, continuity=bool(_param("continuity_pairs", True)),
                                    max_backlog=_param("max_backlog", 2000),
                                    max_batch_pairs=_param("max_batch_pairs", 24),
@@ -278,6 +285,7 @@ class Bridge:
                 if self.work_state.model is not None:
                     with self.work_state.clock.measure("triangulation", 1):
                         self.work_state.feed_model(keyframes)
+                    self.work_state.refine_in_background()  # polls, or starts a run: returns at once
                 return more
             except (ProjectError, DatabaseError, sqlite3.Error, OSError, ValueError) as e:
                 self.work_state.error("project %s: %s" % (self.project.root, e))

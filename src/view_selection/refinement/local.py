@@ -46,7 +46,7 @@ from . import refiner
 
 
 # -- the window ----------------------------------------------------------------------------
-def choose_window(order, observed, refined, covisible, kind, changed=(), size=20, max_fixed=60):
+def choose_window(order, observed, refined, covisible, kind, changed=(), size=20, max_fixed=60, partners=None):
     """(free, fixed): the image ids of one refinement, free ones in `order`.
 
     order: every image id, oldest first (keyframe order). observed: ids with points. refined:
@@ -55,7 +55,10 @@ def choose_window(order, observed, refined, covisible, kind, changed=(), size=20
     'changed'). kind: 'local' (the oldest `size` observed ids never refined, filled up to `size`
     with the observed ids just before them), 'changed' (every id in `changed`), or 'global'
     (every id, nothing held). Held: up to `max_fixed` of the ids that share points with the free
-    ones (the most first; every one for 'changed'), and each free id's neighbours in `order`."""
+    ones (the most first; every one for 'changed'), every id partners(free ids) names (those with
+    a verified pair with a free one: across a revisit the drift keeps them from sharing points
+    at the live model's 3 px, and their matches are what corrects it), and each free id's
+    neighbours in `order`."""
     if kind == "global":
         return list(order), []
     observed, refined = set(observed), set(refined)
@@ -77,6 +80,8 @@ def choose_window(order, observed, refined, covisible, kind, changed=(), size=20
     shared = sorted(((n, i) for i, n in covisible(free_set).items() if i not in free_set and n > 0),
                     key=lambda x: (-x[0], x[1]))
     fixed = {i for _, i in (shared if kind == "changed" else shared[:max_fixed])}
+    if partners is not None:
+        fixed |= set(partners(free_set)) - free_set
     position = {i: q for q, i in enumerate(order)}
     for i in free:
         q = position[i]
@@ -99,6 +104,17 @@ def covisible_in(live, free):
         for i in point[2]:
             counts[i] = counts.get(i, 0) + 1
     return counts
+
+
+def partners_in(live, free):
+    """The images with a verified pair with one of the `free` images."""
+    out = set()
+    for a, b in live.matched_pairs:
+        if a in free:
+            out.add(b)
+        elif b in free:
+            out.add(a)
+    return out
 
 
 def crop(live, free, fixed):
@@ -165,46 +181,61 @@ def at_node_poses(model, node_poses, max_error=4.0):
     lie behind their camera are dropped, and points left with fewer than two. What a model at
     the node's poses holds, without triangulating the session again."""
     out = colmap_model.Model(dict(model.cameras))
-    rot, trans, k = {}, {}, {}
-    for iid, im in model.images.items():
+    ids = sorted(model.images)
+    index = {iid: q for q, iid in enumerate(ids)}
+    r_node, t_node, r_now, t_now, k = [], [], [], [], []
+    for iid in ids:
+        im = model.images[iid]
         q, t = node_poses.get(iid, (im.qvec, im.tvec))
-        rot[iid], trans[iid] = geometry.rotation_of(q), np.asarray(t, float)
+        r_node.append(geometry.rotation_of(q))
+        t_node.append(np.asarray(t, float))
+        r_now.append(geometry.rotation_of(im.qvec))
+        t_now.append(np.asarray(im.tvec, float))
+        k.append(model.cameras[im.camera_id].params[:4])
         out.images[iid] = colmap_model.Image(iid, q, t, im.camera_id, im.name, im.xys,
                                              np.full(len(im.xys), -1, np.int64))
-        fx, fy, cx, cy = model.cameras[im.camera_id].params[:4]
-        k[iid] = (fx, fy, cx, cy)
-    before = {iid: (geometry.rotation_of(im.qvec), np.asarray(im.tvec, float)) for iid, im in model.images.items()}
-    for pid, p in model.points.items():
-        first = int(p.image_ids[0])
-        r0, t0 = before[first]
-        x = rot[first].T @ (r0 @ p.xyz + t0 - trans[first])
-        keep, errors = [], []
-        for iid, kp in zip(p.image_ids, p.point2D_idxs):
-            iid, kp = int(iid), int(kp)
-            pc = rot[iid] @ x + trans[iid]
-            if not pc[2] > 0:
-                continue
-            fx, fy, cx, cy = k[iid]
-            e = float(np.hypot(fx * pc[0] / pc[2] + cx - model.images[iid].xys[kp][0],
-                               fy * pc[1] / pc[2] + cy - model.images[iid].xys[kp][1]))
-            if e <= max_error:
-                keep.append((iid, kp))
-                errors.append(e)
-        if len(keep) < 2:
+    if not model.points:
+        return out
+    r_node, t_node, r_now, t_now, k = (np.array(a) for a in (r_node, t_node, r_now, t_now, k))
+    pids = sorted(model.points)
+    pts = [model.points[pid] for pid in pids]
+    xyz = np.array([p.xyz for p in pts])
+    first = np.array([index[int(p.image_ids[0])] for p in pts])
+    # x in the first image's camera, then back to the world through its node pose
+    cam = np.einsum("nij,nj->ni", r_now[first], xyz) + t_now[first]
+    x = np.einsum("nji,nj->ni", r_node[first], cam - t_node[first])
+    lengths = np.array([len(p.image_ids) for p in pts])
+    owner = np.repeat(np.arange(len(pts)), lengths)
+    img = np.array([index[int(i)] for p in pts for i in p.image_ids])
+    kp = np.concatenate([p.point2D_idxs for p in pts]).astype(np.int64)
+    xy = np.array([model.images[ids[i]].xys[j] for i, j in zip(img, kp)])
+    pc = np.einsum("nij,nj->ni", r_node[img], x[owner]) + t_node[img]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = np.stack([k[img, 0] * pc[:, 0] / pc[:, 2] + k[img, 2], k[img, 1] * pc[:, 1] / pc[:, 2] + k[img, 3]], 1)
+        errors = np.linalg.norm(uv - xy, axis=1)
+    good = (pc[:, 2] > 0) & (errors <= max_error)
+    kept = np.bincount(owner[good], minlength=len(pts))
+    sums = np.bincount(owner[good], weights=errors[good], minlength=len(pts))
+    starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+    for q, pid in enumerate(pids):
+        if kept[q] < 2:
             continue
-        out.points[pid] = colmap_model.Point3D(pid, x, p.rgb, float(np.mean(errors)), [i for i, _ in keep],
-                                               [q for _, q in keep])
-        for iid, kp in keep:
-            out.images[iid].point3D_ids[kp] = pid
+        sel = slice(starts[q], starts[q] + lengths[q])
+        mask = good[sel]
+        image_ids = [ids[i] for i in img[sel][mask]]
+        idxs = kp[sel][mask]
+        out.points[pid] = colmap_model.Point3D(pid, x[q], pts[q].rgb, float(sums[q] / kept[q]), image_ids, idxs)
+        for iid, j in zip(image_ids, idxs):
+            out.images[iid].point3D_ids[j] = pid
     return out
 
 
 class _Run:
     """One refine_model child: what it was given and what it is."""
 
-    def __init__(self, kind, free, fixed, folder, proc, node, pair_counts, cpu, max_seconds):
+    def __init__(self, kind, free, fixed, folder, proc, node, pairs, cpu, max_seconds):
         self.kind, self.free, self.fixed, self.folder, self.proc = kind, free, fixed, folder, proc
-        self.node, self.pair_counts, self.cpu = node, pair_counts, cpu
+        self.node, self.pairs, self.cpu = node, pairs, cpu
         self.started, self.max_seconds = time.monotonic(), max_seconds
         self.rusage = None
         self.status = None
@@ -232,20 +263,23 @@ class LocalRefinement:
     docstring), and the finish's refinement of what changed since (`apply`, in place of
     ModelRefinement's, whose options, tool and log it takes)."""
 
-    def __init__(self, finish, size=20, every=10, max_fixed=60, cpu_share=0.25, local_seconds=3.0,
-                 global_seconds=120.0, global_growth=0.25, clock=time.monotonic):
+    def __init__(self, finish, size=20, every=10, max_fixed=60, cpu_share=0.25, local_fraction=0.3,
+                 local_seconds=3.0, global_seconds=120.0, global_growth=0.25, clock=time.monotonic):
         self.finish_refinement = finish
         self.size, self.every, self.max_fixed = int(size), int(every), int(max_fixed)
         self.cpu_share, self.local_seconds, self.global_seconds = float(cpu_share), float(local_seconds), float(global_seconds)
-        self.global_growth = float(global_growth)
+        self.global_growth, self.local_fraction = float(global_growth), float(local_fraction)
         self.clock = clock
         self.work = None
         self.refined = {}        # image id -> (qvec, tvec refined, the node pose then)
         self.refined_ids = []    # sorted
-        self.at_refinement = {}  # image id -> its verified pairs when it was last refined
+        self.used_pairs = set()  # verified pairs (image ids) a refinement of the whole model had
+        self.covered = {}        # image id -> its node pose when a refinement of the whole model took it
+        self.global_cpu, self.global_pairs_done = 0.0, 1  # the last global run's CPU, and its pairs
         self.running = None
         self.started_at = None
         self.cpu_seconds = 0.0
+        self.cpu_by_kind = {"local": 0.0, "global": 0.0}
         self.runs = {"local": 0, "global": 0}
         self.failures = 0
         self.global_pairs = 0    # matched pairs when the last global run started
@@ -281,21 +315,13 @@ class LocalRefinement:
     def _forget(self, iid):
         if self.refined.pop(iid, None) is not None:
             self.refined_ids.remove(iid)
-        self.at_refinement.pop(iid, None)
 
-    def _take(self, iid, qvec, tvec, node, pairs):
+    def _take(self, iid, qvec, tvec, node):
         if iid not in self.refined:
             bisect.insort(self.refined_ids, iid)
         self.refined[iid] = (tuple(qvec), tuple(tvec), node)
-        self.at_refinement[iid] = pairs
 
     # -- what the live model holds ---------------------------------------------------------
-    def _pair_counts(self):
-        counts = {}
-        for a, b in self.work.model.matched_pairs:
-            counts[a] = counts.get(a, 0) + 1
-            counts[b] = counts.get(b, 0) + 1
-        return counts
 
     def _node_poses(self):
         """{image id: (centre, orientation)} of the node, for the live model's images."""
@@ -306,23 +332,27 @@ class LocalRefinement:
         live = self.work.model
         order = sorted(live.images)
         observed = {i for i in order if live.by_image.get(i)}
-        counts = self._pair_counts()
         node = self._node_poses()
-        current = {i for i in self.refined if self.refined[i][2] == node.get(i) and
-                   self.at_refinement.get(i, -1) >= counts.get(i, 0)}
-        return order, observed, counts, node, current
+        unused = set()
+        for a, b in live.matched_pairs - self.used_pairs:
+            unused.add(a)
+            unused.add(b)
+        current = {i for i, then in self.covered.items() if then == node.get(i) and i not in unused}
+        return order, observed, node, current
 
     def changed(self):
-        order, observed, counts, node, current = self._state()
+        order, observed, node, current = self._state()
         return [i for i in order if i not in current]
 
     # -- the worker loop's step ------------------------------------------------------------
-    def allowance(self):
-        """CPU seconds the runs may still spend: cpu_share of the session's time so far, less
-        what they spent."""
+    def allowance(self, kind):
+        """CPU seconds the runs of a kind may still spend: their part of cpu_share (the windows
+        local_fraction of it, the whole model the rest) of the session's time so far, less what
+        they spent."""
         if self.started_at is None:
             self.started_at = self.clock()
-        return self.cpu_share * (self.clock() - self.started_at) - self.cpu_seconds
+        part = self.local_fraction if kind == "local" else 1.0 - self.local_fraction
+        return part * self.cpu_share * (self.clock() - self.started_at) - self.cpu_by_kind[kind]
 
     def step(self):
         """Polls the run under way (its result taken once it ended) and starts the next one
@@ -334,33 +364,38 @@ class LocalRefinement:
                 return True
             self._finish_run(self.running)
             self.running = None
-        allowance = self.allowance()
-        if allowance <= 0:
+        order, observed, node, current = self._state()
+        pairs = len(self.work.model.matched_pairs)
+        if len(observed) >= 2 and pairs >= max(self.every, (1.0 + self.global_growth) * self.global_pairs):
+            # The whole model is due (it is what pulls the drift back along a loop): it starts
+            # once half its estimated CPU is there (the last global run's, grown with the pairs).
+            estimate = self.global_cpu * pairs / max(1, self.global_pairs_done)
+            if self.allowance("global") >= max(0.5 * estimate, 1e-9):
+                self.global_pairs = pairs
+                self._start("global", order, [], node, self.global_seconds)
+                return True
+        if self.allowance("local") <= 0:
             return False
-        order, observed, counts, node, current = self._state()
         new = [i for i in order if i in observed and i not in self.refined]
         if len(new) >= self.every:
             free, fixed = choose_window(order, observed, self.refined, lambda f: covisible_in(self.work.model, f),
-                                        "local", size=self.size, max_fixed=self.max_fixed)
+                                        "local", size=self.size, max_fixed=self.max_fixed,
+                                        partners=lambda f: partners_in(self.work.model, f))
             if free:
-                self._start("local", free, fixed, counts, node, self.local_seconds)
-        elif len(observed) >= 2 and self.global_pairs >= 0 and allowance >= 2 * self.local_seconds:
-            pairs = len(self.work.model.matched_pairs)
-            if pairs >= max(self.every, (1.0 + self.global_growth) * self.global_pairs) and \
-                    any(i not in current for i in observed):
-                self.global_pairs = pairs
-                self._start("global", order, [], counts, node, min(self.global_seconds, allowance))
+                self._start("local", free, fixed, node, self.local_seconds)
         return self.running is not None
 
-    def _start(self, kind, free, fixed, counts, node, max_seconds):
+    def _start(self, kind, free, fixed, node, max_seconds):
         work = self.work
         t0 = time.process_time()
         folder = tempfile.mkdtemp(prefix=".local_", dir=os.path.join(work.project.root, "sparse"))
         try:
             if kind == "global":
                 model, pairs = work.model.to_model(), None
+                used = set(work.model.matched_pairs)
             else:
                 model, pairs = crop(work.model, free, fixed), window_pairs(work.model, free, fixed)
+                used = set(pairs)
             colmap_model.write_model(model, os.path.join(folder, "input"), binary=True)
             options = self._options(max_seconds)
             matches = os.path.join(folder, "matches.bin")
@@ -384,9 +419,10 @@ class LocalRefinement:
             self.failures += 1
             self.log("warn", "the %s refinement could not start: %s" % (kind, e))
             self.cpu_seconds += time.process_time() - t0
+            self.cpu_by_kind[kind] += time.process_time() - t0
             return
         self.running = _Run(kind, free, fixed, folder, proc, {i: node.get(i) for i in free},
-                            {i: counts.get(i, 0) for i in free}, time.process_time() - t0, max_seconds)
+                            used, time.process_time() - t0, max_seconds)
 
     def _options(self, max_seconds):
         base = self.finish_refinement.options
@@ -405,7 +441,10 @@ class LocalRefinement:
             report = refiner.read_report(os.path.join(run.folder, "report.json"))
             images = colmap_model._read_images_bin(os.path.join(run.folder, "output", "images.bin"))
             if report.get("refined"):
-                self._take_poses(report, images, run.node, run.pair_counts)
+                self._take_poses(report, images, run.node, cover=run.kind == "global")
+                if run.kind == "global":
+                    self.used_pairs |= run.pairs
+                    self.global_cpu, self.global_pairs_done = cpu, max(1, len(run.pairs))
             self.runs[run.kind] += 1
             self.history.append({"kind": run.kind, "free": len(run.free), "fixed": len(run.fixed),
                                  "status": report.get("status"), "iterations": report.get("iterations"),
@@ -416,9 +455,11 @@ class LocalRefinement:
             self.log("warn", "the %s refinement gave nothing: %s" % (run.kind, e))
         finally:
             shutil.rmtree(run.folder, ignore_errors=True)
-            self.cpu_seconds += cpu + run.cpu + (time.process_time() - t0)
+            spent = cpu + run.cpu + (time.process_time() - t0)
+            self.cpu_seconds += spent
+            self.cpu_by_kind[run.kind] += spent
 
-    def _take_poses(self, report, images, node_then, pairs_then):
+    def _take_poses(self, report, images, node_then, cover):
         """Refined images whose node pose did not move meanwhile take their refined pose; the
         images never refined take the new corrections; the live model gets both."""
         live, fed = self.work.model, self.work.fed_poses
@@ -431,7 +472,9 @@ class LocalRefinement:
             if node_now is None or node_now != node_then[iid]:
                 continue  # the node moved it meanwhile: it stays to be refined
             im = images[iid]
-            self._take(iid, im.qvec, im.tvec, node_now, pairs_then[iid])
+            self._take(iid, im.qvec, im.tvec, node_now)
+            if cover:
+                self.covered[iid] = node_now
             moved[iid] = (im.qvec, im.tvec)
         for iid, im in live.images.items():
             if iid in moved:
@@ -457,6 +500,7 @@ class LocalRefinement:
 
     def summary(self):
         return {"runs": dict(self.runs), "failures": self.failures, "cpu_seconds": round(self.cpu_seconds, 3),
+                "cpu_seconds_by_kind": {k: round(v, 3) for k, v in self.cpu_by_kind.items()},
                 "keyframes_refined": len(self.refined), "cpu_share": self.cpu_share, "window": self.size,
                 "every": self.every, "last_runs": self.history[-5:]}
 
@@ -472,11 +516,10 @@ class LocalRefinement:
         unrefined = os.path.join(os.path.dirname(model_path), "unrefined")
         budget = mr.options.max_seconds if mr.options.max_seconds > 0 else 60.0
         if self.running is not None:  # a run that ends within half the budget is worth waiting for
-            left = self.running.max_seconds - (time.monotonic() - self.running.started) + 1.0
-            self.wait(max(0.0, left) if left <= budget / 2 else 0.0)
+            self.wait(budget / 2)
         live = self.work.model
         try:
-            order, observed, counts, node, current = self._state()
+            order, observed, node, current = self._state()
             changed = [i for i in order if i not in current]
             node_poses = {i: geometry.world_to_camera(*p) for i, p in node.items()}
             at_node = all(np.allclose(geometry.rotation_of(node_poses[i][0]), im.r, atol=1e-9) and
@@ -488,7 +531,8 @@ class LocalRefinement:
                            "keyframes": [], "keyframes_kept": [], "seconds": time.monotonic() - start}
             else:
                 free, fixed = choose_window(order, observed, current, lambda f: covisible_in(live, f), "changed",
-                                            changed=changed, size=self.size, max_fixed=self.max_fixed)
+                                            changed=changed, size=self.size, max_fixed=self.max_fixed,
+                                            partners=lambda f: partners_in(live, f))
                 if not fixed:  # everything changed: the whole model, as ModelRefinement refines it
                     section = refiner.refine(model_path, model_path, mr.options, database=project.database,
                                              tool=mr.tool, log_path=project.log_path, deadline=project.deadline,
@@ -496,10 +540,10 @@ class LocalRefinement:
                     made = colmap_model.read_model(model_path)
                     report = {"images": [{"image_id": iid, "movable": True} for iid in made.images]}
                     if section["refined"]:
-                        self._take_poses(report, made.images, {i: node.get(i) for i in free},
-                                         {i: counts.get(i, 0) for i in free})
+                        self._take_poses(report, made.images, {i: node.get(i) for i in free}, cover=True)
+                        self.used_pairs |= live.matched_pairs
                 else:
-                    section = self._refine_crop(project, model_path, free, fixed, node, counts)
+                    section = self._refine_crop(project, model_path, free, fixed, node)
                 section.update(finish_free=len(free), finish_fixed=len(fixed))
         except (refiner.RefinementError, ProjectError, DatabaseError, colmap_model.ModelError, OSError, KeyError,
                 ValueError) as e:
@@ -516,20 +560,22 @@ class LocalRefinement:
                 section["keyframes_kept"][0]["why"]))
         return section
 
-    def _refine_crop(self, project, model_path, free, fixed, node, counts):
+    def _refine_crop(self, project, model_path, free, fixed, node):
         mr, live = self.finish_refinement, self.work.model
         folder = tempfile.mkdtemp(prefix=".finish_", dir=os.path.dirname(os.path.abspath(model_path)))
         try:
             model = crop(live, free, fixed)
             colmap_model.write_model(model, os.path.join(folder, "input"), binary=True)
+            pairs = window_pairs(live, free, fixed)
             section = refiner.refine(os.path.join(folder, "input"), os.path.join(folder, "output"), mr.options,
                                      fixed=[model.images[i].name for i in fixed], database=project.database,
                                      tool=mr.tool, log_path=project.log_path, deadline=project.deadline,
-                                     log=lambda text: mr.log("info", text), pairs=window_pairs(live, free, fixed))
+                                     log=lambda text: mr.log("info", text), pairs=pairs)
             if section["refined"]:
                 images = colmap_model._read_images_bin(os.path.join(folder, "output", "images.bin"))
                 report = {"images": [{"image_id": i, "movable": True} for i in free]}
-                self._take_poses(report, images, {i: node.get(i) for i in free}, {i: counts.get(i, 0) for i in free})
+                self._take_poses(report, images, {i: node.get(i) for i in free}, cover=True)
+                self.used_pairs |= set(pairs)
                 live.update(final=True)  # the points follow the refined poses
                 with project.db() as d:
                     ids = d.image_ids()
