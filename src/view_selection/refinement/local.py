@@ -16,13 +16,15 @@ on what the live model (live/model.py) holds:
     anew, at 9 px first);
   - **global**: once the verified pairs grew by `global_growth` (a quarter) since the last one,
     the whole model, every keyframe free (aligned to the poses it started from): what pulls
-    the drift back along a loop. Windows alone hold the keyframes before them where they were
+    the drift back along a loop; its poses alone are taken, so it is given at most
+    `global_matches` (100) of each pair's matches, spread over the pair. Windows alone hold the
+    keyframes before them where they were
     and leave the correction of a revisit at their edge (measured on the built-in walk with
     the odometry stand-in: 18.0 mm against 3.2 mm for a full refinement);
   - **finish** (`apply`, what LiveWork.build_model calls): the keyframes that changed since a
     refinement of the whole model last had them (new ones, a node pose that moved, a verified
     pair it did not have) free, everything they see held; all of them free (a full refinement,
-    as before, from the poses the windows reached) when no such refinement ran yet.
+    as before, from the poses the windows reached) when more than half the model changed.
 
 Each run is refine_model as a child process (niced with the bridge, one thread), started and
 polled from the bridge's worker loop (`step`), so matching goes on while it runs. The runs are
@@ -272,11 +274,13 @@ class LocalRefinement:
     ModelRefinement's, whose options, tool and log it takes)."""
 
     def __init__(self, finish, size=20, every=10, max_fixed=60, cpu_share=0.25, local_fraction=0.3,
-                 local_seconds=3.0, global_seconds=120.0, global_growth=0.25, clock=time.monotonic):
+                 local_seconds=3.0, global_seconds=120.0, global_growth=0.25, global_matches=100,
+                 clock=time.monotonic):
         self.finish_refinement = finish
         self.size, self.every, self.max_fixed = int(size), int(every), int(max_fixed)
         self.cpu_share, self.local_seconds, self.global_seconds = float(cpu_share), float(local_seconds), float(global_seconds)
         self.global_growth, self.local_fraction = float(global_growth), float(local_fraction)
+        self.global_matches = int(global_matches)
         self.clock = clock
         self.work = None
         self.refined = {}        # image id -> (qvec, tvec refined, the node pose then)
@@ -407,7 +411,8 @@ class LocalRefinement:
             colmap_model.write_model(model, os.path.join(folder, "input"), binary=True)
             options = self._options(max_seconds)
             matches = os.path.join(folder, "matches.bin")
-            refiner.write_matches(work.project.database, matches, pairs)
+            refiner.write_matches(work.project.database, matches, pairs,
+                                  per_pair=self.global_matches if kind == "global" else 0)
             args = refiner.refine_model_command(refiner.find_refine_tool(self.finish_refinement.tool),
                                                 os.path.join(folder, "input"), os.path.join(folder, "output"),
                                                 os.path.join(folder, "report.json"), options,
@@ -544,6 +549,10 @@ class LocalRefinement:
                 free, fixed = choose_window(order, observed, current, lambda f: covisible_in(live, f), "changed",
                                             changed=changed, size=self.size, max_fixed=self.max_fixed,
                                             partners=lambda f: partners_in(live, f))
+                if 2 * len(free) > len(order):
+                    # Most of it changed (no run of the whole model covered it yet): the held
+                    # rest would be the worse refined part, and the crop saves little.
+                    free, fixed = list(order), []
                 if not fixed:  # everything changed: the whole model, as ModelRefinement refines it
                     section = refiner.refine(model_path, model_path, mr.options, database=project.database,
                                              tool=mr.tool, log_path=project.log_path, deadline=project.deadline,

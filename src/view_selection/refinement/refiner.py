@@ -177,11 +177,12 @@ def corrections(before, after):
     return out
 
 
-def write_matches(database_path, path, pairs=None):
+def write_matches(database_path, path, pairs=None, per_pair=0):
     """The database's verified matches (two-view geometries' inliers) as refine_model's VSMATCH1
     file: image id and keypoint index of both sides, the ids the model's images have. `pairs`:
     only these (image id, image id) pairs (a cropped refinement, refinement/local.py), read one
-    by one. Returns how many."""
+    by one. `per_pair`: at most this many of each pair's, evenly spread over its list (0: all).
+    Returns how many."""
     import struct
     from ..colmap import database as cdb
     rows = []
@@ -191,6 +192,8 @@ def write_matches(database_path, path, pairs=None):
             if n <= 0:
                 continue
             m = np.asarray(d.matches(a, b, "two_view_geometries"), np.int64).reshape(-1, 2)
+            if per_pair and len(m) > per_pair:
+                m = m[np.linspace(0, len(m) - 1, per_pair).astype(np.int64)]
             if len(m):
                 rows.append(np.stack([np.full(len(m), a), m[:, 0], np.full(len(m), b), m[:, 1]], axis=1))
     data = np.concatenate(rows).astype("<i4") if rows else np.zeros((0, 4), "<i4")
