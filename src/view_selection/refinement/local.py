@@ -30,8 +30,8 @@ Each run is refine_model as a child process (niced with the bridge, one thread),
 polled from the bridge's worker loop (`step`), so matching goes on while it runs. The runs are
 budgeted: their CPU (the child's, measured by wait4, and the crop's in Python) stays within
 `cpu_share` of a core on average over the session, `local_fraction` of it for the windows and
-the rest for the whole model, which starts once half of its estimated CPU (the last one's, grown
-with the pairs) was saved.
+the rest for the whole model; a run may overspend its part, and the next of its kind waits until
+that is paid back.
 
 The refined poses go into the live model (its tracks are triangulated again at them, so its
 points follow). A keyframe not refined yet takes the correction of the nearest refined keyframe
@@ -287,7 +287,6 @@ class LocalRefinement:
         self.refined_ids = []    # sorted
         self.used_pairs = set()  # verified pairs (image ids) a refinement of the whole model had
         self.covered = {}        # image id -> its node pose when a refinement of the whole model took it
-        self.global_cpu, self.global_pairs_done = 0.0, 1  # the last global run's CPU, and its pairs
         self.running = None
         self.started_at = None
         self.cpu_seconds = 0.0
@@ -380,9 +379,10 @@ class LocalRefinement:
         pairs = len(self.work.model.matched_pairs)
         if len(observed) >= 2 and pairs >= max(self.every, (1.0 + self.global_growth) * self.global_pairs):
             # The whole model is due (it is what pulls the drift back along a loop): it starts
-            # once half its estimated CPU is there (the last global run's, grown with the pairs).
-            estimate = self.global_cpu * pairs / max(1, self.global_pairs_done)
-            if self.allowance("global") >= max(0.5 * estimate, 1e-9):
+            # as soon as its part of the budget is not in debt, and the next waits until what
+            # it spent beyond is paid back. (Gating it on its CPU estimated from the last run's
+            # kept it from ever starting: a small model's run is mostly fixed costs.)
+            if self.allowance("global") > 0:
                 self.global_pairs = pairs
                 self._start("global", order, [], node, self.global_seconds)
                 return True
@@ -457,7 +457,6 @@ class LocalRefinement:
                 self._take_poses(report, images, run.node, cover=run.kind == "global")
                 if run.kind == "global":
                     self.used_pairs |= run.pairs
-                    self.global_cpu, self.global_pairs_done = cpu, max(1, len(run.pairs))
             self.runs[run.kind] += 1
             self.history.append({"kind": run.kind, "free": len(run.free), "fixed": len(run.fixed),
                                  "status": report.get("status"), "iterations": report.get("iterations"),
