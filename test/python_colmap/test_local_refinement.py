@@ -45,7 +45,10 @@ def test_a_session_refined_as_it_goes_matches_a_full_refinement(tmp_path):
     keyframes = sorted(export.keyframes, key=lambda k: k.id)
     replay.session()
     live = replay.local
-    assert live.runs["local"] >= 2 and live.runs["global"] >= 1, live.summary()
+    # several runs during the session, of both kinds (a run of the whole model refines every
+    # keyframe, so windows are due only between them)
+    assert live.runs["local"] + live.runs["global"] >= 3, live.summary()
+    assert live.runs["local"] >= 1 and live.runs["global"] >= 1, live.summary()
     assert live.failures == 0
     changed = live.changed()
     assert 0 < len(changed) < len(keyframes) / 2, (changed, live.summary())  # the runs covered the rest
