@@ -638,16 +638,24 @@ class LocalRefinement:
             shutil.rmtree(made, ignore_errors=True)
 
     def _whole_model_corrections(self, section, node):
-        """The summary's corrections over every keyframe, against the node's poses (what the
-        node would be sent, ~refined_path)."""
+        """The corrections over every keyframe, against the node's poses (what the node would be
+        sent, ~refined_path): the summary, and `keyframes` (one entry a keyframe: the finish's
+        own where it refined the keyframe, with its observations)."""
         t, r = [], []
-        for iid, im in self.work.model.images.items():
+        finish = {k["name"]: k for k in section.get("keyframes", [])}
+        keyframes = []
+        for iid, im in sorted(self.work.model.images.items()):
             if iid not in node:
                 continue
             centre, orientation = node[iid]
             t.append(float(np.linalg.norm(im.centre - np.asarray(centre, float))))
             c = (np.trace(geometry.rotation_of(orientation) @ im.r) - 1.0) / 2.0  # R_cw(node) vs R_wc(live)^T
             r.append(float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))))
+            entry = dict(finish.get(im.name) or {"name": im.name, "refined": iid in self.refined, "kept": None,
+                                                  "weak": False, "observations": None})
+            entry.update(translation=t[-1], rotation_deg=r[-1])
+            keyframes.append(entry)
+        section["keyframes"] = keyframes
         t.sort()
         r.sort()
         section.update(translation_median=t[len(t) // 2] if t else 0.0, translation_max=t[-1] if t else 0.0,

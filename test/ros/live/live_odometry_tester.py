@@ -254,13 +254,13 @@ class LiveOdometry(unittest.TestCase):
             self.assertGreater(dot, 1.0 - 1e-12, (q, o))
 
     def test_offline_gives_the_same_refined_model(self):
-        """colmap_from_selection on the export (the odometry's poses) refines to the same model.
-        The two differ only where the databases do: the bridge also matched pairs announced and
-        later taken back (and COLMAP's RANSAC for the pairs that fell back to it), so the same
-        keyframes must be in both, at the same unrefined poses, and the refined centres within a
-        fifth of the refinement's own median correction of each other (RMS): a difference much
-        smaller than what the refinement changed, that a wrong refinement (one that does not
-        converge to the same place from the same input) breaks."""
+        """colmap_from_selection on the export (the odometry's poses) refines the whole model to
+        convergence; the bridge refined as the recording went on (refinement/local.py: windows,
+        the whole model when its budget allowed, the finish what changed since), along another
+        path. So the same keyframes must be in both, at the same unrefined poses, and the online
+        model as close to the exact poses as the offline one: its ATE at most 1.1x the offline's
+        (issue 34's goal) plus 2 mm (the databases differ: the bridge also matched pairs announced
+        and later taken back, and COLMAP's RANSAC for the pairs that fell back to it)."""
         online = centres(os.path.join(self.project, 'sparse', '0'))
         offline = centres(os.path.join(self.offline, 'sparse', '0'))
         self.assertEqual(sorted(online), sorted(offline))
@@ -276,12 +276,14 @@ class LiveOdometry(unittest.TestCase):
             # on a machine too loaded to give it that, it ends where it got to, and the offline
             # one, without a budget, goes further. Then the two are not meant to be equal.
             self.skipTest('the online refinement stopped at its time budget: %s' % self.report['refinement']['message'])
-        rms = math.sqrt(sum(math.dist(online[n], offline[n]) ** 2 for n in online) / len(online))
-        median = self.report['refinement']['translation_median']
-        rospy.loginfo('online vs offline refined: RMS %.5f m; the median correction %.5f m', rms, median)
-        self.assertLess(rms, 0.2 * median, 'online and offline refinements differ by %.5f m (median correction %.5f)'
-                        % (rms, median))
 
+        def ate(c):
+            names = sorted(n for n in c if stamp_of(n) in self.exact)
+            return ate_rmse([c[n] for n in names], [self.exact[stamp_of(n)] for n in names])
+        on, off = ate(online), ate(offline)
+        rospy.loginfo('refined ATE online %.5f m, offline %.5f m (%s)', on, off,
+                      self.report['refinement'].get('live'))
+        self.assertLess(on, 1.1 * off + 0.002, 'online refined ATE %.5f m, offline %.5f m' % (on, off))
 
 if __name__ == '__main__':
     rospy.init_node('live_odometry_tester')
