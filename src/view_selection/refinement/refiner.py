@@ -203,13 +203,15 @@ def write_matches(database_path, path, pairs=None, per_pair=0):
 
 
 def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, log_path=None, deadline=None,
-           log=None, pairs=None):
+           log=None, pairs=None, reference=None):
     """Refines the model in `model_dir` into `output` (replaced only at the end; on any error
     `output` is untouched and RefinementError says why). `fixed`: image names that must not
     move. `database`: the project's database, whose verified matches the points are
     triangulated anew from (None: the model's own points only; `pairs`: only these image id
-    pairs' matches). `deadline`: time.monotonic() by which it must be done. Returns the
-    report's `refinement` section (dict)."""
+    pairs' matches). `deadline`: time.monotonic() by which it must be done. `reference`: a
+    model folder with the poses the result is aligned to and corrections are measured against
+    (refine_model --reference; default the input's). Returns the report's `refinement` section
+    (dict)."""
     options = options or RefinementOptions()
     log = log or (lambda text: None)
     tool = find_refine_tool(tool)
@@ -231,7 +233,7 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
         import resource
         children = resource.getrusage(resource.RUSAGE_CHILDREN)
         report = run_refine_model(tool, os.path.abspath(model_dir), made, made + ".json", options, fixed,
-                                  log_path=log_path, timeout=timeout, matches=matches)
+                                  reference=reference, log_path=log_path, timeout=timeout, matches=matches)
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu = (after.ru_utime + after.ru_stime) - (children.ru_utime + children.ru_stime)
         log("refinement: %s" % report["message"])
