@@ -47,10 +47,10 @@ def test_a_session_refined_as_it_goes_matches_a_full_refinement(tmp_path):
     replay.session(until=len(keyframes) * 7 // 10)  # before the walk comes back to its start
     keyframes = replay.keyframes
     live = replay.local
-    # several runs during the session, of both kinds (a run of the whole model refines every
-    # keyframe, so windows are due only between them)
+    # several runs during the session (windows are due only between runs of the whole model,
+    # which refine every keyframe: which kinds ran depends on the CPU each took)
     assert live.runs["local"] + live.runs["global"] >= 3, live.summary()
-    assert live.runs["local"] >= 1 and live.runs["global"] >= 1, live.summary()
+    assert live.runs["global"] >= 1, live.summary()
     assert live.failures == 0
     changed = live.changed()
     assert 0 < len(changed) < len(keyframes) / 2, (changed, live.summary())  # the runs covered the rest
