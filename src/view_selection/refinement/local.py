@@ -579,7 +579,8 @@ class LocalRefinement:
                 if not fixed:  # everything changed: the whole model, as ModelRefinement refines it
                     section = refiner.refine(model_path, model_path, mr.options, database=project.database,
                                              tool=mr.tool, log_path=project.log_path, deadline=project.deadline,
-                                             log=lambda text: mr.log("info", text), reference=unrefined)
+                                             log=lambda text: mr.log("info", text), reference=unrefined,
+                                             progress=getattr(mr, "progress", None))
                     made = colmap_model.read_model(model_path)
                     report = {"images": [{"image_id": iid, "movable": True} for iid in made.images]}
                     if section["refined"]:
@@ -613,7 +614,8 @@ class LocalRefinement:
             section = refiner.refine(os.path.join(folder, "input"), os.path.join(folder, "output"), mr.options,
                                      fixed=[model.images[i].name for i in fixed], database=project.database,
                                      tool=mr.tool, log_path=project.log_path, deadline=project.deadline,
-                                     log=lambda text: mr.log("info", text), pairs=pairs)
+                                     log=lambda text: mr.log("info", text), pairs=pairs,
+                                     progress=getattr(mr, "progress", None))
             if section["refined"]:
                 images = colmap_model._read_images_bin(os.path.join(folder, "output", "images.bin"))
                 report = {"images": [{"image_id": i, "movable": True} for i in free]}

@@ -96,9 +96,12 @@ def find_refine_tool(explicit=None):
     raise RefinementError("cannot find the refine_model tool (build the package; or give its path)")
 
 
-def refine_model_command(tool, model, output, report, options, fixed=(), reference=None, matches=None):
+def refine_model_command(tool, model, output, report, options, fixed=(), reference=None, matches=None,
+                         progress=False):
     """refine_model's command line (the list of images held written beside `output`)."""
     args = [tool, "--input", model, "--output", output, "--report", report, "--quiet"] + options.arguments()
+    if progress:
+        args += ["--progress-interval", "1"]
     if reference:
         args += ["--reference", reference]
     if matches:
@@ -121,10 +124,11 @@ def read_report(report):
 
 
 def run_refine_model(tool, model, output, report, options, fixed=(), reference=None, log_path=None, timeout=None,
-                     matches=None):
+                     matches=None, progress=None):
     """One refine_model process; returns its report (dict). RefinementError when it cannot run,
-    fails or exceeds the timeout (then it is killed)."""
-    args = refine_model_command(tool, model, output, report, options, fixed, reference, matches)
+    fails or exceeds the timeout (then it is killed). progress: called with each of its progress
+    lines as it prints them (a line a second; None: they go to the log at the end, one every 10 s)."""
+    args = refine_model_command(tool, model, output, report, options, fixed, reference, matches, bool(progress))
     timeout = options.timeout if timeout is None else timeout
     log = open(log_path, "a") if log_path else None
     try:
@@ -137,7 +141,10 @@ def run_refine_model(tool, model, output, report, options, fixed=(), reference=N
         except OSError as e:
             raise RefinementError("cannot run %s: %s" % (tool, e.strerror or e))
         try:
-            _, err = proc.communicate(timeout=max(1.0, timeout))
+            if progress:
+                err = _relay(proc, progress, max(1.0, timeout))
+            else:
+                _, err = proc.communicate(timeout=max(1.0, timeout))
         except subprocess.TimeoutExpired:
             Colmap._kill(proc)
             raise RefinementError("refine_model did not finish within %.0f s and was killed" % timeout)
@@ -153,6 +160,23 @@ def run_refine_model(tool, model, output, report, options, fixed=(), reference=N
     if proc.returncode != 0:
         raise RefinementError("refine_model failed (exit %d): %s" % (proc.returncode, (err or "").strip()[-500:]))
     return read_report(report)
+
+
+def _relay(proc, progress, timeout):
+    """Waits for `proc` as communicate() does, handing each line of its stderr to `progress` as it
+    comes; returns the whole stderr. subprocess.TimeoutExpired after `timeout` seconds."""
+    import threading
+    lines = []
+
+    def read():
+        for line in proc.stderr:
+            lines.append(line)
+            progress(line.rstrip("\n"))
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    proc.wait(timeout=timeout)
+    reader.join(timeout=5.0)  # the pipe ends with the process
+    return "".join(lines)
 
 
 def poses_only(model):
@@ -203,15 +227,15 @@ def write_matches(database_path, path, pairs=None, per_pair=0):
 
 
 def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, log_path=None, deadline=None,
-           log=None, pairs=None, reference=None):
+           log=None, pairs=None, reference=None, progress=None):
     """Refines the model in `model_dir` into `output` (replaced only at the end; on any error
     `output` is untouched and RefinementError says why). `fixed`: image names that must not
     move. `database`: the project's database, whose verified matches the points are
     triangulated anew from (None: the model's own points only; `pairs`: only these image id
     pairs' matches). `deadline`: time.monotonic() by which it must be done. `reference`: a
     model folder with the poses the result is aligned to and corrections are measured against
-    (refine_model --reference; default the input's). Returns the report's `refinement` section
-    (dict)."""
+    (refine_model --reference; default the input's). `progress`: called with each of
+    refine_model's progress lines. Returns the report's `refinement` section (dict)."""
     options = options or RefinementOptions()
     log = log or (lambda text: None)
     tool = find_refine_tool(tool)
@@ -233,7 +257,8 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
         import resource
         children = resource.getrusage(resource.RUSAGE_CHILDREN)
         report = run_refine_model(tool, os.path.abspath(model_dir), made, made + ".json", options, fixed,
-                                  reference=reference, log_path=log_path, timeout=timeout, matches=matches)
+                                  reference=reference, log_path=log_path, timeout=timeout, matches=matches,
+                                  progress=progress)
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu = (after.ru_utime + after.ru_stime) - (children.ru_utime + children.ru_stime)
         log("refinement: %s" % report["message"])
@@ -328,10 +353,12 @@ class ModelRefinement:
     matches), and give the report's `refinement` section. Whatever fails, the unrefined model
     stays in DIR/sparse/0 and the section says why."""
 
-    def __init__(self, options=None, tool=None, log=None):
+    def __init__(self, options=None, tool=None, log=None, progress=None):
+        """progress: called with each of refine_model's progress lines (a line a second), or None."""
         self.options = options or RefinementOptions()
         self.tool = tool
         self.log = log or (lambda level, text: None)
+        self.progress = progress
 
     def apply(self, project, model_path):
         from ..colmap.database import DatabaseError
@@ -342,7 +369,7 @@ class ModelRefinement:
             keep_copy(model_path, unrefined)
             section = refine(model_path, model_path, self.options, database=project.database, tool=self.tool,
                              log_path=project.log_path, deadline=project.deadline,
-                             log=lambda text: self.log("info", text))
+                             log=lambda text: self.log("info", text), progress=self.progress)
         except (RefinementError, ProjectError, DatabaseError, colmap_model.ModelError, OSError, KeyError,
                 ValueError) as e:
             message = "refinement failed, the unrefined model stays in %s: %s" % (model_path, e)
