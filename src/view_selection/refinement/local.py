@@ -583,9 +583,14 @@ class LocalRefinement:
                     if section["refined"]:
                         self._take_poses(report, made.images, {i: node.get(i) for i in free}, cover=True)
                         self.used_pairs |= live.matched_pairs
+                        # The points follow now, within the finish: a change of the live model
+                        # after it would show the live model again in place of the finished one
+                        # (~points, live/model_topics.py).
+                        live.update(final=True)
                 else:
                     section = self._refine_crop(project, model_path, free, fixed, node)
                 section.update(finish_free=len(free), finish_fixed=len(fixed))
+                self.global_pairs = len(live.matched_pairs)  # the finish brought the whole model up to date
         except (refiner.RefinementError, ProjectError, DatabaseError, colmap_model.ModelError, OSError, KeyError,
                 ValueError) as e:
             message = "refinement failed, the live model stays in %s: %s" % (model_path, e)
