@@ -59,10 +59,11 @@ class Replay:
         self.session(until)
         return self.finish_model()
 
-    def session(self, until=None):
+    def session(self, until=None, quiet_tail=0):
         """Keyframes arrive in order, `batch` at a time (the walk's 5 keyframes a second come
         in batches of a few), each batch then extracted, matched, fed, the refinement stepped
-        and its run waited for."""
+        and its run waited for; the last `quiet_tail` keyframes without a step (they came just
+        before the finish)."""
         self.keyframes = sorted(self.export.keyframes, key=lambda k: k.id)[:until]
         pairs = [pair_of(*p) for p in self.export.pairs]
         first = self.keyframes[0].stamp
@@ -76,7 +77,7 @@ class Replay:
             while self.work.match(arrived, announced, limit=len(announced) + len(arrived)):
                 pass
             self.work.feed_model(arrived)
-            if self.local is not None:
+            if self.local is not None and n <= len(self.keyframes) - quiet_tail:
                 self.work.refine_in_background()
                 if self.local.running is not None:
                     self.local.wait(600.0)
