@@ -30,6 +30,7 @@ from ..colmap import model as colmap_model
 from ..colmap.database import DatabaseError
 from ..colmap.project import ColmapProject, ProjectError, Timeouts, write_json_atomically
 from ..keyframes import Keyframe
+from ..refinement.local import LocalRefinement
 from ..refinement.refiner import FINISH_MAX_SECONDS, ModelRefinement, RefinementOptions
 from ..features.sift import SiftExtractor
 from ..matching.backend import PoseGuidedBackend
@@ -80,6 +81,10 @@ PARAMETERS = """Parameters (private, ~name):
                      the adjustment reached by then (report.json: status out_of_time), so that a
                      long session's finish stays bounded (5; 0: no limit)
   refine_tool        the refine_model executable ("": beside this node)
+  refine_live        with live triangulation: refine while the recording goes on (true): windows of
+                     new keyframes with what they see held, the whole model when the budget allows;
+                     the finish refines only what changed since (refinement/local.py)
+  refine_live_cpu    [cores] the average CPU those runs may take over the session (0.25)
   publish_period     [s] ~points and ~cameras are sent at most once per this (0.5; 0: not published)
   camera_scale       frustum depth of ~cameras in RViz [m, scene units] (0.15: the node's ~markers'
                      frusta are 0.1 deep, so that both show where they coincide)
@@ -150,6 +155,8 @@ class Bridge:
                                   threads=int(_param("threads", -1)),
                                   max_seconds=float(_param("refine_max_seconds", FINISH_MAX_SECONDS))),
                 tool=_param("refine_tool", "") or None, log=self._log)
+            if bool(_param("refine_live", True)) and _param("triangulation", "live") == "live":
+                refinement = LocalRefinement(refinement, cpu_share=float(_param("refine_live_cpu", 0.25)))
         self.work_state = LiveWork(self.project, continuity=bool(_param("continuity_pairs", True)),
                                    max_backlog=_param("max_backlog", 2000),
                                    max_batch_pairs=_param("max_batch_pairs", 24),
@@ -299,6 +306,7 @@ class Bridge:
                 if self.work_state.model is not None:
                     with self.work_state.clock.measure("triangulation", 1):
                         self.work_state.feed_model(keyframes)
+                    self.work_state.refine_in_background()  # polls, or starts a run: returns at once
                 if self.model_topics:
                     self.model_topics.live(self.work_state.model)
                 return more

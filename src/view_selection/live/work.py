@@ -6,6 +6,7 @@ afterwards, so a batch that fails names its culprit.
 """
 import time
 
+from .. import geometry
 from ..colmap import durable
 from ..colmap.project import ColmapProject, ProjectError
 from ..keyframes import continuity_pairs, pair_of
@@ -50,6 +51,11 @@ class LiveWork:
         self.status = {}  # the last batch's figures: keyframes, images extracted and waiting, pairs
         self.deferred = 0  # pairs beyond ~max_backlog at some point, left for the finish
         self.errors = []   # the last few, for the report
+        # The pose the live model takes for a keyframe (its node pose), unless a refinement that
+        # runs beside the matching (refinement/local.py) attaches its own: refined poses.
+        self.pose_of = lambda k, iid: geometry.world_to_camera(k.position, k.orientation)
+        if hasattr(refinement, "attach"):
+            refinement.attach(self)
 
     def error(self, text):
         self.log("error", text)
@@ -254,7 +260,7 @@ class LiveWork:
                     if len(known.keypoints) or k.name in with_features:
                         fed[k.name] = k
                     continue
-                q, t = geometry.world_to_camera(k.position, k.orientation)
+                q, t = self.pose_of(k, iid)
                 mid, w, h, params = cameras[cams[iid]]
                 keypoints = d.keypoints(iid) if (known is None or not len(known.keypoints)) else known.keypoints
                 m.add_image(iid, k.name, cams[iid], (CAMERA_MODELS[mid][0], w, h, params), q, t, keypoints)
@@ -281,6 +287,12 @@ class LiveWork:
         changed = m.update(final=final)
         self.status.update(points=len(m.points), tracks=len(m.members))
         return changed
+
+    def refine_in_background(self):
+        """The bridge's worker loop, after a batch: a refinement that runs beside the matching
+        (refinement/local.py) polls its run and starts the next; True while one runs."""
+        step = getattr(self.refinement, "step", None)
+        return bool(step()) if step is not None and self.model is not None else False
 
     def skipped(self, all_failed=False):
         """What was given up (with all_failed: also what failed and was not retried yet)."""

@@ -96,11 +96,9 @@ def find_refine_tool(explicit=None):
     raise RefinementError("cannot find the refine_model tool (build the package; or give its path)")
 
 
-def run_refine_model(tool, model, output, report, options, fixed=(), reference=None, log_path=None, timeout=None,
-                     matches=None, progress=None):
-    """One refine_model process; returns its report (dict). RefinementError when it cannot run,
-    fails or exceeds the timeout (then it is killed). progress: called with each of its progress
-    lines as it prints them (a line a second; None: they go to the log at the end, one every 10 s)."""
+def refine_model_command(tool, model, output, report, options, fixed=(), reference=None, matches=None,
+                         progress=False):
+    """refine_model's command line (the list of images held written beside `output`)."""
     args = [tool, "--input", model, "--output", output, "--report", report, "--quiet"] + options.arguments()
     if progress:
         args += ["--progress-interval", "1"]
@@ -114,6 +112,23 @@ def run_refine_model(tool, model, output, report, options, fixed=(), reference=N
         with open(listing, "w") as f:
             f.write("".join(n + "\n" for n in fixed))
         args += ["--fixed", listing]
+    return args
+
+
+def read_report(report):
+    try:
+        with open(report) as f:
+            return json.load(f)
+    except (OSError, ValueError) as e:
+        raise RefinementError("refine_model wrote no readable report (%s)" % e)
+
+
+def run_refine_model(tool, model, output, report, options, fixed=(), reference=None, log_path=None, timeout=None,
+                     matches=None, progress=None):
+    """One refine_model process; returns its report (dict). RefinementError when it cannot run,
+    fails or exceeds the timeout (then it is killed). progress: called with each of its progress
+    lines as it prints them (a line a second; None: they go to the log at the end, one every 10 s)."""
+    args = refine_model_command(tool, model, output, report, options, fixed, reference, matches, bool(progress))
     timeout = options.timeout if timeout is None else timeout
     log = open(log_path, "a") if log_path else None
     try:
@@ -144,11 +159,7 @@ def run_refine_model(tool, model, output, report, options, fixed=(), reference=N
             log.close()
     if proc.returncode != 0:
         raise RefinementError("refine_model failed (exit %d): %s" % (proc.returncode, (err or "").strip()[-500:]))
-    try:
-        with open(report) as f:
-            return json.load(f)
-    except (OSError, ValueError) as e:
-        raise RefinementError("refine_model wrote no readable report (%s)" % e)
+    return read_report(report)
 
 
 def _relay(proc, progress, timeout):
@@ -190,18 +201,23 @@ def corrections(before, after):
     return out
 
 
-def write_matches(database_path, path):
+def write_matches(database_path, path, pairs=None, per_pair=0):
     """The database's verified matches (two-view geometries' inliers) as refine_model's VSMATCH1
-    file: image id and keypoint index of both sides, the ids the model's images have. Returns
-    how many."""
+    file: image id and keypoint index of both sides, the ids the model's images have. `pairs`:
+    only these (image id, image id) pairs (a cropped refinement, refinement/local.py), read one
+    by one. `per_pair`: at most this many of each pair's, evenly spread over its list (0: all).
+    Returns how many."""
     import struct
     from ..colmap import database as cdb
     rows = []
     with cdb.open_database(database_path) as d:
-        for (a, b), n in sorted(d.inlier_counts().items()):
+        wanted = sorted(d.inlier_counts().items()) if pairs is None else [(p, 1) for p in sorted(pairs)]
+        for (a, b), n in wanted:
             if n <= 0:
                 continue
             m = np.asarray(d.matches(a, b, "two_view_geometries"), np.int64).reshape(-1, 2)
+            if per_pair and len(m) > per_pair:
+                m = m[np.linspace(0, len(m) - 1, per_pair).astype(np.int64)]
             if len(m):
                 rows.append(np.stack([np.full(len(m), a), m[:, 0], np.full(len(m), b), m[:, 1]], axis=1))
     data = np.concatenate(rows).astype("<i4") if rows else np.zeros((0, 4), "<i4")
@@ -211,13 +227,15 @@ def write_matches(database_path, path):
 
 
 def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, log_path=None, deadline=None,
-           log=None, progress=None):
+           log=None, pairs=None, reference=None, progress=None):
     """Refines the model in `model_dir` into `output` (replaced only at the end; on any error
     `output` is untouched and RefinementError says why). `fixed`: image names that must not
     move. `database`: the project's database, whose verified matches the points are
-    triangulated anew from (None: the model's own points only). `deadline`: time.monotonic()
-    by which it must be done. `progress`: called with each of refine_model's progress lines.
-    Returns the report's `refinement` section (dict)."""
+    triangulated anew from (None: the model's own points only; `pairs`: only these image id
+    pairs' matches). `deadline`: time.monotonic() by which it must be done. `reference`: a
+    model folder with the poses the result is aligned to and corrections are measured against
+    (refine_model --reference; default the input's). `progress`: called with each of
+    refine_model's progress lines. Returns the report's `refinement` section (dict)."""
     options = options or RefinementOptions()
     log = log or (lambda text: None)
     tool = find_refine_tool(tool)
@@ -234,12 +252,13 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
         matches, count = None, 0
         if database and options.retriangulations > 0:
             matches = os.path.join(work, "matches.bin")
-            count = write_matches(database, matches)
+            count = write_matches(database, matches, pairs)
         made = os.path.join(work, "refined")
         import resource
         children = resource.getrusage(resource.RUSAGE_CHILDREN)
         report = run_refine_model(tool, os.path.abspath(model_dir), made, made + ".json", options, fixed,
-                                  log_path=log_path, timeout=timeout, matches=matches, progress=progress)
+                                  reference=reference, log_path=log_path, timeout=timeout, matches=matches,
+                                  progress=progress)
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu = (after.ru_utime + after.ru_stime) - (children.ru_utime + children.ru_stime)
         log("refinement: %s" % report["message"])
@@ -276,6 +295,58 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
         shutil.rmtree(work, ignore_errors=True)
 
 
+_RENAME_EXCHANGE = 2  # linux/fs.h
+
+
+def _exchange(a, b):
+    """Swaps the names a and b in one step (renameat2 RENAME_EXCHANGE); False where the C
+    library or the filesystem cannot."""
+    import ctypes
+    import errno
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        renameat2 = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    renameat2.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    at_fdcwd = -100
+    if renameat2(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP, errno.EPERM):
+        return False
+    raise OSError(err, os.strerror(err), b)
+
+
+def swap_folder(made, output):
+    """`made` becomes `output`; a reader of `output` finds the old folder or the new one, whole,
+    at every moment: the new one is complete beside it before the two names are exchanged
+    (renameat2 RENAME_EXCHANGE; where the filesystem cannot, two renames a few microseconds
+    apart), then the old one is removed."""
+    if not os.path.exists(output):
+        os.rename(made, output)
+        return
+    if _exchange(made, output):
+        shutil.rmtree(made, ignore_errors=True)  # the old one, under the new one's former name
+        return
+    old = made + ".old"
+    os.rename(output, old)
+    os.rename(made, output)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def keep_copy(model_path, unrefined):
+    """A copy of the model folder in `unrefined`, written beside it and swapped in (swap_folder):
+    sparse/unrefined is never missing or half written (it was removed, then copied again)."""
+    made = tempfile.mkdtemp(prefix=".unrefined_", dir=os.path.dirname(os.path.abspath(unrefined)))
+    try:
+        os.rmdir(made)
+        shutil.copytree(model_path, made)
+        swap_folder(made, unrefined)
+    finally:
+        shutil.rmtree(made, ignore_errors=True)
+
+
 class ModelRefinement:
     """What colmap_bridge and colmap_from_selection do with the known-pose model: keep it as
     DIR/sparse/unrefined, refine it into DIR/sparse/0 (re-triangulating with the project's
@@ -295,9 +366,7 @@ class ModelRefinement:
         unrefined = os.path.join(os.path.dirname(model_path), "unrefined")
         start = time.monotonic()
         try:
-            if os.path.exists(unrefined):
-                shutil.rmtree(unrefined)
-            shutil.copytree(model_path, unrefined)
+            keep_copy(model_path, unrefined)
             section = refine(model_path, model_path, self.options, database=project.database, tool=self.tool,
                              log_path=project.log_path, deadline=project.deadline,
                              log=lambda text: self.log("info", text), progress=self.progress)

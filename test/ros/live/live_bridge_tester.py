@@ -414,9 +414,11 @@ class LiveBridge(unittest.TestCase):
         for name in online_poses:
             for a, b in zip(online_poses[name], offline_poses[name]):
                 self.assertAlmostEqual(a, b, delta=1e-9, msg=name)
-        # The refined models: the same keyframes, centres within 2 mm RMS (the refinement's own
-        # precision here; the databases differ by the pairs the bridge matched and the node took
-        # back, so the points differ a little).
+        # The refined models: the same keyframes, centres within 3 mm RMS (the refinement's own
+        # precision here, 1-3 mm of ATE; the databases differ by the pairs the bridge matched and
+        # the node took back, so the points differ a little; and the bridge refined as the
+        # recording went on (refinement/local.py): what the finish held was refined by earlier
+        # runs with fewer pairs. Measured 0.1 mm when the finish refined everything, 2.04 mm since).
         on = model_poses(self.colmap, os.path.join(self.a, 'sparse', '0'), os.path.join(self.tmp, 'on_refined'))
         off = model_poses(self.colmap, os.path.join(offline, 'sparse', '0'), os.path.join(self.tmp, 'off_refined'))
         self.assertEqual(sorted(on), sorted(off))
@@ -430,7 +432,7 @@ class LiveBridge(unittest.TestCase):
             # between the unrefined model and the offline one, which has no budget.
             self.assertLess(rms, 0.002 + off['refinement']['translation_max'], online['refinement']['message'])
         else:
-            self.assertLess(rms, 0.002)
+            self.assertLess(rms, 0.003)
         self.assertEqual(online['registered'], off['registered'])
         self.assertEqual(online['final_pairs'], off['final_pairs'])
         # The same pairs matched; points within COLMAP's run-to-run SIFT differences.

@@ -1,0 +1,93 @@
+"""A selection (select_views or a node's ~export) replayed into LiveWork keyframe by keyframe, as
+colmap_bridge's worker loop sees a recording, without ROS: the features and matches of what has
+arrived, the live model fed, the refinement beside the matching stepped, and the finish. For the
+tests and the benchmark of the refinement while the recording goes on (refinement/local.py).
+
+The session's clock is the recording's: the keyframes' stamps. The refinement's CPU budget
+(LocalRefinement.cpu_share of a core) is counted against it, as the bridge counts it against the
+wall clock of a recording played at 1x; every run is waited for before the next keyframe comes,
+so a replay gives the same runs whatever the machine's load.
+"""
+import os
+import shutil
+import time
+
+from ..colmap.project import ColmapProject
+from ..export_folder import ExportFolder
+from ..keyframes import pair_of
+from ..live.work import LiveWork
+from ..matching.backend import PoseGuidedBackend
+from .local import LocalRefinement
+from .refiner import FINISH_MAX_SECONDS, ModelRefinement, RefinementOptions
+
+
+def link_images(keyframes, images, project):
+    for k in keyframes:
+        target = os.path.join(project.images, k.name)
+        os.makedirs(os.path.dirname(target), exist_ok=True)
+        try:
+            os.link(os.path.join(images, k.name), target)
+        except OSError:
+            shutil.copyfile(os.path.join(images, k.name), target)
+
+
+class Replay:
+    """colmap_bridge's work on `export` into the project folder `out` (replaced), at its
+    defaults: the pose-guided matcher, live triangulation, the finish's refinement within
+    FINISH_MAX_SECONDS, and (refine_live) the refinement beside the matching."""
+
+    def __init__(self, export, out, refine_live=True, threads=1, log=None, refine_tool=None, batch=4, local=None):
+        self.export = ExportFolder(export) if isinstance(export, str) else export
+        self.log = log or (lambda level, text: None)
+        if os.path.exists(out):
+            shutil.rmtree(out)
+        self.project = ColmapProject(out, "colmap", threads)
+        os.makedirs(self.project.images)
+        link_images(self.export.keyframes, self.export.image_root(), self.project)
+        self.project.open()
+        self.now = 0.0  # the recording's time [s]
+        self.finish = ModelRefinement(RefinementOptions(max_seconds=FINISH_MAX_SECONDS, threads=threads),
+                                      tool=refine_tool, log=self.log)
+        self.local = LocalRefinement(self.finish, clock=lambda: self.now, **(local or {})) if refine_live else None
+        self.work = LiveWork(self.project, backend=PoseGuidedBackend(self.project), log=self.log,
+                             refinement=self.local or self.finish)
+        self.batch = max(1, int(batch))
+        self.seconds = {"session": 0.0, "finish": 0.0}
+
+    def run(self, until=None):
+        """The session, then the finish; returns the finish's report."""
+        self.session(until)
+        return self.finish_model()
+
+    def session(self, until=None, quiet_tail=0):
+        """Keyframes arrive in order, `batch` at a time (the walk's 5 keyframes a second come
+        in batches of a few), each batch then extracted, matched, fed, the refinement stepped
+        and its run waited for; the last `quiet_tail` keyframes without a step (they came just
+        before the finish)."""
+        self.keyframes = sorted(self.export.keyframes, key=lambda k: k.id)[:until]
+        pairs = [pair_of(*p) for p in self.export.pairs]
+        first = self.keyframes[0].stamp
+        t0 = time.monotonic()
+        for n in range(self.batch, len(self.keyframes) + self.batch, self.batch):
+            arrived = self.keyframes[:n]
+            names = {k.name for k in arrived}
+            self.now = arrived[-1].stamp - first
+            announced = [p for p in pairs if p[0] in names and p[1] in names]
+            self.work.extract(arrived)
+            while self.work.match(arrived, announced, limit=len(announced) + len(arrived)):
+                pass
+            self.work.feed_model(arrived)
+            if self.local is not None and n <= len(self.keyframes) - quiet_tail:
+                self.work.refine_in_background()
+                if self.local.running is not None:
+                    self.local.wait(600.0)
+        self.seconds["session"] = time.monotonic() - t0
+
+    def finish_model(self):
+        """The bridge's finish on the keyframes that came: the model, refined; its report."""
+        names = {k.name for k in self.keyframes}
+        t0 = time.monotonic()
+        report = self.work.build_model(self.keyframes, [p for p in self.export.pairs
+                                                         if p[0] in names and p[1] in names])
+        self.seconds["finish"] = time.monotonic() - t0
+        return report
