@@ -396,6 +396,37 @@ void BM_ScaleFreeDecisionAtScale(benchmark::State& state) {
 }
 BENCHMARK(BM_ScaleFreeDecisionAtScale)->Arg(10000)->Arg(100000)->Unit(benchmark::kMicrosecond);
 
+// The same decision for a frame back at an earlier place of the corridor (at keyframe n/2, give
+// or take a few cm): new against the last keyframe, so the revisit rule searches the keyframes
+// near it (KeyframeNeighbours) and measures the most alike until one has the view.
+void BM_ScaleFreeRevisitDecisionAtScale(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  Grown& g = grownCorridor(n);
+  ViewSelectorState saved;
+  saved.config.keyframes.mode = KeyframeMode::kScaleFree;
+  const ErrorResistanceMatrix& m = *g.matrix;
+  for (size_t i = 0; i < m.size(); ++i) {
+    saved.keyframes.push_back(m.keyframe(static_cast<ViewId>(i)));
+    saved.rows.push_back(m.table().row(static_cast<ViewId>(i)));
+  }
+  ViewSelector selector(saved.config, std::make_unique<NoPoints>());
+  selector.restore(saved);
+  saved = {};
+  const Keyframe& earlier = m.keyframe(static_cast<ViewId>(m.size() / 2));
+  Frame frame;
+  frame.intrinsics = earlier.intrinsics;
+  size_t wanted = 0, offered = 0;
+  for (auto _ : state) {
+    frame.pose = earlier.pose;
+    frame.pose.position.z() += 0.02 * static_cast<double>(offered % 10);
+    wanted += selector.wantsFrame(frame) ? 1 : 0;
+    ++offered;
+  }
+  state.counters["keyframes"] = static_cast<double>(selector.matrix().size());
+  state.counters["wanted_share"] = static_cast<double>(wanted) / static_cast<double>(offered);
+}
+BENCHMARK(BM_ScaleFreeRevisitDecisionAtScale)->Arg(10000)->Arg(100000)->Unit(benchmark::kMicrosecond);
+
 // Selection after each insertion, at scale: the incremental cache that ViewSelector keeps (each
 // iteration inserts one keyframe untimed, then updates the selection), and the plain
 // definition over the same matrix for comparison.

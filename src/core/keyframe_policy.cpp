@@ -81,7 +81,7 @@ std::string describeKeyframeRule(const KeyframePolicyConfig& kf) {
       s << "scale_free: a new keyframe when under " << kf.keyframe_overlap
         << " of the last keyframe's points are matchable or the parallax at the nearer of "
            "them (90th percentile) reaches "
-        << kf.keyframe_parallax_deg << " deg";
+        << kf.keyframe_parallax_deg << " deg, unless an earlier keyframe near it has the view";
       break;
     case KeyframeMode::kMotion:
       s << "motion: a new keyframe after " << kf.min_translation
@@ -126,8 +126,7 @@ bool KeyframePolicy::offer(const CameraPose& pose, bool external,
           *reference->points, reference->pose.position,
           std::sqrt(reference->intrinsics.fx * reference->intrinsics.fy), pose, *intrinsics,
           reference->max_parallax_deg, reference->max_scale_ratio));
-      return c.overlap < config_.keyframe_overlap ||
-             (config_.keyframe_parallax_deg > 0.0 && c.parallax_deg >= config_.keyframe_parallax_deg);
+      return isNewView(c);
     }
     case KeyframeMode::kEveryFrame:
       return true;
@@ -145,6 +144,22 @@ bool KeyframePolicy::offer(const CameraPose& pose, bool external,
     }
   }
   return false;
+}
+
+bool KeyframePolicy::isNewView(const ViewChange& c) const {
+  return c.overlap < config_.keyframe_overlap ||
+         (config_.keyframe_parallax_deg > 0.0 && c.parallax_deg >= config_.keyframe_parallax_deg);
+}
+
+bool KeyframePolicy::covers(const KeyframeReference& reference, const CameraPose& pose,
+                            const PinholeIntrinsics& intrinsics) const {
+  if (!reference.points || reference.points->cols() < kMinReferencePoints) return false;
+  const ViewChange c = measureViewChange(
+      *reference.points, reference.pose.position,
+      std::sqrt(reference.intrinsics.fx * reference.intrinsics.fy), pose, intrinsics,
+      reference.max_parallax_deg, reference.max_scale_ratio);
+  // At least one point: with keyframe_overlap 0 a keyframe that sees none of it covers nothing.
+  return c.matchable > 0 && !isNewView(c);
 }
 
 void KeyframePolicy::keyframeAccepted(const CameraPose& pose) { last_keyframe_ = pose; }

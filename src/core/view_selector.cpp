@@ -107,12 +107,54 @@ const KeyframeReference* ViewSelector::keyframeReference() const {
   return &r;
 }
 
+bool ViewSelector::revisitRuleApplies(const KeyframePolicy& policy) const {
+  // Only where the policy measured the view against the last keyframe's points: not at the
+  // start (no keyframe has points yet), not for the other modes (a photo collection keeps every
+  // photo, the SLAM's keyframes are its own).
+  return policy.config().mode == KeyframeMode::kScaleFree && policy.lastChange().has_value() &&
+         matrix_.size() > 1;
+}
+
+ViewId ViewSelector::coveringKeyframe(const CameraPose& pose,
+                                      const PinholeIntrinsics& intrinsics) const {
+  const ViewId last = static_cast<ViewId>(matrix_.size()) - 1;
+  neighbours_.query(pose, std::sqrt(intrinsics.fx * intrinsics.fy), kOverlapMaxScaleRatio,
+                    kRevisitCandidates, near_);
+  KeyframeReference r;
+  r.max_parallax_deg = kOverlapMaxParallaxDeg;  // the last keyframe's gate: fixed
+  r.max_scale_ratio = kOverlapMaxScaleRatio;
+  for (const ViewId id : near_) {
+    if (id == last) continue;  // measured already: it does not have the view
+    const Keyframe& k = matrix_.keyframe(id);
+    r.pose = k.pose;
+    r.intrinsics = k.intrinsics;
+    r.points = &k.points;
+    r.stamp = k.stamp;
+    if (policy_.covers(r, pose, intrinsics)) return id;
+  }
+  return -1;
+}
+
+void ViewSelector::indexNeighbours() {
+  neighbours_.clear();
+  for (size_t i = 0; i < matrix_.size(); ++i)
+    neighbours_.update(static_cast<ViewId>(i), matrix_.keyframe(static_cast<ViewId>(i)),
+                       config_.keyframes.keyframe_overlap);
+}
+
 FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
   FrameResult result;
   const KeyframeReference* reference = policy_.needsReference() ? keyframeReference() : nullptr;
   const bool take =
       policy_.offer(pose, frame.external_keyframe, reference, &frame.intrinsics, frame.stamp);
   if (!take) return result;
+  if (revisitRuleApplies(policy_)) {
+    result.covered_by = coveringKeyframe(pose, frame.intrinsics);
+    if (result.covered_by >= 0) {
+      ++revisits_skipped_;
+      return result;
+    }
+  }
 
   const auto t_points = std::chrono::steady_clock::now();
   const ViewId id = static_cast<ViewId>(matrix_.size());
@@ -144,8 +186,11 @@ FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
   // Nothing below throws for inputs validated above: the matrix is never left half-updated.
   const auto t_matrix = std::chrono::steady_clock::now();
   result.id = matrix_.addKeyframe(std::move(keyframe));
+  const double overlap = config_.keyframes.keyframe_overlap;
+  neighbours_.update(result.id, matrix_.keyframe(result.id), overlap);
   for (auto& [view, updated] : points.updated) {
     matrix_.setPoints(view, std::move(updated));
+    neighbours_.update(view, matrix_.keyframe(view), overlap);
     result.updated_rows.push_back(view);
   }
   result.matrix_seconds = secondsSince(t_matrix);
@@ -159,7 +204,9 @@ bool ViewSelector::wantsFrame(const Frame& frame) const {
   CameraPose pose = frame.pose;
   pose.orientation.normalize();  // as addFrame does
   const KeyframeReference* reference = probe.needsReference() ? keyframeReference() : nullptr;
-  return probe.offer(pose, frame.external_keyframe, reference, &frame.intrinsics, frame.stamp);
+  if (!probe.offer(pose, frame.external_keyframe, reference, &frame.intrinsics, frame.stamp))
+    return false;
+  return !revisitRuleApplies(probe) || coveringKeyframe(pose, frame.intrinsics) < 0;
 }
 
 std::vector<ViewId> ViewSelector::applyPointUpdates() {
@@ -172,6 +219,7 @@ std::vector<ViewId> ViewSelector::applyPointUpdates() {
   std::vector<ViewId> rows;
   for (auto& [view, updated] : updates) {
     matrix_.setPoints(view, std::move(updated));
+    neighbours_.update(view, matrix_.keyframe(view), config_.keyframes.keyframe_overlap);
     rows.push_back(view);
   }
   return rows;
@@ -180,8 +228,10 @@ std::vector<ViewId> ViewSelector::applyPointUpdates() {
 void ViewSelector::correctPoses(const std::vector<std::pair<ViewId, CameraPose>>& poses) {
   matrix_.setPoses(poses);
   const ViewId last = static_cast<ViewId>(matrix_.size()) - 1;
-  for (const auto& [id, pose] : poses)
+  for (const auto& [id, pose] : poses) {
+    neighbours_.update(id, matrix_.keyframe(id), config_.keyframes.keyframe_overlap);
     if (id == last) policy_.keyframeAccepted(matrix_.keyframe(id).pose);
+  }
 }
 
 Selection ViewSelector::select() const {
@@ -205,12 +255,16 @@ void ViewSelector::setConfig(const ViewSelectorConfig& requested) {
   config.validate();
   policy_.setConfig(config.keyframes);
   matrix_.setConfig(config.matrix);
+  const bool reindex = config.keyframes.keyframe_overlap != config_.keyframes.keyframe_overlap;
   config_ = config;
+  if (reindex) indexNeighbours();
   params_.reset();
 }
 
 void ViewSelector::reset() {
   matrix_.clear();
+  neighbours_.clear();
+  revisits_skipped_ = 0;
   policy_.reset();
   points_->reset();
   last_stamp_.reset();
@@ -242,6 +296,7 @@ void ViewSelector::restore(const ViewSelectorState& state) {
   matrix_ = std::move(matrix);
   policy_ = std::move(policy);
   last_stamp_ = state.last_stamp;
+  indexNeighbours();
   params_.reset();
 }
 

@@ -3,6 +3,7 @@
 #include "view_selection/core/exceptions.h"
 #include "view_selection/eval/trajectory_alignment.h"
 #include "view_selection/refine/tracks.h"
+#include "view_selection/refine/triangulation.h"
 
 #include <ceres/ceres.h>
 #include <ceres/product_manifold.h>
@@ -16,6 +17,7 @@
 #include <memory>
 #include <sstream>
 #include <cstdio>
+#include <functional>
 #include <thread>
 
 namespace view_selection::refine {
@@ -246,8 +248,23 @@ struct Deadline {
   }
 };
 
-/// One bundle adjustment of the poses the gauge lets move, and every point.
-ceres::Solver::Summary adjust(State& s, const Gauge& gauge, const RefinementConfig& config, const Deadline& deadline) {
+/// Tells `on_iteration` each Ceres iteration (for the progress line).
+class IterationReporter : public ceres::IterationCallback {
+ public:
+  explicit IterationReporter(const std::function<void(int)>& on_iteration) : on_iteration_(on_iteration) {}
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
+    on_iteration_(summary.iteration);
+    return ceres::SOLVER_CONTINUE;
+  }
+
+ private:
+  const std::function<void(int)>& on_iteration_;
+};
+
+/// One bundle adjustment of the poses the gauge lets move, and every point; `on_iteration`, when
+/// given, is told each iteration.
+ceres::Solver::Summary adjust(State& s, const Gauge& gauge, const RefinementConfig& config, const Deadline& deadline,
+                              const std::function<void(int)>* on_iteration = nullptr) {
   const std::set<int>& moving = gauge.moving;
   ceres::Problem::Options problem_options;
   problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
@@ -305,6 +322,11 @@ ceres::Solver::Summary adjust(State& s, const Gauge& gauge, const RefinementConf
   options.num_threads = config.threads > 0 ? config.threads
                                            : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
   options.logging_type = ceres::SILENT;
+  std::unique_ptr<IterationReporter> reporter;
+  if (on_iteration) {
+    reporter = std::make_unique<IterationReporter>(*on_iteration);
+    options.callbacks.push_back(reporter.get());
+  }
   ceres::Solver::Summary summary;
   if (problem.NumResidualBlocks() == 0) return summary;
   ceres::Solve(options, &problem, &summary);
@@ -429,25 +451,32 @@ Gauge gaugeOf(const State& s, const std::map<int, State::Pose>& reference, const
 }
 
 /// The points of `tracks` triangulated anew at the poses of `s` (images in `excluded` and their
-/// observations left out), replacing its points: a linear (DLT) point from the rays, three
-/// Gauss-Newton steps on the pixel error, and the worst observation dropped while it is further
-/// than triangulation_max_error (the point again from the rest); kept when it has two
-/// observations left, lies in front of them and is seen at min_triangulation_angle_deg at
-/// least. A point takes the colour of an old point that shared an observation.
-/// Returns false, with `s` untouched, when `deadline` passed before every track was done.
+/// observations left out), replacing its points, by the package's one triangulation
+/// (triangulation.h, the live model's too) with `max_error` and min_triangulation_angle_deg.
+/// A point takes the colour of an old point that shared an observation.
+/// Returns false, with `s` untouched, when `deadline` passed before every track was done
+/// (looked at before the first track and every 1024th after it).
+/// `progress`, when given, shows the tracks done under `label`.
 bool retriangulate(State& s, const Tracks& tracks, const std::set<int>& excluded, const RefinementConfig& config,
-                   double max_error, const Deadline& deadline = Deadline{}) {
+                   double max_error, const Deadline& deadline, io::Progress* progress = nullptr,
+                   const std::string& label = "triangulating") {
   std::map<std::pair<int, int>, int64_t> old_point;  // (image, 2D index) -> old point id
   for (const auto& [id, track] : s.tracks)
     for (const auto& e : track) old_point[{e.image_id, e.point2D_idx}] = id;
   std::map<int64_t, Eigen::Vector3d> points;
   std::map<int64_t, std::vector<io::ColmapTrackElement>> new_tracks;
   std::map<int64_t, std::array<uint8_t, 3>> colours;
-  const double min_angle = config.min_triangulation_angle_deg * kPi / 180.0;
+  TriangulationRule rule;
+  rule.max_error_px = max_error;
+  rule.min_angle_deg = config.min_triangulation_angle_deg;
   int64_t next = 1;
   size_t done = 0;
   for (const auto& track : tracks.tracks) {
-    if (++done % 1024 == 0 && deadline.passed()) return false;
+    if (done % 1024 == 0) {
+      if (deadline.passed()) return false;
+      if (progress && done > 0) progress->report(label, done, tracks.tracks.size(), "tracks");
+    }
+    ++done;
     std::vector<io::ColmapTrackElement> obs;
     for (const Observation& o : track) {
       const auto im = s.images.find(o.image_id);
@@ -456,72 +485,18 @@ bool retriangulate(State& s, const Tracks& tracks, const std::set<int>& excluded
         continue;
       obs.push_back({o.image_id, o.point2D_idx});
     }
-    Eigen::Vector3d x = Eigen::Vector3d::Zero();
-    bool ok = false;
-    while (obs.size() >= 2) {
-      Eigen::Matrix4d a = Eigen::Matrix4d::Zero();
-      for (const auto& e : obs) {
-        const State::Pose& pose = s.poses.at(e.image_id);
-        const Eigen::Vector4d& k = s.intrinsics.at(e.image_id);
-        const Eigen::Vector2d xy = s.observed(e);
-        const Eigen::Vector2d n((xy.x() - k[2]) / k[0], (xy.y() - k[3]) / k[1]);
-        Eigen::Matrix<double, 3, 4> pm;
-        pm << pose.rotation.toRotationMatrix(), pose.translation;
-        const Eigen::RowVector4d r0 = n.x() * pm.row(2) - pm.row(0);
-        const Eigen::RowVector4d r1 = n.y() * pm.row(2) - pm.row(1);
-        a += r0.transpose() * r0 + r1.transpose() * r1;
-      }
-      const Eigen::Vector4d h = Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d>(a).eigenvectors().col(0);
-      if (!(std::abs(h.w()) > 1e-12 * h.head<3>().norm())) break;  // at infinity
-      x = h.head<3>() / h.w();
-      for (int step = 0; step < 3; ++step) {  // Gauss-Newton, the poses held
-        Eigen::Matrix3d jtj = Eigen::Matrix3d::Zero();
-        Eigen::Vector3d jtr = Eigen::Vector3d::Zero();
-        for (const auto& e : obs) {
-          const State::Pose& pose = s.poses.at(e.image_id);
-          const Eigen::Vector4d& k = s.intrinsics.at(e.image_id);
-          const Eigen::Matrix3d r = pose.rotation.toRotationMatrix();
-          const Eigen::Vector3d p = r * x + pose.translation;
-          if (!(p.z() > 0.0)) continue;
-          const Eigen::Vector2d res(k[0] * p.x() / p.z() + k[2] - s.observed(e).x(),
-                                    k[1] * p.y() / p.z() + k[3] - s.observed(e).y());
-          Eigen::Matrix<double, 2, 3> d;
-          d << k[0] / p.z(), 0.0, -k[0] * p.x() / (p.z() * p.z()), 0.0, k[1] / p.z(), -k[1] * p.y() / (p.z() * p.z());
-          const Eigen::Matrix<double, 2, 3> j = d * r;
-          jtj += j.transpose() * j;
-          jtr += j.transpose() * res;
-        }
-        const Eigen::Vector3d dx = (jtj + 1e-12 * Eigen::Matrix3d::Identity()).ldlt().solve(-jtr);
-        if (!dx.allFinite()) break;
-        x += dx;
-      }
-      size_t worst = 0;
-      double worst_error = -1.0;
-      bool behind = false;
-      for (size_t q = 0; q < obs.size(); ++q) {
-        const auto [error, depth] = s.reproject(obs[q].image_id, x, s.observed(obs[q]));
-        if (!(depth > 0.0)) behind = true;
-        const double e = std::isfinite(error) ? error : std::numeric_limits<double>::max();
-        if (e > worst_error) {
-          worst_error = e;
-          worst = q;
-        }
-      }
-      if (!behind && worst_error <= max_error) {
-        ok = true;
-        break;
-      }
-      obs.erase(obs.begin() + static_cast<long>(worst));
+    std::vector<TrackObservation> rays;
+    rays.reserve(obs.size());
+    for (const auto& e : obs) {
+      const State::Pose& pose = s.poses.at(e.image_id);
+      rays.push_back({pose.rotation.toRotationMatrix(), pose.translation, s.intrinsics.at(e.image_id), s.observed(e)});
     }
-    if (!ok || !x.allFinite()) continue;
-    double widest = 0.0;
-    for (size_t p = 0; p < obs.size() && widest < min_angle; ++p)
-      for (size_t q = p + 1; q < obs.size() && widest < min_angle; ++q) {
-        const Eigen::Vector3d ra = (s.poses.at(obs[p].image_id).centre() - x).normalized();
-        const Eigen::Vector3d rb = (s.poses.at(obs[q].image_id).centre() - x).normalized();
-        widest = std::max(widest, std::acos(std::clamp(ra.dot(rb), -1.0, 1.0)));
-      }
-    if (widest < min_angle) continue;
+    const TriangulatedPoint point = triangulateTrack(rays, rule);
+    if (!point.ok) continue;
+    const Eigen::Vector3d& x = point.x;
+    std::vector<io::ColmapTrackElement> kept;
+    for (const int q : point.inliers) kept.push_back(obs[static_cast<size_t>(q)]);
+    obs = std::move(kept);
     const int64_t id = next++;
     points[id] = x;
     colours[id] = {{128, 128, 128}};
@@ -537,6 +512,7 @@ bool retriangulate(State& s, const Tracks& tracks, const std::set<int>& excluded
   s.points = std::move(points);
   s.tracks = std::move(new_tracks);
   s.colours = std::move(colours);
+  if (progress) progress->end();
   return true;
 }
 
@@ -554,51 +530,49 @@ struct PassResult {
   int retriangulations = 0;
 };
 
-/// Rounds of adjust-then-filter on `input` with the images in `kept` left out (their
-/// observations too) and those not in `movable` held; aligned to the input when the caller held
-/// nothing.
-PassResult pass(const State& input, const std::map<int, State::Pose>& reference, const std::set<int>& movable,
-                const std::set<int>& kept, const RefinementConfig& config, const Tracks* tracks,
-                const Deadline& deadline) {
-  PassResult r;
-  r.state = input;
+/// Where a pass is, for the progress lines: "(pass 1, stage 2 of 3)".
+std::string stageName(int pass_number, int stage, int stages) {
+  return "(pass " + std::to_string(pass_number) + ", stage " + std::to_string(stage + 1) + " of " +
+         std::to_string(stages) + ")";
+}
+
+/// Stage `stage` of a pass begins with the points triangulated anew from the tracks, at the
+/// poses as they are. Earlier triangulations admit more (the poses are still off), the last one
+/// the final limit. Under a time budget a triangulation may take half of what is left; one that
+/// cannot is given up, and the points stay as they were (the model's own, or the last
+/// triangulation's): the first one given up still lets the adjustment run on the model's
+/// points, a later one ends the pass (out_of_time).
+void triangulationStage(PassResult& r, const Tracks& tracks, const std::set<int>& kept, const RefinementConfig& config,
+                        int stage, const Deadline& deadline, const std::string& where, io::Progress* progress) {
+  const int later = config.retriangulations - stage;
+  if (retriangulate(r.state, tracks, kept, config,
+                    config.triangulation_max_error * std::pow(config.triangulation_growth, std::max(0, later)),
+                    deadline.half(), progress, "triangulating " + where))
+    ++r.retriangulations;
+  else
+    r.out_of_time = stage > 0;
+}
+
+/// Rounds of adjust-then-filter of one stage, until a round filters (almost) nothing, the
+/// rounds run out or the deadline passes (the first round of a stage always runs, however
+/// briefly). Returns false when the adjustment failed or ran away (r.diverged, r.why).
+bool adjustmentRounds(PassResult& r, const Gauge& gauge, const std::set<int>& kept, const RefinementConfig& config,
+                      int stage, const Deadline& deadline, const std::string& where, io::Progress* progress) {
   State& s = r.state;
-  const bool caller_fixed = std::any_of(s.poses.begin(), s.poses.end(),
-                                        [&](const auto& p) { return !movable.count(p.first); });
-  // Before the first solve only what cannot take part goes (kept images, points behind a
-  // camera): the input was triangulated at these poses, and what it left far from its points is
-  // for the robust loss and the filter after the solve to judge.
-  auto [obs, pts] = filter(s, config, kept, false);
-  r.observations_filtered += obs;
-  r.points_filtered += pts;
-  const Gauge gauge = gaugeOf(s, reference, movable, kept, config);
-  const int stages = tracks ? 1 + config.retriangulations : 1;
-  for (int stage = 0; stage < stages && !r.out_of_time; ++stage) {
-  if (stage > 0 && deadline.passed()) {
-    r.out_of_time = true;
-    break;
-  }
-  if (stage > 0 || (tracks && config.triangulate_first)) {
-    // Earlier triangulations admit more (the poses are still off), the last one the final limit.
-    // Under a time budget a triangulation may take half of what is left; one that cannot is
-    // given up, and the points stay as they were (the model's own, or the last triangulation's).
-    const int later = config.retriangulations - stage;
-    if (retriangulate(s, *tracks, kept, config,
-                      config.triangulation_max_error * std::pow(config.triangulation_growth, std::max(0, later)),
-                      deadline.half()))
-      ++r.retriangulations;
-    else
-      r.out_of_time = stage > 0;  // the first one given up: the adjustment still runs on the model's points
-  }
-  if (r.out_of_time) break;
+  const std::string label = "adjusting " + where;
   for (int round = 0; round < config.max_rounds; ++round) {
     const size_t before = s.observations();
     if (before == 0) break;
-    if (round > 0 && deadline.passed()) {  // the first round of a stage always runs, however briefly
+    if (round > 0 && deadline.passed()) {
       r.out_of_time = true;
       break;
     }
-    const ceres::Solver::Summary summary = adjust(s, gauge, config, deadline);
+    const std::function<void(int)> on_iteration = [&](int iteration) {
+      if (progress)
+        progress->report(label, static_cast<size_t>(round), static_cast<size_t>(config.max_rounds), "rounds",
+                         "iteration " + std::to_string(iteration));
+    };
+    const ceres::Solver::Summary summary = adjust(s, gauge, config, deadline, progress ? &on_iteration : nullptr);
     ++r.rounds;
     r.iterations += static_cast<int>(summary.iterations.size());
     if (stage == 0 && round == 0) r.initial_cost = summary.initial_cost;
@@ -610,13 +584,15 @@ PassResult pass(const State& input, const std::map<int, State::Pose>& reference,
       why << "the adjustment failed in round " << r.rounds << " (" << summary.message << "; cost "
           << summary.initial_cost << " -> " << summary.final_cost << ")";
       r.why = why.str();
-      return r;
+      return false;
     }
     if (summary.termination_type == ceres::NO_CONVERGENCE) r.converged = false;
     if (deadline.passed()) r.out_of_time = true;
-    std::tie(obs, pts) = filter(s, config, kept);
+    const auto [obs, pts] = filter(s, config, kept);
     r.observations_filtered += obs;
     r.points_filtered += pts;
+    if (progress)
+      progress->report(label, static_cast<size_t>(round + 1), static_cast<size_t>(config.max_rounds), "rounds");
     // A solve that leaves most observations far from their points has run away (points behind
     // the cameras, a degenerate minimum): that is not a correction of drift.
     if (static_cast<double>(obs) > config.max_filtered_ratio * static_cast<double>(before)) {
@@ -625,31 +601,69 @@ PassResult pass(const State& input, const std::map<int, State::Pose>& reference,
       why << "the adjustment ran away in round " << r.rounds << ": " << obs << " of " << before
           << " observations left more than " << config.max_reprojection_error << " px from their points";
       r.why = why.str();
-      return r;
+      return false;
     }
     if (static_cast<double>(obs) < 1e-3 * static_cast<double>(before)) break;
   }
+  if (progress) progress->end();
+  return true;
+}
+
+/// The pass's result aligned to the reference poses by a similarity (the movable images'
+/// centres), when the caller held no image: the refined model stays in the SLAM frame.
+void alignToReference(PassResult& r, const std::map<int, State::Pose>& reference, const std::set<int>& movable,
+                      const std::set<int>& kept) {
+  State& s = r.state;
+  std::vector<int> ids;
+  for (int id : movable)
+    if (!kept.count(id) && s.poses.count(id)) ids.push_back(id);
+  if (ids.size() < 3) return;
+  Eigen::Matrix3Xd from(3, static_cast<long>(ids.size())), to(3, static_cast<long>(ids.size()));
+  for (size_t q = 0; q < ids.size(); ++q) {
+    from.col(static_cast<long>(q)) = s.poses.at(ids[q]).centre();
+    to.col(static_cast<long>(q)) = reference.at(ids[q]).centre();
   }
-  if (!caller_fixed && config.align_to_input) {
-    std::vector<int> ids;
-    for (int id : movable)
-      if (!kept.count(id) && s.poses.count(id)) ids.push_back(id);
-    if (ids.size() >= 3) {
-      Eigen::Matrix3Xd from(3, static_cast<long>(ids.size())), to(3, static_cast<long>(ids.size()));
-      for (size_t q = 0; q < ids.size(); ++q) {
-        from.col(static_cast<long>(q)) = s.poses.at(ids[q]).centre();
-        to.col(static_cast<long>(q)) = reference.at(ids[q]).centre();
-      }
-      try {
-        const eval::SimilarityTransform sim = eval::alignUmeyama(from, to);
-        transform(s, sim);
-        r.aligned = true;
-        r.scale = sim.scale;
-      } catch (const core::InvalidArgument&) {
-        // collinear or coincident centres: the held first image defines the frame
-      }
+  try {
+    const eval::SimilarityTransform sim = eval::alignUmeyama(from, to);
+    transform(s, sim);
+    r.aligned = true;
+    r.scale = sim.scale;
+  } catch (const core::InvalidArgument&) {
+    // collinear or coincident centres: the held first image defines the frame
+  }
+}
+
+/// Stages of triangulation (with tracks) and adjust-then-filter rounds on `input`, with the
+/// images in `kept` left out (their observations too) and those not in `movable` held; aligned
+/// to the reference when the caller held nothing. `pass_number` names the pass in the progress.
+PassResult pass(const State& input, const std::map<int, State::Pose>& reference, const std::set<int>& movable,
+                const std::set<int>& kept, const RefinementConfig& config, const Tracks* tracks,
+                const Deadline& deadline, int pass_number = 1, io::Progress* progress = nullptr) {
+  PassResult r;
+  r.state = input;
+  State& s = r.state;
+  const bool caller_fixed = std::any_of(s.poses.begin(), s.poses.end(),
+                                        [&](const auto& p) { return !movable.count(p.first); });
+  // Before the first solve only what cannot take part goes (kept images, points behind a
+  // camera): the input was triangulated at these poses, and what it left far from its points is
+  // for the robust loss and the filter after the solve to judge.
+  const auto [obs, pts] = filter(s, config, kept, false);
+  r.observations_filtered += obs;
+  r.points_filtered += pts;
+  const Gauge gauge = gaugeOf(s, reference, movable, kept, config);
+  const int stages = tracks ? 1 + config.retriangulations : 1;
+  for (int stage = 0; stage < stages && !r.out_of_time; ++stage) {
+    if (stage > 0 && deadline.passed()) {
+      r.out_of_time = true;
+      break;
     }
+    const std::string where = stageName(pass_number, stage, stages);
+    if (stage > 0 || (tracks && config.triangulate_first))
+      triangulationStage(r, *tracks, kept, config, stage, deadline, where, progress);
+    if (r.out_of_time) break;
+    if (!adjustmentRounds(r, gauge, kept, config, stage, deadline, where, progress)) return r;
   }
+  if (!caller_fixed && config.align_to_input) alignToReference(r, reference, movable, kept);
   return r;
 }
 
@@ -677,6 +691,78 @@ io::ColmapModel modelOf(const io::ColmapModel& input, const State& s) {
     out.points[id] = std::move(p);
   }
   return out;
+}
+
+/// The movable images not kept yet whose correction in `s` is implausible (further than
+/// max_correction_depth_ratio x their median depth, or turned more than max_correction_deg), or
+/// that were left with too few observations (without priors), each with why.
+std::map<int, std::string> implausibleCorrections(const State& s, const std::set<int>& movable,
+                                                  const std::map<int, std::string>& kept,
+                                                  const std::map<int, State::Pose>& reference,
+                                                  const std::map<int, double>& depth, const RefinementConfig& config) {
+  const bool priors = config.prior_translation_ratio > 0.0;
+  std::map<int, std::string> found;
+  const std::map<int, int> observations = s.observationsPerImage();
+  for (int id : movable) {
+    if (kept.count(id)) continue;
+    const double moved = (s.poses.at(id).centre() - reference.at(id).centre()).norm();
+    const double turned = rotationBetweenDeg(s.poses.at(id).rotation, reference.at(id).rotation);
+    std::ostringstream why;
+    if (moved > config.max_correction_depth_ratio * depth.at(id))
+      why << "implausible correction: moved " << moved << " (more than " << config.max_correction_depth_ratio
+          << " x its median depth " << depth.at(id) << ")";
+    else if (turned > config.max_correction_deg)
+      why << "implausible correction: turned " << turned << " deg (more than " << config.max_correction_deg
+          << ")";
+    else if (!priors && observations.at(id) < config.min_observations)
+      why << "too few observations after filtering (" << observations.at(id) << " < "
+          << config.min_observations << ")";
+    if (!why.str().empty()) found[id] = why.str();
+  }
+  return found;
+}
+
+/// The report of a refinement that diverged: every movable image keeps its input pose.
+void reportDiverged(RefinementReport& rep, const PassResult& result) {
+  rep.status = "diverged";
+  rep.refined = false;
+  rep.message = result.why + ": every keyframe keeps its input pose";
+  for (auto& c : rep.images)
+    if (c.movable) c.kept = "the adjustment diverged";
+  rep.rounds = result.rounds;
+  rep.iterations = result.iterations;
+  rep.initial_cost = result.initial_cost;
+  rep.final_cost = result.final_cost;
+}
+
+/// The report of a refinement that ran: its figures, which images moved and which kept their
+/// pose and why, and the sentence for the log.
+void reportRefined(RefinementReport& rep, const PassResult& result, const std::map<int, std::string>& kept,
+                   size_t movable, const RefinementConfig& config) {
+  rep.status = result.out_of_time ? "out_of_time" : result.converged ? "converged" : "no_convergence";
+  rep.refined = true;
+  rep.rounds = result.rounds;
+  rep.iterations = result.iterations;
+  rep.initial_cost = result.initial_cost;
+  rep.final_cost = result.final_cost;
+  rep.observations_filtered = result.observations_filtered;
+  rep.points_filtered = result.points_filtered;
+  rep.aligned = result.aligned;
+  rep.retriangulations = result.retriangulations;
+  rep.alignment_scale = result.scale;
+  for (auto& c : rep.images) {
+    if (!c.movable) continue;
+    const auto k = kept.find(c.image_id);
+    c.refined = k == kept.end();
+    c.kept = c.refined ? "" : k->second;
+  }
+  std::ostringstream msg;
+  const size_t moved = static_cast<size_t>(std::count_if(rep.images.begin(), rep.images.end(),
+                                                         [](const ImageCorrection& c) { return c.refined; }));
+  msg << "refined " << moved << " of " << movable << " movable images in " << rep.rounds << " rounds ("
+      << rep.iterations << " iterations, " << rep.status << "); " << kept.size() << " kept their input pose";
+  if (result.out_of_time) msg << "; stopped at its time budget of " << config.max_seconds << " s";
+  rep.message = msg.str();
 }
 
 }  // namespace
@@ -714,7 +800,8 @@ std::set<int> allImages(const io::ColmapModel& model) {
 
 io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& movable_in,
                             const RefinementConfig& config, RefinementReport* report,
-                            const io::ColmapModel* reference_model, const std::vector<Match>* matches) {
+                            const io::ColmapModel* reference_model, const std::vector<Match>* matches,
+                            io::Progress* progress) {
   const auto start = std::chrono::steady_clock::now();
   config.validate();
   Deadline deadline;
@@ -779,7 +866,15 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
     // Nothing may move: the matches are triangulated at the given poses, nothing adjusted (what
     // the model's points would be at these poses with these matches).
     State s = initial;
-    retriangulate(s, tracks, {}, config, config.triangulation_max_error);
+    if (!retriangulate(s, tracks, {}, config, config.triangulation_max_error, deadline, progress,
+                       "triangulating at the given poses")) {
+      std::ostringstream msg;
+      msg << "no image may move, and the time budget of " << config.max_seconds
+          << " s was spent before the matches were triangulated: the model as it came";
+      rep.status = "out_of_time";
+      rep.message = msg.str();
+      return finish(input, initial);
+    }
     filter(s, config, {});
     rep.status = "triangulated";
     rep.retriangulations = 1;
@@ -805,61 +900,44 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
     for (const auto& [id, why] : kept) ids.insert(id);
     return ids;
   };
-  PassResult result = pass(initial, reference, movable, keptIds(), config, with_tracks, deadline);
+  PassResult result = pass(initial, reference, movable, keptIds(), config, with_tracks, deadline, 1, progress);
   // Implausible corrections, or images left without enough observations: start again with them
   // kept at their input poses (once; what the second pass still moves too far is put back).
-  const auto offenders = [&](const State& s, bool record) {
-    std::map<int, std::string> found;
-    const std::map<int, int> observations = s.observationsPerImage();
-    for (int id : movable) {
-      if (kept.count(id)) continue;
-      const double moved = (s.poses.at(id).centre() - reference.at(id).centre()).norm();
-      const double turned = rotationBetweenDeg(s.poses.at(id).rotation, reference.at(id).rotation);
-      std::ostringstream why;
-      if (moved > config.max_correction_depth_ratio * depth.at(id))
-        why << "implausible correction: moved " << moved << " (more than " << config.max_correction_depth_ratio
-            << " x its median depth " << depth.at(id) << ")";
-      else if (turned > config.max_correction_deg)
-        why << "implausible correction: turned " << turned << " deg (more than " << config.max_correction_deg
-            << ")";
-      else if (!priors && observations.at(id) < config.min_observations)
-        why << "too few observations after filtering (" << observations.at(id) << " < "
-            << config.min_observations << ")";
-      if (!why.str().empty()) found[id] = why.str();
+  if (!result.diverged) {
+    const std::map<int, std::string> offenders =
+        implausibleCorrections(result.state, movable, kept, reference, depth, config);
+    kept.insert(offenders.begin(), offenders.end());
+    if (!offenders.empty() && !deadline.passed()) {
+      rep.passes = 2;
+      result = pass(initial, reference, movable, keptIds(), config, with_tracks, deadline, 2, progress);
     }
-    if (record)
-      for (const auto& [id, why] : found) kept[id] = why;
-    return found;
-  };
-  if (!result.diverged && !offenders(result.state, true).empty() && !deadline.passed()) {
-    rep.passes = 2;
-    result = pass(initial, reference, movable, keptIds(), config, with_tracks, deadline);
   }
+  if (progress) progress->end();
   if (result.diverged) {
-    rep.status = "diverged";
-    rep.refined = false;
-    rep.message = result.why + ": every keyframe keeps its input pose";
-    for (auto& c : rep.images)
-      if (c.movable) c.kept = "the adjustment diverged";
-    rep.rounds = result.rounds;
-    rep.iterations = result.iterations;
-    rep.initial_cost = result.initial_cost;
-    rep.final_cost = result.final_cost;
+    reportDiverged(rep, result);
     return finish(input, initial);
   }
   State& s = result.state;
-  if (rep.passes == 2) {
-    const std::map<int, std::string> late = offenders(s, false);
-    for (const auto& [id, why] : late) kept[id] = why + " (second pass)";
-  }
+  if (rep.passes == 2)
+    for (const auto& [id, why] : implausibleCorrections(s, movable, kept, reference, depth, config))
+      kept[id] = why + " (second pass)";
   // Kept images sit at their input poses; their observations that fit the refined points stay.
   std::set<int> none;
   for (const auto& [id, why] : kept) s.poses[id] = reference.at(id);
-  if (!kept.empty() && with_tracks) {
-    // Kept images at their input poses take part again: the tracks triangulated once more.
-    retriangulate(s, tracks, {}, config, config.triangulation_max_error);
+  // Kept images at their input poses take part again: the tracks triangulated once more, within
+  // what is left of the budget. Out of time, the points stay the pass's; when those are the
+  // input's own (no triangulation ran), the kept images' input observations join them below.
+  const bool kept_triangulated = !kept.empty() && with_tracks &&
+                                 retriangulate(s, tracks, {}, config, config.triangulation_max_error, deadline,
+                                               progress, "triangulating with the kept images");
+  if (!kept.empty() && with_tracks && !kept_triangulated) result.out_of_time = true;
+  if (kept_triangulated) {
     ++result.retriangulations;
     const auto [obs, pts] = filter(s, config, none);
+    result.observations_filtered += obs;
+    result.points_filtered += pts;
+  } else if (!kept.empty() && with_tracks && result.retriangulations > 0) {
+    const auto [obs, pts] = filter(s, config, none);  // points of the matches: the kept images see none
     result.observations_filtered += obs;
     result.points_filtered += pts;
   } else if (!kept.empty()) {
@@ -879,33 +957,8 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
     result.points_filtered += pts;
     s = std::move(with_kept);
   }
-  rep.status = result.out_of_time ? "out_of_time" : result.converged ? "converged" : "no_convergence";
-  rep.refined = true;
-  rep.rounds = result.rounds;
-  rep.iterations = result.iterations;
-  rep.initial_cost = result.initial_cost;
-  rep.final_cost = result.final_cost;
-  rep.observations_filtered = result.observations_filtered;
-  rep.points_filtered = result.points_filtered;
-  rep.aligned = result.aligned;
-  rep.retriangulations = result.retriangulations;
-  rep.alignment_scale = result.scale;
-  for (auto& c : rep.images) {
-    if (!c.movable) continue;
-    const auto k = kept.find(c.image_id);
-    c.refined = k == kept.end();
-    c.kept = c.refined ? "" : k->second;
-  }
-  const io::ColmapModel out = modelOf(input, s);
-  std::ostringstream msg;
-  const size_t moved = static_cast<size_t>(std::count_if(rep.images.begin(), rep.images.end(),
-                                                         [](const ImageCorrection& c) { return c.refined; }));
-  msg << "refined " << moved << " of " << movable.size() << " movable images in " << rep.rounds
-      << " rounds (" << rep.iterations << " iterations, " << rep.status << "); " << kept.size()
-      << " kept their input pose";
-  if (result.out_of_time) msg << "; stopped at its time budget of " << config.max_seconds << " s";
-  rep.message = msg.str();
-  return finish(out, s);
+  reportRefined(rep, result, kept, movable.size(), config);
+  return finish(modelOf(input, s), s);
 }
 
 }  // namespace view_selection::refine

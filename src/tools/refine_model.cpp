@@ -6,6 +6,7 @@
 #include "view_selection/core/exceptions.h"
 #include "view_selection/io/atomic_file.h"
 #include "view_selection/io/colmap_model.h"
+#include "view_selection/io/progress.h"
 #include "view_selection/refine/model_refinement.h"
 
 #include <glog/logging.h>
@@ -72,12 +73,17 @@ Cameras must be PINHOLE or SIMPLE_PINHOLE.
   --prior-loss-scale S            Cauchy loss on the priors at S sigmas (default 3)
   --no-align         do not align the result to the input poses
   --max-seconds S    the time the refinement may take (default 0: no limit): once spent, the solve
-                     under way stops at its best state, no further round, triangulation or pass
-                     begins, and the result is what was reached (status out_of_time)
+                     under way stops at its best state, a triangulation under way is given up,
+                     no further round, triangulation or pass begins, and the result is what was
+                     reached (status out_of_time)
   --threads N        Ceres threads (default 0: one per core)
   --dense-up-to N    Ceres' dense Schur solver up to N images (default 50), ...
   --sparse-up-to N   ... the sparse one up to N (default 1000), the iterative one above
   --quiet            no summary line
+  --no-progress      no progress on stderr (by default: the stage, the rounds or tracks done of
+                     the total and the time left; one line rewritten in place on a terminal, a
+                     line every --progress-interval seconds into a log or pipe)
+  --progress-interval S  (default 10)
   --verbose          Ceres' report of every solve on stderr
   --help             this text
 )";
@@ -129,8 +135,9 @@ int run(int argc, char** argv) {
                          "rounds", "iterations", "min-observations", "max-correction-depth-ratio",
                          "max-correction-deg", "threads", "prior-translation-ratio", "prior-rotation-deg",
                          "prior-loss-scale", "dense-up-to", "function-tolerance", "matches", "retriangulations",
-                         "triangulation-max-error", "triangulation-growth", "max-seconds", "sparse-up-to"},
-                        {"no-align", "quiet", "verbose", "no-triangulate-first", "help"});
+                         "triangulation-max-error", "triangulation-growth", "max-seconds", "sparse-up-to",
+                         "progress-interval"},
+                        {"no-align", "quiet", "verbose", "no-triangulate-first", "no-progress", "help"});
   if (cli.flag("help")) {
     std::cout << kUsage;
     return 0;
@@ -178,9 +185,11 @@ int run(int argc, char** argv) {
   if (cli.has("reference")) reference = io::readColmapModel(*cli.text("reference"));
   std::vector<refine::Match> matches;
   if (cli.has("matches")) matches = refine::readMatches(*cli.text("matches"));
+  io::Progress progress =
+      io::Progress::toStderr(!cli.flag("no-progress"), cli.real("progress-interval", io::Progress::kLogInterval, 0.1, 1e6));
   const io::ColmapModel out = refine::refineModel(input, movable, config, &report,
                                                   cli.has("reference") ? &reference : nullptr,
-                                                  cli.has("matches") ? &matches : nullptr);
+                                                  cli.has("matches") ? &matches : nullptr, &progress);
   io::writeColmapModel(out, *cli.text("output"));
   if (cli.has("report"))
     io::writeAtomically(*cli.text("report"), [&](const std::string& tmp) {

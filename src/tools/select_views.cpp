@@ -9,6 +9,7 @@
 #include "view_selection/io/export.h"
 #include "view_selection/io/params_json.h"
 #include "view_selection/io/points_file.h"
+#include "view_selection/io/progress.h"
 #include "view_selection/io/selection_io.h"
 #include "view_selection/io/tum_frames.h"
 #include "view_selection/points/point_source_factory.h"
@@ -78,7 +79,8 @@ options:
                             with each stability rule "announce once still selected M keyframes
                             later" and prints the pairs announced, wasted (announced, not in
                             the final selection) and left for the end (docs/live.md)
-  --quiet                   no progress lines
+  --quiet                   no progress lines (on stderr: one line rewritten in place on a
+                            terminal, a line every 10 s into a log or pipe)
   --help                    this text
 
 parameters (the node's ~parameters of the same names, '_' written '-'; defaults shown;
@@ -384,8 +386,7 @@ void addFrames(const Options& o, const TumDataset& dataset, ViewSelector& select
                StreamReplay* stream) {
   const bool features = selector.pointSource().name() == "features";
   const size_t total = framesToUse(o, dataset);
-  const bool tty = isatty(fileno(stderr));
-  auto last_report = std::chrono::steady_clock::now();
+  Progress progress = Progress::toStderr(!o.quiet);
   for (size_t q = 0; q < total; ++q) {
     const auto t0 = std::chrono::steady_clock::now();
     // Frames the policy will skip are passed without depth: reading PNGs is the slow part.
@@ -408,13 +409,10 @@ void addFrames(const Options& o, const TumDataset& dataset, ViewSelector& select
     t.rows_updated += r.updated_rows.size();
     t.matrix += r.matrix_seconds;
     if (stream && r.outcome == FrameOutcome::kKeyframe) stream->keyframe(selector);
-    if (!o.quiet && (seconds(last_report) > 1.0 || q + 1 == total)) {
-      last_report = std::chrono::steady_clock::now();
-      std::fprintf(stderr, "%s  frame %zu/%zu, %zu keyframes%s", tty ? "\r" : "", q + 1, total,
-                   selector.matrix().size(), tty ? "" : "\n");
-      if (tty && q + 1 == total) std::fprintf(stderr, "\n");
-    }
+    progress.report("selecting views", q + 1, total, "frames",
+                    std::to_string(selector.matrix().size()) + " keyframes");
   }
+  progress.end();
 }
 
 
@@ -475,6 +473,10 @@ void printSummary(const Options& o, const TumDataset& dataset, const ViewSelecto
   std::printf("keyframes   %zu (%s), %zu sample points each (median), source: %s\n", n,
               describeKeyframeRule(o.config.keyframes).c_str(), median_points,
               selector.pointSource().name().c_str());
+  if (o.config.keyframes.mode == KeyframeMode::kScaleFree)
+    std::printf("revisits    %zu frames a new view against the last keyframe, not against an "
+                "earlier one near them: no keyframe\n",
+                selector.revisitsSkipped());
   // The feature source's own line: --points features (auto takes most keyframes from depth).
   if (selector.pointSource().name() == "features")
     if (const FeaturePointSource* fs = featureSourceOf(selector.pointSource()))
@@ -592,8 +594,7 @@ int runPointsOnly(const Options& o, const fs::path& points_file) {
   Timings t;
   const size_t total = o.max_frames > 0 ? std::min<size_t>(reader.size(), size_t(o.max_frames))
                                         : static_cast<size_t>(reader.size());
-  const bool tty = isatty(fileno(stderr));
-  auto last_report = std::chrono::steady_clock::now();
+  Progress progress = Progress::toStderr(!o.quiet);
   PointsRecord record;
   size_t points = 0;
   for (size_t q = 0; q < total; ++q) {
@@ -618,14 +619,14 @@ int runPointsOnly(const Options& o, const fs::path& points_file) {
     }
     t.points += r.points_seconds;
     t.matrix += r.matrix_seconds;
-    if (!o.quiet && (seconds(last_report) > 5.0 || q + 1 == total)) {
-      last_report = std::chrono::steady_clock::now();
-      std::fprintf(stderr, "%s  record %zu/%zu, %zu keyframes, %.1f s, peak RSS %.0f MB%s",
-                   tty ? "\r" : "", q + 1, total, selector.matrix().size(), seconds(t_start),
-                   peakRssMb(), tty ? "" : "\n");
-      if (tty && q + 1 == total) std::fprintf(stderr, "\n");
+    if (progress.enabled() && (q % 64 == 0 || q + 1 == total)) {  // getrusage is not free
+      char detail[96];
+      std::snprintf(detail, sizeof detail, "%zu keyframes, peak RSS %.0f MB", selector.matrix().size(),
+                    peakRssMb());
+      progress.report("selecting views", q + 1, total, "records", detail);
     }
   }
+  progress.end();
   const double rss_matrix = peakRssMb();
   const auto t_sel = std::chrono::steady_clock::now();
   const SelectionOutput snapshot = selector.output();

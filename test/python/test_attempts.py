@@ -24,3 +24,25 @@ def test_success_forgets_the_failures():
     a.failed("y", "once")
     a.succeeded("y")
     assert a.due("y") and not a.suspect("y") and a.skipped() == []
+
+
+def test_the_count_of_items_given_up_follows_failures_and_successes():
+    a = Attempts(max_attempts=2, clock=lambda: 0.0)
+    for item in ("a", "b", "c"):
+        a.failed(item, "x")
+    assert a.given_up_count() == 0
+    a.failed("a", "x")
+    a.failed("b", "x")
+    a.failed("b", "x")  # failed again after it was given up: still one
+    assert a.given_up_count() == 2 == len(a.skipped())
+    a.succeeded("a")  # a given-up item that came through after all (a restart's retry)
+    a.succeeded("c")
+    assert a.given_up_count() == 1 == len(a.skipped())
+
+
+def test_a_suspect_is_not_charged_and_a_success_clears_it():
+    a = Attempts(max_attempts=3, clock=lambda: 0.0)
+    a.suspected("p")
+    assert a.suspect("p") and a.due("p") and a.failures == {} and a.skipped(all_failed=True) == []
+    a.succeeded("p")
+    assert not a.suspect("p")

@@ -9,7 +9,7 @@ import pytest
 from view_selection import geometry
 from view_selection.features.sift import Features, SiftExtractor
 from view_selection.keyframes import Keyframe
-from view_selection.matching import guided
+from view_selection.matching import guided, two_view
 
 K = (500.0, 500.0, 320.0, 240.0)
 
@@ -65,8 +65,47 @@ def test_every_inlier_lies_within_the_band_of_the_poses_epipolar_lines():
     a, b, fa, fb, _ = synthetic_pair(noise_px=1.5, seed=3)
     r = guided.match_pair(fa, fb, a, b)
     assert r.path == guided.GUIDED
-    d = guided.epipolar_distances(r.F, fa.xy[r.inliers[:, 0]], fb.xy[r.inliers[:, 1]])
+    d = guided.epipolar_distances(r.pose_F, fa.xy[r.inliers[:, 0]], fb.xy[r.inliers[:, 1]])
     assert np.all(np.diag(d) <= r.band_px + 1e-6)
+
+
+def test_every_inlier_lies_within_colmaps_threshold_of_the_stored_geometry():
+    """Poses 2 cm off widen the band beyond COLMAP's 4 px; the geometry stored for the pair is
+    the one the matches give, and every inlier is within 4 px (Sampson) of its F at the
+    keypoints as the database holds them, and in front of both cameras."""
+    a, b, fa, fb, n = synthetic_pair(seed=1, noise_px=1.0)
+    off = Keyframe(b.id, b.name, b.stamp, np.asarray(b.position) + [0.0, 0.02, 0.0], b.orientation, b.intrinsics,
+                   b.width, b.height)
+    r = guided.match_pair(fa, fb, a, off)
+    assert r.path == guided.GUIDED, r.why
+    assert r.band_px > two_view.COLMAP_MAX_ERROR_PX
+    xa, xb = fa.xy[r.inliers[:, 0]] + 0.5, fb.xy[r.inliers[:, 1]] + 0.5  # COLMAP's keypoints
+    assert np.all(two_view.sampson_distances(r.geometry.F, xa, xb) <= two_view.COLMAP_MAX_ERROR_PX)
+    assert np.all(two_view.in_front(*(two_view.normalised(x, two_view.colmap_intrinsic_matrix(k))
+                                      for x, k in ((xa, a), (xb, off))), r.geometry.R, r.geometry.t))
+    assert np.sum(r.inliers[:, 0] == r.inliers[:, 1]) >= 0.8 * n  # the matcher's matches stay
+    # E, R, t and F are one geometry: E = [t]x R, F = K_b^-T E K_a^-1 with the database's cameras
+    g = r.geometry
+    unit = lambda m: m / np.linalg.norm(m) * np.sign(m.flat[np.argmax(np.abs(m))])
+    assert np.allclose(unit(g.E), unit(guided.skew(g.t) @ g.R), atol=1e-6)
+    ka, kb = two_view.colmap_intrinsic_matrix(a), two_view.colmap_intrinsic_matrix(off)
+    assert np.allclose(unit(g.F), unit(np.linalg.inv(kb).T @ g.E @ np.linalg.inv(ka)), atol=1e-9)
+
+
+def test_the_stored_geometry_is_the_poses_in_colmaps_pixel_convention():
+    """Noise-free correspondences at exact poses: the stored E is the poses' (E does not depend on
+    the pixel convention), and the stored F is the poses' moved to COLMAP's pixel centres (x + 0.5):
+    T^-T F T^-1 with T the half-pixel shift. Measured: equal to 3e-16; the poses' F as the matcher
+    uses it (OpenCV's convention) differs by 2e-4, so the comparison sees the half pixel."""
+    a, b, fa, fb, _ = synthetic_pair(seed=0, noise_px=0.0)
+    r = guided.match_pair(fa, fb, a, b)
+    assert r.path == guided.GUIDED, r.why
+    unit = lambda m: m / np.linalg.norm(m) * np.sign(m.flat[np.argmax(np.abs(m))])
+    rotation, t = guided.relative_pose(a, b)
+    assert np.allclose(unit(r.geometry.E), unit(guided.skew(t) @ rotation), atol=1e-9)
+    shift = np.linalg.inv(np.array([[1.0, 0.0, 0.5], [0.0, 1.0, 0.5], [0.0, 0.0, 1.0]]))
+    assert np.allclose(unit(r.geometry.F), unit(shift.T @ r.pose_F @ shift), atol=1e-9)
+    assert np.abs(unit(r.geometry.F) - unit(r.pose_F)).max() > 1e-5
 
 
 def test_poses_a_little_off_widen_the_band():

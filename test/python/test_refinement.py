@@ -242,3 +242,24 @@ def test_options_reach_the_tool(tmp_path):
     assert "--max-seconds 4.5" in text
     assert fixed.read_text() == "a.png\n"
     json.dumps(refiner.RefinementOptions().to_json())  # goes into report.json
+
+
+def test_progress_lines_are_relayed_as_they_come_and_a_hang_is_still_killed(tmp_path):
+    # refine_model's progress on stderr reaches the caller line by line (colmap_from_selection
+    # shows them), asked for a line a second; its stderr still makes the error.
+    args = tmp_path / "args.txt"
+    tool = fake_tool(tmp_path / "refine_model", 'echo "$@" > %s; echo "adjusting 1/4 rounds" >&2; '
+                     'echo "adjusting 2/4 rounds" >&2; echo "refine_model: error: it broke" >&2; exit 3' % args)
+    lines = []
+    with pytest.raises(refiner.RefinementError, match="(?s)exit 3.*it broke"):
+        refiner.refine(str(tmp_path), str(tmp_path / "out"), tool=tool, progress=lines.append)
+    assert lines == ["adjusting 1/4 rounds", "adjusting 2/4 rounds", "refine_model: error: it broke"]
+    assert "--progress-interval 1" in args.read_text()
+    # A tool that prints and then hangs is killed at its timeout, as without progress.
+    tool = fake_tool(tmp_path / "hangs", 'echo "adjusting 0/4 rounds" >&2; sleep 60')
+    lines, start = [], time.monotonic()
+    with pytest.raises(refiner.RefinementError, match="did not finish within"):
+        refiner.refine(str(tmp_path), str(tmp_path / "out2"), refiner.RefinementOptions(timeout=2), tool=tool,
+                       progress=lines.append)
+    assert time.monotonic() - start < 20
+    assert lines == ["adjusting 0/4 rounds"]

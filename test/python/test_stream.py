@@ -83,3 +83,21 @@ def test_new_keyframes_are_timed_by_the_clock():
     now[0] = 12.0
     s.receive(msg(2, keyframes=[0], total=1))  # the same keyframe again (a pose update)
     assert s.last_keyframe_time == 10.0 and s.last_change_time == 12.0
+
+
+def test_the_names_follow_every_change_as_a_full_conversion_would():
+    # The names are kept as messages come (issue 34: no conversion of the whole set per batch);
+    # after each message they must equal what the announced ids and known keyframes give.
+    def converted(s):
+        names = {k.id: k.name for k in s.keyframes.values()}
+        return {tuple(sorted((names[a], names[b]))) for a, b in s.announced if a in names and b in names}
+    s = PairStream()
+    steps = [msg(1, added=[(0, 1), (1, 3)], keyframes=[0, 1]),      # (1, 3) before keyframe 3 is known
+             msg(2, added=[(2, 0)], keyframes=[2, 3], total=4),      # 3 comes: (1, 3) gets its names
+             msg(3, removed=[(0, 1)], added=[(4, 2)], total=4),      # (4, 2): 4 not known yet
+             msg(4, removed=[(4, 2)], keyframes=[4], total=5),       # removed before its names came
+             msg(5, added=[(3, 4)], full=True, keyframes=[0, 1, 2, 3, 4], total=5)]
+    for m in steps:
+        assert s.receive(m)
+        assert s.announced_names() == converted(s), m.sequence
+    assert s.announced_names() == {("3.png", "4.png")}

@@ -8,9 +8,14 @@ from view_selection.live.work import LiveWork
 
 
 class FailingProject:
-    def __init__(self, bad_images=(), bad_pairs=(), fail_everything=False, unreadable=()):
+    """hanging_images, hanging_pairs: a run that lists one of them times out (as a COLMAP that
+    hangs on it every time, killed at its timeout); hang_everything: every run does."""
+
+    def __init__(self, bad_images=(), bad_pairs=(), fail_everything=False, unreadable=(), hanging_images=(),
+                 hanging_pairs=(), hang_everything=False):
         self.bad_images, self.bad_pairs, self.unreadable = set(bad_images), set(bad_pairs), set(unreadable)
-        self.fail_everything = fail_everything
+        self.hanging_images, self.hanging_pairs = set(hanging_images), set(hanging_pairs)
+        self.fail_everything, self.hang_everything = fail_everything, hang_everything
         self.features, self.geometries = set(), set()
         self.runs = []
         self.ledgered = []
@@ -22,21 +27,25 @@ class FailingProject:
     def has_image(self, name):
         return True
 
-    def extracted(self):
+    def extracted(self, refresh=()):
         return set(self.features)
 
-    def matched(self):
+    def matched(self, refresh=()):
         return set(self.geometries)
 
     def extract(self, keyframes):
         names = [k.name for k in keyframes]
         self.runs.append(("extract", names))
+        if self.hang_everything or self.hanging_images & set(names):
+            raise ProjectError("'colmap feature_extractor' did not finish within 130 s and was killed", timed_out=True)
         if self.fail_everything or self.bad_images & set(names):
             raise ProjectError("'colmap feature_extractor' failed (exit 1)")
         self.features |= set(names) - self.unreadable  # COLMAP skips what it cannot read
 
     def match(self, pairs):
         self.runs.append(("match", list(pairs)))
+        if self.hang_everything or self.hanging_pairs & set(pairs):
+            raise ProjectError("'colmap matches_importer' did not finish within 240 s and was killed", timed_out=True)
         if self.fail_everything or self.bad_pairs & set(pairs):
             raise ProjectError("'colmap matches_importer' failed (exit 3)")
         self.geometries |= set(pairs)
@@ -117,3 +126,144 @@ def test_one_bad_image_does_not_stop_the_others_or_the_matching():
     assert project.extracted() == {k.name for k in kfs} - {"003.png"}
     work.match(kfs, [])
     assert project.matched() == {p for p in chain(kfs) if "003.png" not in p}
+
+
+def timeouts(project):
+    """The runs that timed out (each cost a COLMAP timeout)."""
+    return [(kind, items) for kind, items in project.runs
+            if project.hang_everything or (project.hanging_images if kind == "extract" else project.hanging_pairs)
+            & set(items)]
+
+
+def test_a_pair_that_hangs_every_time_is_the_only_one_charged_and_skipped():
+    kfs = keyframes(25)
+    pairs = chain(kfs)
+    hung = pairs[9]
+    project = FailingProject(hanging_pairs=[hung])
+    project.features = {k.name for k in kfs}
+    now = [0.0]
+    work = LiveWork(project, continuity=False, max_batch_pairs=24, max_attempts=3)
+    work.pairs.clock = lambda: now[0]
+    work.match(kfs, pairs)
+    # The batch of 24 timed out once; then each of its pairs alone: only the hung one failed.
+    assert project.matched() == set(pairs[:24]) - {hung}
+    assert work.pairs.failures == {hung: 1}
+    assert len(timeouts(project)) == 2
+    for _ in range(6):
+        now[0] += 1000.0  # past every backoff
+        work.match(kfs, pairs)
+    assert project.matched() == set(pairs) - {hung}
+    assert work.pairs.given_up(hung)
+    assert [s["item"] for s in work.skipped()["pairs"]] == ["%s %s" % hung]
+    assert "did not finish" in work.skipped()["pairs"][0]["error"]
+    assert project.ledgered == [("skipped-pair", "%s %s" % hung)]
+    assert len(timeouts(project)) == 1 + 3  # the batch, then three tries alone; never again
+
+
+def test_an_image_that_hangs_every_time_is_the_only_one_skipped():
+    kfs = keyframes(12)
+    project = FailingProject(hanging_images=["004.png"])
+    now = [0.0]
+    work = LiveWork(project, continuity=True, max_attempts=3)
+    work.images.clock = lambda: now[0]
+    for _ in range(5):
+        work.extract(kfs)
+        now[0] += 1000.0
+    assert project.extracted() == {k.name for k in kfs} - {"004.png"}
+    assert work.images.given_up("004.png") and work.images.failures == {"004.png": 3}
+    assert len(timeouts(project)) == 1 + 3
+    work.match(kfs, [])
+    assert project.matched() == {p for p in chain(kfs) if "004.png" not in p}
+
+
+def test_a_colmap_that_hangs_on_everything_costs_a_bounded_number_of_timeouts_per_batch():
+    kfs = keyframes(25)
+    project = FailingProject(hang_everything=True)
+    project.features = {k.name for k in kfs}
+    work = LiveWork(project, continuity=False, max_batch_pairs=24)
+    work.match(kfs, chain(kfs))
+    # The batch, then two alone in a row: COLMAP hangs on everything; the rest wait uncharged.
+    assert len(project.runs) == 1 + LiveWork.ALONE_TIMEOUTS_IN_A_ROW
+    assert len(work.pairs.failures) == LiveWork.ALONE_TIMEOUTS_IN_A_ROW
+    assert all(work.pairs.suspect(p) for p in chain(kfs)[:24])
+
+
+def test_a_cancelled_run_charges_nobody():
+    kfs = keyframes(6)
+    project = FailingProject()
+    project.features = {k.name for k in kfs}
+    work = LiveWork(project, continuity=False)
+
+    def cancelled(pairs):
+        project.cancelled = True
+        raise ProjectError("'colmap matches_importer' (matching) was cancelled")
+
+    project.match = cancelled
+    work.match(kfs, chain(kfs))
+    assert work.pairs.failures == {} and work.skipped(all_failed=True)["pairs"] == []
+
+
+def test_the_finish_matches_every_wanted_pair_whatever_max_backlog_is():
+    # A small ~max_backlog (5 of 40 pairs), so that the recording's batches leave most pairs for
+    # the finish: its matching must take them all (issue 34: the finish once matched at most
+    # ~max_backlog and said nothing).
+    kfs = keyframes(41)
+    pairs = chain(kfs)
+    project = FailingProject()
+    project.features = {k.name for k in kfs}
+    work = LiveWork(project, continuity=False, max_backlog=5, max_batch_pairs=3)
+    assert work.match(kfs, pairs)  # a batch while recording: 3 pairs, more waiting
+    assert len(project.matched()) == 3 and work.deferred == 40 - 5
+    seen = []
+    runs = work.match_all(kfs, pairs, batch=8, progress=lambda done, total: seen.append((done, total)))
+    assert project.matched() == set(pairs)
+    assert runs == 5 and seen[-1] == (37, 37)
+    assert work.lost_pairs(set(pairs), project.matched(), project.extracted(), []) == []
+
+
+def test_a_wanted_pair_not_in_the_model_is_named_with_its_reason():
+    kfs = keyframes(6)
+    pairs = chain(kfs)
+    project = FailingProject(bad_pairs=[pairs[0]], bad_images=["004.png"])
+    work = LiveWork(project, continuity=False, max_attempts=1)
+    work.extract(kfs)
+    work.match_all(kfs, pairs)
+    lost = {x["pair"]: x["reason"] for x in work.lost_pairs(set(pairs), project.matched(), project.extracted(),
+                                                            ["005.png"])}
+    assert set(lost) == {"000.png 001.png", "003.png 004.png", "004.png 005.png"}
+    assert "exit 3" in lost["000.png 001.png"] and lost["000.png 001.png"].startswith("failed 1 time")
+    assert lost["003.png 004.png"].startswith("the image 004.png has no features")
+    assert lost["004.png 005.png"] == "the image 004.png has no features: 'colmap feature_extractor' failed (exit 1)" \
+        or lost["004.png 005.png"].startswith("the image 005.png never arrived")
+
+
+def test_out_of_time_stops_the_work_and_charges_nobody():
+    kfs = keyframes(8)
+    project = FailingProject()
+    project.features = {k.name for k in kfs}
+    work = LiveWork(project, continuity=False)
+
+    def out_of_time(pairs):
+        raise ProjectError("out of time in matching: the finish's budget at shutdown is spent", out_of_time=True)
+
+    project.match = out_of_time
+    try:
+        work.match(kfs, chain(kfs))
+        assert False, "out of time must stop the finish's work"
+    except ProjectError as e:
+        assert e.out_of_time
+    assert work.pairs.failures == {} and not any(work.pairs.suspect(p) for p in chain(kfs))
+
+
+def test_items_that_fail_alone_one_after_another_stop_the_runs_alone():
+    kfs = keyframes(20)
+    project = FailingProject(fail_everything=True)
+    project.features = {k.name for k in kfs}
+    work = LiveWork(project, continuity=False, max_batch_pairs=24)
+    now = [0.0]
+    work.pairs.clock = lambda: now[0]
+    work.match(kfs, chain(kfs))  # the batch halved: every pair charged once
+    runs = len(project.runs)
+    now[0] += 1000.0  # past the backoff
+    work.match(kfs, chain(kfs))  # each is a suspect now, tried alone: four in a row fail, the rest wait
+    assert len(project.runs) - runs == LiveWork.ALONE_FAILURES_IN_A_ROW

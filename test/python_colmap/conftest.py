@@ -22,17 +22,19 @@ def tool(name):
     return path
 
 
-def run(cmd, timeout=1800):
+def run(cmd, timeout=1800, expect=0):
     env = dict(os.environ, PYTHONPATH=os.path.join(REPO, "src") + ":" + os.environ.get("PYTHONPATH", ""),
                OPENBLAS_NUM_THREADS="1", QT_QPA_PLATFORM="offscreen")
     done = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, universal_newlines=True,
                           timeout=timeout, env=env)
-    assert done.returncode == 0, "%s failed (exit %d):\n%s" % (" ".join(cmd), done.returncode, done.stdout[-4000:])
+    assert done.returncode == expect, "%s: exit %d, not %d:\n%s" % (" ".join(cmd), done.returncode, expect,
+                                                                     done.stdout[-4000:])
     return done.stdout
 
 
-def colmap_from_selection(*args):
-    return run([sys.executable, os.path.join(REPO, "scripts", "colmap_from_selection")] + [str(a) for a in args])
+def colmap_from_selection(*args, expect=0):
+    return run([sys.executable, os.path.join(REPO, "scripts", "colmap_from_selection")] + [str(a) for a in args],
+               expect=expect)
 
 
 def without_real_data(test, folder):

@@ -35,9 +35,15 @@ def test_bad_images_and_a_wrong_pose_are_reported_and_the_rest_is_built(tmp_path
     moved["orientation_xyzw"] = [qx, qy, qz, qw]
     json.dump(doc, open(str(selection / "selection.json"), "w"))
 
-    colmap_from_selection(selection, "--model", "known_poses", "--image-path", images, "--out", tmp_path / "model",
-                          "--threads", "2")
+    # The unreadable image's pairs never get matched: the model lacks wanted pairs, so the tool
+    # says how many and exits 3 (issue 34), with the model built all the same.
+    output = colmap_from_selection(selection, "--model", "known_poses", "--image-path", images, "--out",
+                                   tmp_path / "model", "--threads", "2", expect=3)
     report = json.load(open(str(tmp_path / "model" / "report.json")))
+    lost = {x["pair"]: x["reason"] for x in report["pairs_lost"]}
+    assert lost and all(unreadable in pair.split() for pair in lost), lost
+    assert all(reason.startswith("the image %s has no features" % unreadable) for reason in lost.values()), lost
+    assert "%d lost" % len(lost) in output and "%d wanted pairs are not in the model" % len(lost) in output
     skipped = {s["item"]: s["error"] for s in report["skipped"]["images"]}
     assert unreadable in skipped and "cannot read" in skipped[unreadable]
     assert blank in report["images_with_no_features"]

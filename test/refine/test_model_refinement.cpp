@@ -10,9 +10,13 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Eigenvalues>
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <random>
+#include <set>
+#include <sstream>
 
 namespace {
 
@@ -209,6 +213,35 @@ TEST_F(Refinement, DriftedPosesComeCloserToTheExactOnes) {
     for (const auto& e : p.track) EXPECT_EQ(id, out.images.at(e.image_id).points2D[static_cast<size_t>(e.point2D_idx)].point3D_id);
 }
 
+TEST_F(Refinement, ProgressNamesEachStageAndChangesNothing) {
+  // refine_model's progress: each adjustment's rounds (and Ceres' iterations) under its pass and
+  // stage; the refinement with a reporter is the one without (one thread: the same solves).
+  std::vector<refine::Match> matches;
+  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.0, 4.0, &matches);
+  refine::RefinementConfig config;
+  config.threads = 1;
+  refine::RefinementReport quiet, reported;
+  const io::ColmapModel plain = refine::refineModel(input, refine::allImages(input), config, &quiet, nullptr, &matches);
+  std::ostringstream out;
+  double now = 0.0;
+  io::Progress progress(out, false, [&] { return now += 1.0; }, 0.5);  // a line at every report
+  const io::ColmapModel shown =
+      refine::refineModel(input, refine::allImages(input), config, &reported, nullptr, &matches, &progress);
+  EXPECT_EQ(quiet.status, reported.status);
+  EXPECT_EQ(quiet.iterations, reported.iterations);
+  EXPECT_EQ(ate(plain, exact), ate(shown, exact));
+  std::istringstream in(out.str());
+  std::set<std::string> stages;
+  size_t iterations = 0;
+  for (std::string line; std::getline(in, line);) {
+    ASSERT_EQ(line.rfind("adjusting (pass 1, stage ", 0), 0u) << line;  // 600 tracks: under a triangulation's 1024
+    stages.insert(line.substr(0, line.find(')') + 1));
+    if (line.find("rounds (iteration ") != std::string::npos) ++iterations;
+  }
+  EXPECT_EQ(stages, (std::set<std::string>{"adjusting (pass 1, stage 1 of 2)", "adjusting (pass 1, stage 2 of 2)"}));
+  EXPECT_GT(iterations, 2u);
+}
+
 TEST_F(Refinement, TheIterativeSolverOfLargeModelsAlsoBringsThePosesCloser) {
   // Beyond sparse_up_to images Ceres' iterative Schur solver runs (a 10-minute walk's 3,253
   // keyframes: one sparse step took 58 s); here forced on 30 images.
@@ -246,6 +279,68 @@ TEST_F(Refinement, ATimeBudgetStopsItEarlyWithWhatItReached) {
   EXPECT_EQ(input.images.size(), out.images.size());
   config.max_seconds = -1.0;
   EXPECT_THROW(refine::refineModel(input, refine::allImages(input), config, &report), core::InvalidArgument);
+}
+
+/// A model COLMAP reads: every image of the input, every track naming 2D points that point back
+/// at it, every point finite with at least two observations.
+void expectConsistent(const io::ColmapModel& input, const io::ColmapModel& out) {
+  EXPECT_EQ(input.images.size(), out.images.size());
+  for (const auto& [id, p] : out.points) {
+    EXPECT_TRUE(p.xyz.allFinite()) << id;
+    EXPECT_GE(p.track.size(), 2u) << id;
+    for (const auto& e : p.track)
+      EXPECT_EQ(id, out.images.at(e.image_id).points2D.at(static_cast<size_t>(e.point2D_idx)).point3D_id);
+  }
+}
+
+// The budget bounds every stage: a budget spent before a stage begins (max_seconds 1 ns: spent
+// before refineModel's first look at the clock) stops a triangulation there. No wall time is
+// asserted; what is asserted is which stages ran.
+
+TEST_F(Refinement, ASpentBudgetStopsTheTriangulationOfAModelThatMayNotMove) {
+  std::vector<refine::Match> matches;
+  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.0, 4.0, &matches);
+  refine::RefinementReport report;
+  refine::refineModel(input, {}, {}, &report, nullptr, &matches);
+  ASSERT_EQ("triangulated", report.status) << report.message;  // without a budget: the matches triangulated
+  refine::RefinementConfig config;
+  config.max_seconds = 1e-9;
+  const io::ColmapModel out = refine::refineModel(input, {}, config, &report, nullptr, &matches);
+  EXPECT_EQ("out_of_time", report.status) << report.message;
+  EXPECT_EQ(0, report.retriangulations);
+  EXPECT_FALSE(report.refined);
+  EXPECT_EQ(input.points.size(), out.points.size());  // the model as it came
+  expectConsistent(input, out);
+}
+
+TEST_F(Refinement, ASpentBudgetStopsTheTriangulationAfterKeptImages) {
+  // Without priors the least observed image keeps its input pose (min_observations above its
+  // count); the tracks are then triangulated once more with it at that pose. Out of time that
+  // triangulation does not run, and the kept image's input observations join the points.
+  std::vector<refine::Match> matches;
+  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.0, 4.0, &matches);
+  std::map<int, int> seen;
+  for (const auto& [id, p] : input.points)
+    for (const auto& e : p.track) ++seen[e.image_id];
+  const auto least = std::min_element(seen.begin(), seen.end(),
+                                      [](const auto& a, const auto& b) { return a.second < b.second; });
+  refine::RefinementConfig config;
+  config.prior_translation_ratio = 0.0;
+  config.min_observations = least->second + 1;
+  refine::RefinementReport report;
+  refine::refineModel(input, refine::allImages(input), config, &report, nullptr, &matches);
+  ASSERT_EQ(config.retriangulations + 2, report.retriangulations) << report.message;  // the stage is reached
+  config.max_seconds = 1e-9;
+  const io::ColmapModel out = refine::refineModel(input, refine::allImages(input), config, &report, nullptr, &matches);
+  EXPECT_EQ("out_of_time", report.status) << report.message;
+  EXPECT_EQ(0, report.retriangulations) << report.message;
+  EXPECT_NE(std::string::npos, report.message.find("time budget")) << report.message;
+  const io::ColmapImage& kept = out.images.at(least->first);
+  EXPECT_TRUE(kept.rotation.isApprox(input.images.at(least->first).rotation, 1e-12));
+  EXPECT_TRUE(kept.translation.isApprox(input.images.at(least->first).translation, 1e-12));
+  EXPECT_GT(std::count_if(kept.points2D.begin(), kept.points2D.end(), [](const auto& p) { return p.point3D_id >= 0; }),
+            0);
+  expectConsistent(input, out);
 }
 
 TEST_F(Refinement, OutlierObservationsAreFiltered) {

@@ -22,7 +22,9 @@ enum class KeyframeMode {
   kExternal,    ///< the caller's verdict for each frame (Frame::external_keyframe)
   /// the first frame, then one whose view of the last keyframe's points has changed enough:
   /// fewer than keyframe_overlap of them matchable, or the parallax of the nearer ones (90th
-  /// percentile) at least keyframe_parallax_deg (angles and ratios only: any unit alike)
+  /// percentile) at least keyframe_parallax_deg (angles and ratios only: any unit alike), and
+  /// no earlier keyframe near it has the view by the same measure (the revisit rule:
+  /// ViewSelector::coveringKeyframe, docs/design.md)
   kScaleFree,
 };
 
@@ -124,6 +126,13 @@ class KeyframePolicy {
              double stamp = std::numeric_limits<double>::quiet_NaN());
   /// Whether this mode needs a KeyframeReference (the keyframes' points) to decide.
   bool needsReference() const { return config_.mode == KeyframeMode::kScaleFree; }
+  /// kScaleFree's revisit rule: whether `reference` (an earlier keyframe near the frame) already
+  /// has the view of a frame at `pose`: the frame sees at least keyframe_overlap of its points
+  /// (at least one) within the gates and the parallax stays under keyframe_parallax_deg, the
+  /// measure offer() takes against the last keyframe. A reference without kMinReferencePoints
+  /// points covers nothing.
+  bool covers(const KeyframeReference& reference, const CameraPose& pose,
+              const PinholeIntrinsics& intrinsics) const;
   /// The last decision's measure (kScaleFree; empty before one was measured).
   const std::optional<ViewChange>& lastChange() const { return last_change_; }
   /// The frame offered last did become a keyframe at `pose`.
@@ -147,6 +156,10 @@ class KeyframePolicy {
   void restore(const State& state);
 
  private:
+  /// kScaleFree: whether `change` is a new view (under keyframe_overlap, or the parallax
+  /// reached keyframe_parallax_deg).
+  bool isNewView(const ViewChange& change) const;
+
   KeyframePolicyConfig config_;
   long frames_offered_ = 0;
   std::optional<CameraPose> last_keyframe_;

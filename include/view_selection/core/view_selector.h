@@ -5,6 +5,7 @@
 
 #include "view_selection/core/error_resistance_matrix.h"
 #include "view_selection/core/frame.h"
+#include "view_selection/core/keyframe_neighbours.h"
 #include "view_selection/core/keyframe_policy.h"
 #include "view_selection/core/pair_buckets.h"
 #include "view_selection/core/parameters.h"
@@ -38,6 +39,9 @@ enum class FrameOutcome {
 struct FrameResult {
   FrameOutcome outcome = FrameOutcome::kSkippedByPolicy;
   ViewId id = -1;                    ///< keyframe id when outcome == kKeyframe
+  /// kSkippedByPolicy by the revisit rule: the earlier keyframe that already has the view
+  /// (-1: not skipped, or the last keyframe had it)
+  ViewId covered_by = -1;
   size_t points = 0;                 ///< sample points of the new keyframe
   std::vector<ViewId> updated_rows;  ///< earlier keyframes whose rows were recomputed
   double points_seconds = 0.0;       ///< time in the point source
@@ -75,6 +79,15 @@ class ViewSelector {
   /// them; null without a keyframe or without any such depth. O(points), not O(keyframes).
   const KeyframeReference* keyframeReference() const;
   static constexpr int kReferenceLookBack = 64;
+  /// The scale_free policy's revisit rule: a frame whose view has changed against the last
+  /// keyframe still becomes none when an earlier keyframe near it already has its view
+  /// (KeyframePolicy::covers: the same measure). The earlier keyframe that does, or -1; looks at
+  /// the kRevisitCandidates most alike of those that can (KeyframeNeighbours::query).
+  /// Measured on the built-in walk round one room (docs/design.md, "Revisits").
+  ViewId coveringKeyframe(const CameraPose& pose, const PinholeIntrinsics& intrinsics) const;
+  static constexpr size_t kRevisitCandidates = 8;
+  /// Frames the revisit rule kept from becoming keyframes so far (since reset()).
+  size_t revisitsSkipped() const { return revisits_skipped_; }
   /// The selection for the keyframes so far (selectViews, kept current incrementally), as a
   /// plain Selection (O(n): for tools and tests; outputs take output()).
   Selection select() const;
@@ -120,6 +133,10 @@ class ViewSelector {
 
  private:
   FrameResult insert(const Frame& frame, const CameraPose& pose);
+  /// Whether the revisit rule applies to the policy's last verdict (scale_free, measured).
+  bool revisitRuleApplies(const KeyframePolicy& policy) const;
+  /// The revisit rule's index from the keyframes as they are (restore, a new keyframe_overlap).
+  void indexNeighbours();
 
   ViewSelectorConfig config_;
   std::unique_ptr<PointSource> points_;
@@ -127,6 +144,10 @@ class ViewSelector {
   ErrorResistanceMatrix matrix_;
   std::optional<double> last_stamp_;  // of the last valid frame offered
   mutable KeyframeReference reference_;  // keyframeReference()'s, rebuilt on each call
+  // The keyframes by centre for the revisit rule; its searches regrid, hence mutable.
+  mutable KeyframeNeighbours neighbours_;
+  mutable std::vector<ViewId> near_;  // coveringKeyframe()'s, reused
+  size_t revisits_skipped_ = 0;
   // What select() last returned, updated from the rows that changed since. Not shared between
   // threads: like every other member, one thread at a time drives a ViewSelector.
   mutable SelectionCache selection_;

@@ -15,6 +15,7 @@
 #pragma once
 
 #include "view_selection/io/colmap_model.h"
+#include "view_selection/io/progress.h"
 #include "view_selection/refine/tracks.h"
 
 #include <set>
@@ -81,9 +82,11 @@ struct RefinementConfig {
   /// With every image movable: align the result to the input poses (Sim(3)); see above.
   bool align_to_input = true;
   /// [s] wall time the refinement may take, 0: no limit. Once it is spent, the solve under way
-  /// stops at its best state so far, no further round, triangulation or pass begins, and the
-  /// result is what the adjustments reached (status out_of_time): a live finish's refinement
-  /// stays within a bound however long the session was (issue 28).
+  /// stops at its best state so far, a triangulation under way is given up (the points stay
+  /// what they were; it looks at the clock every 1024 tracks), no further round, triangulation
+  /// or pass begins, and the result is what the adjustments reached (status out_of_time; with
+  /// no image movable, the model as it came): a live finish's refinement stays within a bound
+  /// however long the session was (issue 28). Reading and writing the model are not bounded.
   double max_seconds = 0.0;
   int threads = 0;  ///< Ceres threads; 0: one per core
   /// Ceres' dense Schur solver up to this many images, the sparse one up to sparse_up_to, the
@@ -148,11 +151,12 @@ struct RefinementReport {
 /// SIMPLE_PINHOLE or PINHOLE, or non-finite input. `matches` (verified matches of the project
 /// as (image id, 2D point index) pairs, the 2D points of the model's images): the points are
 /// triangulated anew from them at the refined poses (config.retriangulations); without them
-/// the input's points and tracks are refined as they are.
+/// the input's points and tracks are refined as they are. `progress`, when given, shows each
+/// triangulation's tracks and each adjustment's rounds (and Ceres' iterations) as they go.
 io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& movable,
                             const RefinementConfig& config, RefinementReport* report,
                             const io::ColmapModel* reference = nullptr,
-                            const std::vector<Match>* matches = nullptr);
+                            const std::vector<Match>* matches = nullptr, io::Progress* progress = nullptr);
 
 /// Every image id of `model`.
 std::set<int> allImages(const io::ColmapModel& model);

@@ -240,6 +240,21 @@ class Database:
         sql = "SELECT pair_id FROM two_view_geometries" + (" WHERE rows > 0" if verified_only else "")
         return {ids_of_pair(pid) for (pid,) in self.con.execute(sql)}
 
+    def images_with_features_among(self, image_ids):
+        """The ids among `image_ids` that have descriptors: only those rows are read."""
+        return {iid for iid in image_ids
+                if self.con.execute("SELECT 1 FROM descriptors WHERE image_id = ?", (int(iid),)).fetchone()}
+
+    def inlier_counts_among(self, pairs):
+        """{(image_id1, image_id2): inlier matches} of those of `pairs` ((id, id), either order)
+        that have a two-view geometry: only those rows are read."""
+        out = {}
+        for a, b in pairs:
+            row = self.con.execute("SELECT rows FROM two_view_geometries WHERE pair_id = ?", (pair_id(a, b),)).fetchone()
+            if row is not None:
+                out[(min(a, b), max(a, b))] = row[0]
+        return out
+
     def inlier_counts(self):
         """{(image_id1, image_id2): inlier matches} of every pair with a two-view geometry."""
         return {ids_of_pair(pid): rows for pid, rows in self.con.execute("SELECT pair_id, rows FROM two_view_geometries")}

@@ -10,6 +10,8 @@ import struct
 
 import numpy as np
 
+from . import durable
+
 # COLMAP's camera models by id: (name, number of parameters)
 CAMERA_MODELS = {0: ("SIMPLE_PINHOLE", 3), 1: ("PINHOLE", 4), 2: ("SIMPLE_RADIAL", 4), 3: ("RADIAL", 5),
                  4: ("OPENCV", 8), 5: ("OPENCV_FISHEYE", 8), 6: ("FULL_OPENCV", 12), 7: ("FOV", 5),
@@ -208,16 +210,14 @@ def _read_points_txt(path):
 # -- writing -------------------------------------------------------------------------------------
 def write_model(model, folder, binary=True):
     """Writes cameras, images and points3D into `folder` (made when missing), each file written
-    to a temporary name and renamed, so a reader never sees half a file."""
+    to a temporary name, fsynced and renamed, and the folder fsynced (durable.write_atomically),
+    so a reader never sees half a file, also after a power loss."""
     os.makedirs(folder, exist_ok=True)
     ext = ".bin" if binary else ".txt"
     for name, writer in (("cameras", _cameras_bin if binary else _cameras_txt),
                          ("images", _images_bin if binary else _images_txt),
                          ("points3D", _points_bin if binary else _points_txt)):
-        path = os.path.join(folder, name + ext)
-        with open(path + ".tmp", "wb") as f:
-            f.write(writer(model))
-        os.replace(path + ".tmp", path)
+        durable.write_atomically(os.path.join(folder, name + ext), writer(model))
 
 
 def _cameras_bin(model):

@@ -10,6 +10,7 @@ import os
 import shutil
 import signal
 import subprocess
+import threading
 import time
 
 
@@ -49,15 +50,19 @@ def _death_signal_prefix():
 class Colmap:
     """Runs `colmap <command>` with its output appended to `log_path`.
 
-    seconds: wall time spent per stage (the stage names the caller gives)."""
+    seconds: wall time spent per stage (the stage names the caller gives).
+    cancelled: set by cancel() and kept until the caller clears it; while it is set, no command
+    starts and one that started in the meantime is killed at once (issue 35: a cancel that came
+    between a check and the Popen was forgotten, and COLMAP ran to its timeout)."""
 
     def __init__(self, executable="colmap", log_path=None, default_timeout=600.0):
         self.executable = executable
         self.log_path = log_path
         self.default_timeout = float(default_timeout)
         self.seconds = {}
+        self.cancelled = False
         self._running = None  # the Popen of the command running now
-        self._cancelled = False
+        self._lock = threading.Lock()  # cancelled and _running change together
 
     def available(self):
         return shutil.which(self.executable) is not None
@@ -68,6 +73,8 @@ class Colmap:
         (then the child and its group are killed)."""
         timeout = self.default_timeout if timeout is None else float(timeout)
         cmd = [self.executable] + [str(a) for a in args]
+        if self.cancelled:
+            raise ColmapError("'%s %s' (%s) not started: cancelled" % (self.executable, args[0], stage), stage)
         start = time.monotonic()
         log = open(self.log_path, "a") if (self.log_path and not capture) else None
         try:
@@ -80,7 +87,11 @@ class Colmap:
                                         stderr=subprocess.STDOUT, universal_newlines=capture)
             except OSError as e:
                 raise ColmapError("cannot run '%s %s': %s" % (self.executable, args[0], e.strerror or e), stage)
-            self._running, self._cancelled = proc, False
+            with self._lock:  # a cancel() before this line sees no process: it is killed here
+                self._running = proc
+                cancelled = self.cancelled
+            if cancelled:
+                self._kill(proc)
             try:
                 out, _ = proc.communicate(timeout=timeout)
             except subprocess.TimeoutExpired:
@@ -91,9 +102,10 @@ class Colmap:
                 self._kill(proc)  # an interrupted parent takes its child with it
                 raise
             finally:
-                self._running = None
+                with self._lock:
+                    self._running = None
             elapsed = time.monotonic() - start
-            if self._cancelled:
+            if self.cancelled:
                 raise ColmapError("'%s %s' (%s) was cancelled" % (self.executable, args[0], stage), stage)
             if log:
                 log.write("# exit %d after %.2f s\n" % (proc.returncode, elapsed))
@@ -108,10 +120,12 @@ class Colmap:
         return (elapsed, out) if capture else elapsed
 
     def cancel(self):
-        """Kills the command running now, if any (from another thread)."""
-        proc = self._running
+        """Kills the command running now, if any, and any that starts until `cancelled` is
+        cleared (from another thread)."""
+        with self._lock:
+            self.cancelled = True
+            proc = self._running
         if proc is not None:
-            self._cancelled = True
             self._kill(proc)
 
     def _see(self):

@@ -18,17 +18,20 @@ import time
 from ..keyframes import pair_of
 from .. import geometry
 from . import database as db
+from . import durable
 from . import model as colmap_model
+from .catalogue import Catalogue
 from .process import Colmap, ColmapError
 
 
 class ProjectError(Exception):
     """A project that cannot be kept: an unusable folder, COLMAP missing or failing (timed_out:
-    a COLMAP command was killed at its time limit)."""
+    a COLMAP command was killed at its time limit; out_of_time: the project's deadline passed,
+    which is no item's fault)."""
 
-    def __init__(self, message, timed_out=False):
+    def __init__(self, message, timed_out=False, out_of_time=False):
         super().__init__(message)
-        self.timed_out = timed_out
+        self.timed_out, self.out_of_time = timed_out, out_of_time
 
 
 class Timeouts:
@@ -47,23 +50,12 @@ class Timeouts:
 
 
 def write_json_atomically(path, data):
-    tmp = path + ".tmp"
-    with open(tmp, "w") as f:
-        json.dump(data, f, indent=2, sort_keys=True, default=str)
-        f.write("\n")
-    os.replace(tmp, path)
+    """`data` as JSON in `path`: written beside it, fsynced, renamed over it, the folder fsynced
+    (durable.write_atomically: the old report or the new, also after a power loss)."""
+    durable.write_atomically(path, json.dumps(data, indent=2, sort_keys=True, default=str) + "\n")
 
 
-def replace_folder(made, output):
-    """Moves `made` to `output`, replacing what was there (the old one stays until then)."""
-    old = None
-    if os.path.exists(output):
-        old = output + ".old.%d" % os.getpid()
-        os.rename(output, old)
-    os.makedirs(os.path.dirname(output), exist_ok=True)
-    shutil.move(made, output)
-    if old:
-        shutil.rmtree(old, ignore_errors=True)
+replace_folder = durable.replace_folder  # sparse/0 swapped in one step, never absent
 
 
 class ColmapProject:
@@ -76,9 +68,9 @@ class ColmapProject:
         self.threads = str(int(threads))
         self.timeouts = timeouts or Timeouts()
         self.init_pair = None  # (name, name): the mapper starts from these two images
-        self.cancelled = False
         self.deadline = None  # time.monotonic() by which every COLMAP call must be done, or None
         self.seconds = self.colmap.seconds  # per stage: extraction, matching, model
+        self._catalogue = None  # what the database holds (catalogue.py), read at the first use
         for stage in ("extraction", "matching", "model"):
             self.seconds.setdefault(stage, 0.0)
 
@@ -104,25 +96,55 @@ class ColmapProject:
         """The project's database, for a `with` block (one transaction, closed after)."""
         return db.Database(self.database, create=create)
 
+    def catalogue(self):
+        """What the database holds, in memory (catalogue.py): read whole once, then kept current
+        by the steps that write it."""
+        if self._catalogue is None:
+            with self.db() as d:
+                self._catalogue = Catalogue(d)
+        return self._catalogue
+
+    def forget(self):
+        """The database was changed by something other than this project's steps: read it again."""
+        self._catalogue = None
+
     def run(self, args, stage, timeout):
         """A COLMAP command, within `timeout` and within the project's deadline when one is set
         (a finish at shutdown has only so long)."""
         if self.cancelled:
             raise ProjectError("'%s' (%s) not started: the project's work was cancelled" % (args[0], stage))
+        cut = False
         if self.deadline is not None:
             left = self.deadline - time.monotonic()
             if left <= 1.0:
-                raise ProjectError("no time left for '%s' (%s)" % (args[0], stage))
-            timeout = min(timeout, left)
+                raise ProjectError("no time left for '%s' (%s)" % (args[0], stage), out_of_time=True)
+            cut, timeout = left < timeout, min(timeout, left)
         try:
             return self.colmap.run(args, stage, timeout)
         except ColmapError as e:
-            raise ProjectError(str(e), timed_out=e.timed_out)
+            raise ProjectError(str(e), timed_out=e.timed_out, out_of_time=e.timed_out and cut)
+
+    def check_deadline(self, stage):
+        """Raises ProjectError (out_of_time) once the project's deadline has passed: the in-process
+        loops (SIFT, guided matching, the live model) call it for each item, as run() bounds a
+        COLMAP command (one clock read)."""
+        if self.deadline is not None and time.monotonic() >= self.deadline:
+            raise ProjectError("out of time in %s: the finish's budget at shutdown is spent" % stage,
+                               out_of_time=True)
+
+    @property
+    def cancelled(self):
+        """Set by cancel(), kept until the caller clears it: no COLMAP command runs meanwhile
+        (the flag is the Colmap's, so a cancel between a check and a start is not lost)."""
+        return self.colmap.cancelled
+
+    @cancelled.setter
+    def cancelled(self, value):
+        self.colmap.cancelled = bool(value)
 
     def cancel(self):
         """Kills the COLMAP command running now (from another thread), and refuses to start
         another until `cancelled` is cleared; the one killed raises ProjectError."""
-        self.cancelled = True
         self.colmap.cancel()
 
     def has_image(self, name):
@@ -133,39 +155,58 @@ class ColmapProject:
         database has it, in order (what was done when; each appears once)."""
         if not items:
             return
-        with open(os.path.join(self.root, "ledger.txt"), "a") as f:
-            stamp = "%.3f" % time.time()
-            f.write("".join("%s %s %s\n" % (stamp, what, item) for item in items))
+        stamp = "%.3f" % time.time()
+        durable.append_durably(os.path.join(self.root, "ledger.txt"),
+                               "".join("%s %s %s\n" % (stamp, what, item) for item in items))
 
     def image_ids(self):
-        with self.db() as d:
-            return d.image_ids()
+        return dict(self.catalogue().ids)
 
     def register(self, keyframes):
         """Rows in `images` for keyframes the database does not have yet, in id order (so the
         image ids, and the direction each pair is matched in, do not depend on when images
         arrived or on a restart), each with the PINHOLE camera of its intrinsics (in COLMAP's
         pixel convention, Keyframe.colmap_camera_params)."""
+        cat = self.catalogue()
+        new = sorted((k for k in keyframes if k.name not in cat.ids), key=lambda k: k.id)
+        if not new:
+            return
         with self.db() as d:
-            known = d.image_ids()
-            for k in sorted(keyframes, key=lambda k: k.id):
-                if k.name not in known:
-                    known[k.name] = d.add_image(k.name, d.camera_id(k.width, k.height, k.colmap_camera_params()))
+            added = []
+            for k in new:
+                if k.name in cat.ids or any(k.name == a[0] for a in added):
+                    continue
+                cid = d.camera_id(k.width, k.height, k.colmap_camera_params())
+                added.append((k.name, d.add_image(k.name, cid), cid))
+            cameras = d.cameras() if any(cid not in cat.cameras for _, _, cid in added) else {}
+        for name, iid, cid in added:  # after the commit: the catalogue holds what the database does
+            cat.image_added(name, iid, cid, cameras.get(cid))
 
-    def extracted(self):
-        """Names of the images with features."""
-        with self.db() as d:
-            return d.images_with_features()
+    def extracted(self, refresh=()):
+        """Names of the images with features; `refresh`: names whose rows are read back first
+        (after a step that extracted them)."""
+        cat = self.catalogue()
+        if refresh:
+            with self.db() as d:
+                cat.read_features(d, refresh)
+        return set(cat.with_features)
 
-    def matched(self):
-        """Pairs (name, name), sorted within, that were matched (verified or not)."""
-        with self.db() as d:
-            names = {iid: name for name, iid in d.image_ids().items()}
-            return {pair_of(names[a], names[b]) for a, b in d.geometry_pairs() if a in names and b in names}
+    def matched(self, refresh=()):
+        """Pairs (name, name), sorted within, that were matched (verified or not), as a live
+        read-only view (set operations and `in` work on it; copy it to keep it); `refresh`:
+        pairs whose rows are read back first (after a step that matched them)."""
+        cat = self.catalogue()
+        if refresh:
+            with self.db() as d:
+                cat.read_pairs(d, refresh)
+        return cat.inliers.keys()  # a view, not a copy: it grows with the session
+
+    def inlier_counts(self):
+        """{(name, name): inlier matches} of the pairs matched (0: matched, not verified)."""
+        return dict(self.catalogue().inliers)
 
     def verified_count(self):
-        with self.db() as d:
-            return d.counts()["pairs_verified"]
+        return sum(1 for n in self.catalogue().inliers.values() if n > 0)
 
     # -- COLMAP's own extraction and matching -------------------------------------------------
     def extract(self, keyframes):
@@ -179,11 +220,13 @@ class ColmapProject:
         listing = os.path.join(self.root, ".extract_list.txt")
         with open(listing, "w") as f:
             f.write("".join(k.name + "\n" for k in todo))
-        self.run(["feature_extractor", "--database_path", self.database, "--image_path", self.images,
-                  "--image_list_path", listing, "--ImageReader.camera_model", "PINHOLE",
-                  "--SiftExtraction.use_gpu", "0", "--SiftExtraction.num_threads", self.threads], "extraction",
-                 self.timeouts.images(len(todo)))
-        now = self.extracted()
+        try:
+            self.run(["feature_extractor", "--database_path", self.database, "--image_path", self.images,
+                      "--image_list_path", listing, "--ImageReader.camera_model", "PINHOLE",
+                      "--SiftExtraction.use_gpu", "0", "--SiftExtraction.num_threads", self.threads], "extraction",
+                     self.timeouts.images(len(todo)))
+        finally:  # also what a run that failed half-way wrote
+            now = self.extracted(refresh=[k.name for k in todo])
         self.ledger("extracted", [k.name for k in todo if k.name in now])
         return len(todo)
 
@@ -199,10 +242,12 @@ class ColmapProject:
         listing = os.path.join(self.root, ".match_list.txt")
         with open(listing, "w") as f:
             f.write("".join("%s %s\n" % p for p in todo))
-        self.run(["matches_importer", "--database_path", self.database, "--match_list_path", listing,
-                  "--match_type", "pairs", "--SiftMatching.use_gpu", "0",
-                  "--SiftMatching.num_threads", self.threads], "matching", self.timeouts.pairs(len(todo)))
-        now = self.matched()
+        try:
+            self.run(["matches_importer", "--database_path", self.database, "--match_list_path", listing,
+                      "--match_type", "pairs", "--SiftMatching.use_gpu", "0",
+                      "--SiftMatching.num_threads", self.threads], "matching", self.timeouts.pairs(len(todo)))
+        finally:  # also what a run that failed half-way wrote
+            now = self.matched(refresh=todo)
         self.ledger("matched", ["%s %s" % p for p in todo if p in now])
         return len(todo)
 
@@ -210,8 +255,8 @@ class ColmapProject:
     def known_poses(self, keyframes):
         """The model point_triangulator starts from: the keyframes at their poses (the
         database's image and camera ids), no points."""
-        with self.db() as d:
-            ids, cams, cameras = d.image_ids(), d.image_cameras(), d.cameras()
+        cat = self.catalogue()
+        ids, cams, cameras = cat.ids, cat.image_cameras, cat.cameras
         model = colmap_model.Model()
         for k in keyframes:
             if k.name not in ids:

@@ -1,5 +1,7 @@
 """Items that failed (an image COLMAP could not extract, a pair it could not match), retried with
-a growing wait a bounded number of times, then given up and reported. No ROS."""
+a growing wait a bounded number of times, then given up and reported; and items suspected
+without a failure charged (they were in a run that hung: one of them, or none, is the culprit),
+tried alone next. No ROS."""
 import time
 
 
@@ -11,6 +13,8 @@ class Attempts:
         self.failures = {}   # item -> count
         self.not_before = {}  # item -> clock time
         self.errors = {}     # item -> last error text
+        self.suspects = set()  # items in a run that timed out, not charged: tried alone next
+        self._given_up = 0     # how many items are given up now (kept as it changes: the diagnostics ask)
 
     def failed(self, item, error):
         """Records a failure; True when the item is now given up."""
@@ -18,9 +22,19 @@ class Attempts:
         self.failures[item] = n
         self.errors[item] = str(error)
         self.not_before[item] = self.clock() + self.first_wait * self.factor ** (n - 1)
+        if n == self.max_attempts:
+            self._given_up += 1
         return n >= self.max_attempts
 
+    def suspected(self, item):
+        """The item was in a run of several that timed out: it is tried alone next, and only a
+        failure alone is charged (so a hang costs only the item that hangs)."""
+        self.suspects.add(item)
+
     def succeeded(self, item):
+        self.suspects.discard(item)
+        if self.given_up(item):
+            self._given_up -= 1
         self.failures.pop(item, None)
         self.not_before.pop(item, None)
         self.errors.pop(item, None)
@@ -29,8 +43,12 @@ class Attempts:
         return self.failures.get(item, 0) >= self.max_attempts
 
     def suspect(self, item):
-        """Failed before (so tried alone next time, not in a batch)."""
-        return self.failures.get(item, 0) > 0
+        """Failed before, or was in a run that hung (so tried alone next time, not in a batch)."""
+        return item in self.suspects or self.failures.get(item, 0) > 0
+
+    def given_up_count(self):
+        """len(skipped()), without looking at each item."""
+        return self._given_up
 
     def due(self, item):
         """Not given up and not waiting."""

@@ -12,14 +12,15 @@ instead: each new observation joins the point when it lies within `max_error_px`
 projection, as COLMAP's incremental triangulator continues a track. So the cost of an update is
 that of its new observations, not of whole tracks that grow with every revisit (issue 28: in a
 room walked round for 3 minutes the mean track reached 22 observations and a full
-re-triangulation 0.31 s of CPU an update). In a full triangulation, observations further than
-`max_error_px` from the point are dropped (the worst first, the point made again from the
-rest; after DROP_ONE_BY_ONE rounds every one beyond the limit at once), and a point seen at less than `min_angle_deg` of
-triangulation angle, or behind a camera, is not kept. The angle is COLMAP 3.8's point_triangulator
-default (tri_min_angle 1.5 deg); the error is tighter than its 4 px (filter_max_reproj_error):
-measured on the kitchen at its poses, 3 px keeps 5,934 points at 1.34 px mean error where 4 px
-keeps 6,431 at 1.73 px, and COLMAP's point_triangulator on the same matches 4,680 at 1.62 px
-(docs/live.md).
+re-triangulation 0.31 s of CPU an update). A full triangulation is the package's one
+(triangulation.py, the C++ that refine_model re-triangulates with, issue 34): observations
+further than `max_error_px` from the point or behind their camera are dropped (the worst first,
+the point made again from the rest; after a few rounds every one beyond the limit at once), and a
+point seen at less than `min_angle_deg` of triangulation angle is not kept. The angle is COLMAP
+3.8's point_triangulator default (tri_min_angle 1.5 deg); the error is tighter than its 4 px
+(filter_max_reproj_error): measured on the kitchen at its poses, 3 px keeps 5,934 points at 1.34
+px mean error where 4 px keeps 6,431 at 1.73 px, and COLMAP's point_triangulator on the same
+matches 4,680 at 1.62 px (docs/live.md).
 
 Cameras, keypoints and poses are in COLMAP's convention (the database's keypoints, the cameras'
 principal points shifted by half a pixel, world-to-camera poses), so the model written is the one
@@ -27,7 +28,7 @@ point_triangulator would start from, with its points.
 """
 import numpy as np
 
-from .. import geometry
+from .. import geometry, triangulation
 from ..colmap import model as colmap_model
 
 
@@ -51,16 +52,9 @@ class _Image:
         return self.k @ np.hstack([self.r, self.t.reshape(3, 1)])
 
 
-# Rounds in which a track's worst observation alone is dropped before all beyond the limit go at
-# once. Replayed from the kitchen's and a 3-minute walk's projects: one by one throughout, 5,497
-# points on the kitchen and 21.7 s of CPU on the walk; after 6 rounds 5,474 and 21.3 s; after 3,
-# 5,347 and 18.6 s; every observation off by more than half the worst at once, 4,378 points.
-DROP_ONE_BY_ONE = 6
-
-
 class LiveModel:
-    def __init__(self, max_error_px=3.0, min_angle_deg=1.5):
-        self.max_error_px, self.min_angle = float(max_error_px), np.radians(float(min_angle_deg))
+    def __init__(self, max_error_px=triangulation.MAX_ERROR_PX, min_angle_deg=triangulation.MIN_ANGLE_DEG):
+        self.max_error_px, self.min_angle_deg = float(max_error_px), float(min_angle_deg)
         self.images = {}      # image id -> _Image
         self.cameras = {}     # camera id -> (model name, width, height, params)
         self.parent = {}      # observation -> parent (union-find)
@@ -75,6 +69,20 @@ class LiveModel:
         self.by_image = {}    # image id -> set of roots with an observation in it
         self.conflicts = 0    # matches left out: they would give a track two keypoints of one image
         self.matched_pairs = set()
+        self.changed = None   # with watch_points(): roots whose point was made, moved or removed since taken
+
+    def watch_points(self):
+        """From now on, record the roots whose point changes, for take_changed() (what the bridge
+        publishes is updated with them: live/visualisation.py). Off by default: nothing takes them
+        offline."""
+        if self.changed is None:
+            self.changed = set(self.points)
+
+    def take_changed(self):
+        """The roots whose point was made, moved or removed since the last call (a root no longer
+        in `points` lost its point)."""
+        changed, self.changed = self.changed, set()
+        return changed or set()
 
     # -- images ------------------------------------------------------------------------------
     def add_image(self, iid, name, camera_id, camera, qvec, tvec, keypoints):
@@ -133,6 +141,8 @@ class LiveModel:
             self.members.pop(rb, None)
             if self.points.pop(rb, None) is not None or rb in self.full:
                 self.full.add(ra)  # two points (or one to redo) become one: triangulated from scratch
+                if self.changed is not None:
+                    self.changed.add(rb)
             self.full.discard(rb)
             self.full_size.pop(rb, None)
             self.failed_size.pop(rb, None)
@@ -171,22 +181,15 @@ class LiveModel:
                 continue  # it gave no point with nearly as many observations: not yet again
             obs = {img: kp for img, kp in self.members[root].items() if img in self.images}
             if len(obs) >= 2:
-                tracks.append((root, obs, 0))
+                tracks.append((root, obs))
             else:
-                self.points.pop(root, None)
+                if self.points.pop(root, None) is not None and self.changed is not None:
+                    self.changed.add(root)
                 self.full_size.pop(root, None)
         if extend:
             self._extend(extend)
-        # Vectorised by track length: a DLT point, Gauss-Newton, and the worst observation
-        # dropped while it is further than max_error_px (the track then goes round again, one
-        # shorter), until every track is kept or has fewer than two observations.
-        while tracks:
-            by_length = {}
-            for track in tracks:
-                by_length.setdefault(len(track[1]), []).append(track)
-            tracks = []
-            for length, group in by_length.items():
-                tracks += self._triangulate_group(group)
+        if tracks:
+            self._triangulate(tracks)
         return len(todo)
 
     def _extend(self, extend):
@@ -212,75 +215,30 @@ class LiveModel:
                 obs[img] = kp  # the point's own dict (made by the triangulation): no copy per observation
                 self.points[root] = (xyz, (mean * (len(obs) - 1) + float(e)) / len(obs), obs)
 
-    def _triangulate_group(self, group):
-        """Tracks of one length; returns those to try again one observation shorter."""
-        length = len(group[0][1])
-        self.observations_triangulated += length * len(group)
-        ids = np.array([list(obs) for _, obs, _ in group])                    # n x L image ids
-        ims = [[self.images[i] for i in row] for row in ids]
-        xy = np.array([[im.keypoints[obs[im.id]] for im in row] for row, (_, obs, _) in zip(ims, group)])  # n x L x 2
-        r = np.array([[im.r for im in row] for row in ims])                   # n x L x 3 x 3
-        t = np.array([[im.t for im in row] for row in ims])                   # n x L x 3
-        k = np.array([[im.k for im in row] for row in ims])                   # n x L x 3 x 3
-        p = k @ np.concatenate([r, t[..., None]], axis=3)                     # n x L x 3 x 4
-        a = np.concatenate([xy[..., 0:1] * p[:, :, 2, :] - p[:, :, 0, :],
-                            xy[..., 1:2] * p[:, :, 2, :] - p[:, :, 1, :]], axis=1)  # n x 2L x 4
-        _, _, vt = np.linalg.svd(a)
-        h = vt[:, -1, :]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            x = h[:, :3] / h[:, 3:4]
-        for _ in range(3):  # Gauss-Newton on the reprojection error, the poses held
-            pc = np.einsum("nlij,nj->nli", r, x) + t                          # n x L x 3
-            z = pc[..., 2]
-            fx, fy = k[:, :, 0, 0], k[:, :, 1, 1]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                res = np.stack([fx * pc[..., 0] / z + k[:, :, 0, 2], fy * pc[..., 1] / z + k[:, :, 1, 2]], -1) - xy
-                dproj = np.zeros(pc.shape[:2] + (2, 3))
-                dproj[..., 0, 0], dproj[..., 0, 2] = fx / z, -fx * pc[..., 0] / z ** 2
-                dproj[..., 1, 1], dproj[..., 1, 2] = fy / z, -fy * pc[..., 1] / z ** 2
-            jac = dproj @ r                                                    # n x L x 2 x 3
-            jtj = np.einsum("nlki,nlkj->nij", jac, jac) + 1e-12 * np.eye(3)
-            jtr = np.einsum("nlki,nlk->ni", jac, res)
-            ok = np.all(np.isfinite(jtj), axis=(1, 2)) & np.all(np.isfinite(jtr), axis=1)
-            step = np.zeros_like(x)
-            if ok.any():
-                step[ok] = np.linalg.solve(jtj[ok], -jtr[ok][..., None])[..., 0]
-            x = x + step
-        pc = np.einsum("nlij,nj->nli", r, x) + t
-        z = pc[..., 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            uv = np.stack([k[:, :, 0, 0] * pc[..., 0] / z + k[:, :, 0, 2], k[:, :, 1, 1] * pc[..., 1] / z + k[:, :, 1, 2]], -1)
-            errors = np.linalg.norm(uv - xy, axis=2)                           # n x L
-        valid = np.all(np.isfinite(errors), axis=1) & np.all(z > 0, axis=1)
-        centres = np.array([[im.centre for im in row] for row in ims])        # n x L x 3
-        rays = centres - x[:, None, :]
-        rays /= np.maximum(np.linalg.norm(rays, axis=2, keepdims=True), 1e-15)
-        angle = np.arccos(np.clip(np.einsum("nli,nmi->nlm", rays, rays), -1.0, 1.0)).max(axis=(1, 2))
-        worst = np.argmax(np.where(np.isfinite(errors), errors, np.inf), axis=1)
-        again = []
-        for q, (root, obs, drops) in enumerate(group):
-            if not valid[q]:
-                self.points.pop(root, None)
-                self.failed_size[root] = len(self.members.get(root, obs))
-            elif errors[q, worst[q]] > self.max_error_px:
-                self.points.pop(root, None)
-                self.failed_size[root] = len(self.members.get(root, obs))
-                if length > 2:
-                    # The worst goes; after DROP_ONE_BY_ONE such rounds, every observation beyond
-                    # max_error_px at once, so that a long track is not triangulated once for
-                    # each of its bad observations.
-                    limit = errors[q, worst[q]] if drops < DROP_ONE_BY_ONE else self.max_error_px
-                    shorter = {int(img): obs[int(img)] for img, e in zip(ids[q], errors[q]) if not e >= limit}
-                    if len(shorter) >= 2:
-                        again.append((root, shorter, drops + 1))
-            elif angle[q] < self.min_angle:
-                self.points.pop(root, None)
-                self.failed_size[root] = len(self.members.get(root, obs))
-            else:
-                self.points[root] = (x[q], float(errors[q].mean()), dict(obs))
-                self.full_size[root] = len(obs)
+    def _triangulate(self, tracks):
+        """Points of the tracks [(root, {image id: keypoint})] by the package's one triangulation
+        (triangulation.py: the C++ of refine_model's re-triangulation), all in one call."""
+        rows = [(root, img, kp) for root, obs in tracks for img, kp in obs.items()]
+        self.observations_triangulated += len(rows)
+        ims = [self.images[img] for _, img, _ in rows]
+        points, ok, mean_error, inlier = triangulation.triangulate_tracks(
+            [len(obs) for _, obs in tracks], np.array([im.r for im in ims]), np.array([im.t for im in ims]),
+            np.array([(im.k[0, 0], im.k[1, 1], im.k[0, 2], im.k[1, 2]) for im in ims]),
+            np.array([im.keypoints[kp] for im, (_, _, kp) in zip(ims, rows)]),
+            self.max_error_px, self.min_angle_deg, triangulation.DROP_ONE_BY_ONE)
+        at = 0
+        for q, (root, obs) in enumerate(tracks):
+            kept = {img: kp for (img, kp), good in zip(obs.items(), inlier[at:at + len(obs)]) if good}
+            at += len(obs)
+            if ok[q]:
+                self.points[root] = (points[q], float(mean_error[q]), kept)
+                self.full_size[root] = len(kept)
                 self.failed_size.pop(root, None)
-        return again
+            else:
+                self.points.pop(root, None)
+                self.failed_size[root] = len(self.members.get(root, obs))
+        if self.changed is not None:
+            self.changed.update(root for root, _ in tracks)  # made, moved or removed
 
     # -- the COLMAP model --------------------------------------------------------------------
     def to_model(self, image_ids=None):

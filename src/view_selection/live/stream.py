@@ -8,7 +8,7 @@ anything with the fields of view_selection/PairChanges works (tests pass plain o
 """
 import time
 
-from ..keyframes import Keyframe
+from ..keyframes import Keyframe, pair_of
 
 
 class PairStream:
@@ -19,6 +19,10 @@ class PairStream:
         self.clock = clock
         self.keyframes = {}
         self.announced = set()
+        # The announced pairs as image names (pair_of: sorted within), kept as messages come, so
+        # that a batch does not convert the whole set again (issue 34); pairs whose keyframes are
+        # not known yet wait in _unnamed (ids).
+        self._named, self._unnamed = set(), set()
         self.sequence = 0
         self.need_sync = True          # until the first ~get_pairs
         self.messages = 0              # applied
@@ -30,17 +34,33 @@ class PairStream:
         """Applies one message (in sequence, or `full`)."""
         if msg.full:
             self.announced = set()
+            self._named, self._unnamed = set(), set()
             if msg.total_keyframes < len(self.keyframes):
                 self.keyframes = {}  # a new session: fewer keyframes than we hold
+        new = []
         for k in msg.keyframes:
             kf = Keyframe.from_msg(k)
             if kf.id not in self.keyframes:
                 self.last_keyframe_time = self.clock()
+                new.append(kf.id)
             self.keyframes[kf.id] = kf
+        if new and self._unnamed:
+            for pair in [p for p in self._unnamed if p[0] in self.keyframes and p[1] in self.keyframes]:
+                self._unnamed.discard(pair)
+                self._named.add(self._name_of(pair))
         for p in msg.removed:
-            self.announced.discard((p.first, p.second))
+            pair = (p.first, p.second)
+            self.announced.discard(pair)
+            self._unnamed.discard(pair)
+            if p.first in self.keyframes and p.second in self.keyframes:
+                self._named.discard(self._name_of(pair))
         for p in msg.added:
-            self.announced.add((p.first, p.second))
+            pair = (p.first, p.second)
+            self.announced.add(pair)
+            if p.first in self.keyframes and p.second in self.keyframes:
+                self._named.add(self._name_of(pair))
+            else:
+                self._unnamed.add(pair)
         self.sequence = msg.sequence
         self.messages += 1
         self.pending_pairs = msg.pending_pairs
@@ -72,7 +92,10 @@ class PairStream:
     def ordered_keyframes(self):
         return sorted(self.keyframes.values(), key=lambda k: k.id)
 
+    def _name_of(self, pair):
+        return pair_of(self.keyframes[pair[0]].name, self.keyframes[pair[1]].name)
+
     def announced_names(self):
-        """The announced pairs whose keyframes we know, as image names."""
-        names = {k.id: k.name for k in self.keyframes.values()}
-        return [(names[a], names[b]) for a, b in self.announced if a in names and b in names]
+        """The announced pairs whose keyframes we know, as image names (sorted within), a set of
+        its own (the caller may keep it outside the lock)."""
+        return set(self._named)

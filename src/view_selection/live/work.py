@@ -6,9 +6,16 @@ afterwards, so a batch that fails names its culprit.
 """
 import time
 
+from ..colmap import durable
 from ..colmap.project import ColmapProject, ProjectError
 from ..keyframes import continuity_pairs, pair_of
 from .attempts import Attempts
+
+
+# Pairs a run of the finish's matching takes (match_all): large enough that COLMAP's fallback
+# matcher starts seldom, small enough that a run that fails is halved over few pairs and that
+# progress is reported as it goes.
+FINISH_BATCH_PAIRS = 256
 
 
 class LiveWork:
@@ -36,7 +43,10 @@ class LiveWork:
         self.log = log or (lambda level, text: None)
         self.model = LiveModel() if triangulation == "live" else None
         self.fed_poses = {}        # name -> the pose the model has for it
+        self.unfed_pairs = []      # verified pairs (image ids) the live model does not have yet
+        self.fed_keyframes = {}    # name -> the Keyframe object last fed with its keypoints
         self.backlog_max = 0
+        self.backlog_before = 0
         self.status = {}  # the last batch's figures: keyframes, images extracted and waiting, pairs
         self.deferred = 0  # pairs beyond ~max_backlog at some point, left for the finish
         self.errors = []   # the last few, for the report
@@ -47,35 +57,88 @@ class LiveWork:
         del self.errors[:-20]
 
     # -- running COLMAP on a batch, with the culprit found --------------------------------------
-    def _attempt(self, items, run, done, attempts, kind, ledger_kind, budget=None):
+    # A run of several items that timed out names no culprit and charges nobody: its items are
+    # suspected and each is tried alone. Two runs alone in a row that time out say COLMAP hangs
+    # on everything now: the rest stay suspected, uncharged, for the next batch (so one call
+    # costs at most the batch's timeout and two single-item timeouts); so do four failures in a
+    # row of any kind (COLMAP failing on everything: a run each would cost n runs, not log n).
+    ALONE_TIMEOUTS_IN_A_ROW = 2
+    ALONE_FAILURES_IN_A_ROW = 4
+
+    def _attempt(self, items, run, done, attempts, kind, ledger_kind):
         """Runs `run(items)`; the items `done()` does not list afterwards failed; returns them.
 
-        When the run itself failed (COLMAP exited non-zero) with several items, each half is
-        tried on its own, so one bad item costs its neighbours nothing (about 2 log2 n runs). The
-        halving has a budget of runs (2 log2 n + 2): when COLMAP fails on everything, the rest are
-        recorded as failed without running. A run that timed out is not halved: a hung COLMAP
-        would cost a timeout per half."""
-        if budget is None:
-            budget = [2 * max(1, len(items) - 1).bit_length() + 2]
-        error, timed_out = None, False
+        Items suspected before (a failure, or a run that hung) are each tried alone; the others
+        in one run. When that run fails (COLMAP exited non-zero) with several items, each half
+        is tried on its own, so one bad item costs its neighbours nothing (about 2 log2 n runs;
+        the halving has a budget of 2 log2 n + 2 runs: when COLMAP fails on everything, the rest
+        are charged without running). When a run of several times out, it is not halved (a
+        hung COLMAP would cost a timeout per half): its items are suspected, not charged, and
+        each is tried alone, so an item that hangs COLMAP every time is the only one charged
+        (issue 35: it took up to 23 neighbours with it)."""
+        alone = [i for i in items if attempts.suspect(i)]
+        batch = [i for i in items if not attempts.suspect(i)]
+        failed = []
+        if batch:
+            budget = [2 * max(1, len(batch) - 1).bit_length() + 2]
+            failed += self._halving(batch, run, done, attempts, kind, ledger_kind, budget, alone)
+        timeouts, failures = 0, 0  # in a row
+        for n, i in enumerate(alone):
+            if (self.project.cancelled or timeouts >= self.ALONE_TIMEOUTS_IN_A_ROW
+                    or failures >= self.ALONE_FAILURES_IN_A_ROW):
+                failed += alone[n:]  # not tried now (a suspect from a hang stays uncharged)
+                break
+            f, error, timed_out = self._run([i], run, done, attempts)
+            timeouts = timeouts + 1 if timed_out else 0
+            failures = failures + 1 if f else 0
+            self._charge(f, error, attempts, kind, ledger_kind)
+            failed += f
+        return failed
+
+    def _halving(self, items, run, done, attempts, kind, ledger_kind, budget, hung):
+        """_attempt's batch: run, halved where it fails; the items of a run of several that timed
+        out are suspected and go to `hung` (tried alone by the caller); returns the items
+        charged."""
         if budget[0] <= 0:
-            error = "not tried: COLMAP failed on the whole batch"
+            failed, error, timed_out = list(items), "not tried: COLMAP failed on the whole batch", False
         else:
             budget[0] -= 1
-            try:
-                run(items)
-            except ProjectError as e:
-                error, timed_out = str(e), getattr(e, "timed_out", False)
-                self.error(error)
+            failed, error, timed_out = self._run(items, run, done, attempts)
+        if timed_out and len(failed) > 1 and not self.project.cancelled:
+            for i in failed:
+                attempts.suspected(i)
+            hung += failed
+            return []
+        if error is not None and len(failed) > 1 and budget[0] > 0 and not self.project.cancelled:
+            half = len(failed) // 2
+            return (self._halving(failed[:half], run, done, attempts, kind, ledger_kind, budget, hung) +
+                    self._halving(failed[half:], run, done, attempts, kind, ledger_kind, budget, hung))
+        self._charge(failed, error, attempts, kind, ledger_kind)
+        return failed
+
+    def _run(self, items, run, done, attempts):
+        """One run of `run(items)`: (the items done() does not list afterwards, the error or None,
+        whether it timed out). What is done is forgiven."""
+        error, timed_out = None, False
+        try:
+            run(items)
+        except ProjectError as e:
+            if getattr(e, "out_of_time", False):
+                raise  # the finish's budget is spent: no item's fault, and nothing more is tried
+            error, timed_out = str(e), getattr(e, "timed_out", False)
+            self.error(error)
         now = done()
         for i in items:
             if i in now:
                 attempts.succeeded(i)
-        failed = [i for i in items if i not in now]
-        if error is not None and len(failed) > 1 and not timed_out and budget[0] > 0 and not self.project.cancelled:
-            half = len(failed) // 2
-            return (self._attempt(failed[:half], run, done, attempts, kind, ledger_kind, budget) +
-                    self._attempt(failed[half:], run, done, attempts, kind, ledger_kind, budget))
+        return [i for i in items if i not in now], error, timed_out
+
+    def _charge(self, failed, error, attempts, kind, ledger_kind):
+        """A failure for each item (its own reason where the backend knows it); an item that
+        reaches ~max_attempts is given up, ledgered and logged. A run the shutdown cancelled
+        charges nobody."""
+        if error is not None and self.project.cancelled:
+            return
         default = error or ("no features were extracted (an image that cannot be read?)" if kind == "image"
                             else "no two-view geometry was written for it")
         errors = getattr(self.backend, "errors", None) or {}
@@ -85,7 +148,6 @@ class LiveWork:
                 label = i if isinstance(i, str) else "%s %s" % i
                 self.project.ledger(ledger_kind, [label])
                 self.error("%s %s skipped after %d attempts: %s" % (kind, label, attempts.failures[i], reason))
-        return failed
 
     # -- features ----------------------------------------------------------------------------
     def extract(self, keyframes):
@@ -99,38 +161,70 @@ class LiveWork:
             return 0
         by_name = {k.name: k for k in todo}
         self._attempt([k.name for k in todo], lambda names: self.backend.extract([by_name[n] for n in names]),
-                      self.backend.extracted, self.images, "image", "skipped-image")
+                      lambda: self.backend.extracted(refresh=list(by_name)), self.images, "image", "skipped-image")
         for warning in getattr(self.backend, "warnings", None) or []:
             self.log("warn", warning)
         return len(todo)
 
     # -- matches -----------------------------------------------------------------------------
     def wanted_pairs(self, keyframes, pairs):
-        """The announced pairs (names) plus, with continuity, each keyframe with the one before."""
-        wanted = {pair_of(a, b) for a, b in pairs}
+        """The announced pairs (names) plus, with continuity, each keyframe with the one before.
+        A set is taken as it is (its pairs sorted within, as PairStream.announced_names gives
+        them): a batch does not convert the whole session's pairs again."""
+        wanted = set(pairs) if isinstance(pairs, (set, frozenset)) else {pair_of(a, b) for a, b in pairs}
         if self.continuity:
             wanted |= set(continuity_pairs(keyframes))
         return wanted
 
     def match(self, keyframes, pairs, limit=None):
         """Matches at most `limit` (~max_batch_pairs) of the wanted pairs not matched yet whose
-        images have features and that are due; True when more are waiting."""
-        limit = self.max_batch_pairs if limit is None else limit
-        backlog = sorted(self.wanted_pairs(keyframes, pairs) - self.backend.matched())
+        images have features and that are due; True when more are waiting.
+
+        While the recording goes on, at most ~max_backlog of the waiting pairs are considered
+        (the oldest by name; the rest are counted in `deferred`); the finish (match_all) takes
+        every one of them: ~max_backlog bounds what a batch looks at, never what the model gets."""
+        return self._match(keyframes, pairs, self.max_batch_pairs if limit is None else limit, self.max_backlog)
+
+    def _match(self, keyframes, pairs, limit, max_backlog=None):
+        matched = self.backend.matched()
+        backlog = sorted(self.wanted_pairs(keyframes, pairs) - matched)
         have = self.backend.extracted()
         backlog = [p for p in backlog if p[0] in have and p[1] in have and not self.pairs.given_up(p)]
         self.backlog_max = max(self.backlog_max, len(backlog))
-        self.status.update(backlog_pairs=len(backlog), pairs_matched=len(self.backend.matched()))
-        if len(backlog) > self.max_backlog:
-            self.deferred = max(self.deferred, len(backlog) - self.max_backlog)
-            self.log("warn", "%d pairs wait (~max_backlog %d): the rest are matched at the finish"
-                     % (len(backlog), self.max_backlog))
-            backlog = backlog[:self.max_backlog]
+        self.backlog_before = len(backlog)  # before this run
+        self.status.update(backlog_pairs=len(backlog), pairs_matched=len(matched))
+        if max_backlog is not None and len(backlog) > max_backlog:
+            self.deferred = max(self.deferred, len(backlog) - max_backlog)
+            self.log("warn", "more pairs wait than ~max_backlog (%d): the rest are matched at the finish "
+                     "(/diagnostics: backlog pairs)" % max_backlog)  # one text: throttled as one
+            backlog = backlog[:max_backlog]
         due = [p for p in backlog if self.pairs.due(p)]
         if not due:
             return False
-        self._attempt(due[:limit], self.backend.match, self.backend.matched, self.pairs, "pair", "skipped-pair")
+        batch = due[:limit]
+        failed = self._attempt(batch, self.backend.match, lambda: self.backend.matched(refresh=batch), self.pairs,
+                               "pair", "skipped-pair")
+        self.status.update(backlog_pairs=len(backlog) - len(batch) + len(failed),
+                           pairs_matched=len(matched) + len(batch) - len(failed))
         return len(due) > limit
+
+    def match_all(self, keyframes, pairs, batch=FINISH_BATCH_PAIRS, progress=None):
+        """Every wanted pair that is due and whose images have features, in runs of `batch` pairs
+        (each halved where it fails, as in a batch), until none is left: the finish's matching,
+        whatever ~max_backlog is. A pair that fails is not due again until its wait is over, so
+        this ends. progress(done, total): after each run. Returns how many runs were made."""
+        runs = 0
+        total = None
+        while not self.project.cancelled:
+            more = self._match(keyframes, pairs, batch)
+            if total is None:
+                total = self.backlog_before
+            runs += 1
+            if progress is not None:
+                progress(total - self.status.get("backlog_pairs", 0), total)
+            if not more:
+                break
+        return runs
 
     # -- the live model ----------------------------------------------------------------------
     def feed_model(self, keyframes, final=False):
@@ -140,26 +234,50 @@ class LiveWork:
         from .. import geometry
         from ..colmap.model import CAMERA_MODELS
         m = self.model
+        cat = self.project.catalogue()  # what the database holds, in memory: no table is read whole
+        ids, cams, cameras, with_features = cat.ids, cat.image_cameras, cat.cameras, cat.with_features
+        self.unfed_pairs.extend(cat.take_new_verified())
+        check = getattr(self.project, "check_deadline", lambda stage: None)
         with self.project.db() as d:
-            ids, cams, cameras = d.image_ids(), d.image_cameras(), d.cameras()
-            with_features = {ids[n] for n in d.images_with_features() if n in ids}
+            fed = self.fed_keyframes
             for k in keyframes:
+                if fed.get(k.name) is k:
+                    continue  # the same keyframe object as at its last update: nothing changed
+                check("triangulation")
                 iid = ids.get(k.name)
                 if iid is None:
                     continue
                 pose = (k.position, k.orientation)
                 known = m.images.get(iid)
                 if known is not None and self.fed_poses.get(k.name) == pose and (
-                        len(known.keypoints) or iid not in with_features):
+                        len(known.keypoints) or k.name not in with_features):
+                    if len(known.keypoints) or k.name in with_features:
+                        fed[k.name] = k
                     continue
                 q, t = geometry.world_to_camera(k.position, k.orientation)
                 mid, w, h, params = cameras[cams[iid]]
                 keypoints = d.keypoints(iid) if (known is None or not len(known.keypoints)) else known.keypoints
                 m.add_image(iid, k.name, cams[iid], (CAMERA_MODELS[mid][0], w, h, params), q, t, keypoints)
                 self.fed_poses[k.name] = pose
-            for (a, b), n in d.inlier_counts().items():
-                if n > 0 and (a, b) not in m.matched_pairs and a in m.images and b in m.images:
+                if len(m.images[iid].keypoints) or k.name in with_features:
+                    fed[k.name] = k  # complete: looked at again only when a new object comes (a new pose)
+            # The pairs that verified since the last update; one whose image the model does not
+            # have yet (its keyframe not announced, or no features) waits for it.
+            waiting = []
+            for n, (a, b) in enumerate(self.unfed_pairs):
+                if (a, b) in m.matched_pairs:
+                    continue
+                try:
+                    check("triangulation")
+                except ProjectError:
+                    self.unfed_pairs = waiting + self.unfed_pairs[n:]  # they wait for the next time
+                    raise
+                if a in m.images and b in m.images:
                     m.add_matches(a, b, d.matches(a, b, "two_view_geometries"))
+                else:
+                    waiting.append((a, b))
+            self.unfed_pairs = waiting
+        check("triangulation")
         changed = m.update(final=final)
         self.status.update(points=len(m.points), tracks=len(m.members))
         return changed
@@ -170,9 +288,41 @@ class LiveWork:
         return {"images": images, "pairs": [dict(s, item="%s %s" % s["item"]) for s in pairs]}
 
     # -- the model ---------------------------------------------------------------------------
-    def build_model(self, keyframes, final_pairs, model="known_poses", seed=0):
+    def lost_pairs(self, wanted, matched, extracted, missing, stopped=None):
+        """[{'pair': 'a b', 'reason'}] of the wanted pairs that were not matched at all (a pair
+        matched and found not to verify is not lost: COLMAP's verification said no), each with
+        why: an image missing or without features, the pair given up after its attempts, or not
+        tried (the work was cancelled or ran out of time)."""
+        missing = set(missing)
+        out = []
+        for pair in sorted(set(wanted) - set(matched)):
+            reason = None
+            for name in pair:
+                if name in missing:
+                    reason = "the image %s never arrived" % name
+                elif name not in extracted:
+                    error = self.images.errors.get(name)
+                    reason = "the image %s has no features%s" % (name, ": " + error if error else "")
+                if reason:
+                    break
+            if reason is None:
+                error = self.pairs.errors.get(pair)
+                if error is not None:
+                    reason = "failed %d time(s): %s" % (self.pairs.failures.get(pair, 0), error)
+                elif stopped:
+                    reason = "not tried: %s" % stopped
+                elif self.project.cancelled:
+                    reason = "not tried: the work was cancelled"
+                else:
+                    reason = "not tried"
+            out.append({"pair": "%s %s" % pair, "reason": reason})
+        return out
+
+    def build_model(self, keyframes, final_pairs, model="known_poses", seed=0, progress=None):
         """What is left of `final_pairs` (names) extracted and matched, then the model; returns
         the report's model part. The bridge's finish and colmap_from_selection share it.
+        Every wanted pair is matched (match_all); one that is not in the model is listed in
+        pairs_lost with its reason. progress(stage, done, total): as the matching goes.
         Items given up are left out and listed; a keyframe without features or image is not in
         the model, and the report says which."""
         import os
@@ -182,9 +332,8 @@ class LiveWork:
         project = self.project
         final = sorted({pair_of(*p) for p in final_pairs})
         extra = sorted(set(continuity_pairs(keyframes)) - set(final)) if self.continuity else []
-        with open(os.path.join(project.root, "pairs.txt.tmp"), "w") as f:  # COLMAP's match list
-            f.write("".join("%s %s\n" % p for p in final))
-        os.replace(os.path.join(project.root, "pairs.txt.tmp"), os.path.join(project.root, "pairs.txt"))
+        durable.write_atomically(os.path.join(project.root, "pairs.txt"),  # COLMAP's match list
+                                 "".join("%s %s\n" % p for p in final))
         # Everything due now, in one run each (halved where a run fails): the finish does not
         # wait for backoffs, and what fails now is reported as skipped.
         for attempts in (self.images, self.pairs):
@@ -192,21 +341,36 @@ class LiveWork:
         import time
         phases, t0 = {}, time.monotonic()
         made = None  # the live model written, when it is
-        self.extract(keyframes)
-        phases["extraction"], t0 = time.monotonic() - t0, time.monotonic()
-        self.match(keyframes, final, limit=len(final) + len(extra) + 1)
+        # Out of time (the shutdown's budget, project.deadline): what is done so far is the
+        # model, written as it stands, unrefined, and report.json says so (complete: false).
+        incomplete = None
+        try:
+            self.extract(keyframes)
+            phases["extraction"], t0 = time.monotonic() - t0, time.monotonic()
+            self.match_all(keyframes, final, progress=(lambda done, total: progress("matching", done, total))
+                           if progress else None)
+        except ProjectError as e:
+            if not e.out_of_time:
+                raise
+            incomplete = str(e)
         phases["matching"], t0 = time.monotonic() - t0, time.monotonic()
         missing = [k.name for k in keyframes if not project.has_image(k.name)]
         extracted = project.extracted()
-        matched = project.matched()
+        matched = set(project.matched())
         with project.db() as d:
             featureless = sorted(d.images_without_keypoints())
         wanted = set(final) | set(extra)
+        lost = self.lost_pairs(wanted, matched, extracted, missing, stopped=incomplete)
+        if lost:
+            self.error("%d of %d wanted pairs are not in the model (report.json: pairs_lost), e.g. %s: %s"
+                       % (len(lost), len(wanted), lost[0]["pair"], lost[0]["reason"]))
         out = {"keyframes": len(keyframes), "images_missing": missing,
                "images_without_features": [k.name for k in keyframes if k.name not in extracted and k.name not in missing],
                "images_with_no_features": featureless,
                "final_pairs": len(final), "continuity_pairs": len(extra), "pairs_matched": len(matched),
                "final_pairs_matched": len(set(final) & matched), "pairs_wasted": len(matched - wanted),
+               "pairs_wanted": len(wanted), "pairs_lost": lost,
+               "pairs_not_verified": sum(1 for p, n in project.inlier_counts().items() if p in wanted and n == 0),
                "pairs_verified": project.verified_count(), "model": model, "skipped": self.skipped(all_failed=True)}
         if model == "mapper":
             path = project.mapper_model(seed)
@@ -223,8 +387,14 @@ class LiveWork:
                                    "(the node keeps earlier keyframes' images only with ~save_keyframe_images)"
                                    % (len(have), len(keyframes), project.images))
             if self.model is not None:
-                with self.clock.measure("triangulation", 1):
-                    out["tracks_triangulated_at_finish"] = self.feed_model(keyframes, final=True)
+                if incomplete is None:
+                    try:
+                        with self.clock.measure("triangulation", 1):
+                            out["tracks_triangulated_at_finish"] = self.feed_model(keyframes, final=True)
+                    except ProjectError as e:
+                        if not e.out_of_time:
+                            raise
+                        incomplete = str(e)
                 phases["triangulation"], t0 = time.monotonic() - t0, time.monotonic()
                 with project.db() as d:
                     ids = d.image_ids()
@@ -247,7 +417,12 @@ class LiveWork:
                     out["model_error"] = "%s: the model holds the keyframes' poses and no points" % e
                     self.error(out["model_error"])
                     path = project.poses_only_model(have)
-        if self.refinement is not None and model != "mapper" and "model_error" not in out:
+        out["complete"] = incomplete is None
+        if incomplete is not None:
+            out["incomplete"] = ("%s: the model is the live model as it stood (the keyframes and points it had), "
+                                 "not refined" % incomplete)
+            self.error(out["incomplete"])
+        elif self.refinement is not None and model != "mapper" and "model_error" not in out:
             out["refinement"] = self.refinement.apply(project, path)  # issue 29: sparse/0 refined
             made = None  # the statistics are the refined model's, read from sparse/0
             phases["refinement"], t0 = time.monotonic() - t0, time.monotonic()

@@ -55,7 +55,9 @@ class StageClock:
 
 
 class PoseGuidedBackend:
-    def __init__(self, project, extractor=None, options=None, cache_images=64):
+    def __init__(self, project, extractor=None, options=None, cache_images=64, progress=None):
+        """progress: called as progress(stage, done, total, unit) while images are extracted
+        and pairs matched (view_selection.progress.Progress.report), or None."""
         self.project = project
         self.extractor = extractor or SiftExtractor()
         self.options = options or guided.GuidedOptions()
@@ -65,7 +67,9 @@ class PoseGuidedBackend:
         self.errors = {}              # item -> why it failed in the last run
         self.warnings = []            # what the last run did that a user should know
         self.paths = {}               # pair -> PairResult.summary()
+        self._path_totals = collections.Counter()  # path -> pairs: the diagnostics' figures, kept as they change
         self.clock = StageClock()
+        self.progress = progress or (lambda stage, done, total, unit: None)
 
     # -- what the project has ----------------------------------------------------------------
     def register(self, keyframes):
@@ -73,11 +77,11 @@ class PoseGuidedBackend:
             self.keyframes[k.name] = k
         self.project.register(keyframes)
 
-    def extracted(self):
-        return self.project.extracted()
+    def extracted(self, refresh=()):
+        return self.project.extracted(refresh)
 
-    def matched(self):
-        return self.project.matched()
+    def matched(self, refresh=()):
+        return self.project.matched(refresh)
 
     def has_image(self, name):
         return self.project.has_image(name)
@@ -89,10 +93,17 @@ class PoseGuidedBackend:
         self.register(keyframes)
         self.errors, self.warnings = {}, []
         made = {}
+        stop = None  # out of time: what was made is written, then it is raised
         with self.clock.measure("extraction", len(keyframes)):
-            for k in keyframes:
+            for q, k in enumerate(keyframes):
+                self.progress("extracting features", q, len(keyframes), "images")
                 if self.project.cancelled:
                     raise ProjectError("extraction cancelled")
+                try:
+                    self.project.check_deadline("extraction")
+                except ProjectError as e:
+                    stop = e
+                    break
                 try:
                     made[k.name] = self.extractor.extract_file(os.path.join(self.project.images, k.name))
                 except (ValueError, OSError) as e:
@@ -101,13 +112,17 @@ class PoseGuidedBackend:
                 if not len(made[k.name]):
                     self.warnings.append("no features in %s (a blank image?): it stays in the model without points"
                                          % k.name)
+            ids = self.project.catalogue().ids
             with self.project.db() as d:
-                ids = d.image_ids()
                 for name, features in made.items():
                     d.write_features(ids[name], *features.to_colmap())
+            self.project.catalogue().features_written(made)  # after the commit
+        self.progress("extracting features", len(keyframes), len(keyframes), "images")
         for name, features in made.items():
             self._remember(name, features)
         self.project.ledger("extracted", list(made))
+        if stop is not None:
+            raise stop
         return len(keyframes)
 
     def _remember(self, name, features):
@@ -120,7 +135,7 @@ class PoseGuidedBackend:
         if name in self.cache:
             self.cache.move_to_end(name)
             return self.cache[name]
-        iid = database.image_ids()[name]
+        iid = self.project.catalogue().ids[name]
         f = Features.from_colmap(database.keypoints(iid), database.descriptors(iid))
         self._remember(name, f)
         return f
@@ -132,31 +147,59 @@ class PoseGuidedBackend:
         geometry (verified, or empty) in the database."""
         pairs = [pair_of(*p) for p in pairs]
         self.errors = {}
-        fallback = []
+        fallback, written = [], []
+        stop = None  # out of time: the pairs matched so far are committed, then it is raised
         with self.clock.measure("guided_matching", len(pairs)):
+            ids = self.project.catalogue().ids
             with self.project.db() as d:
-                ids = d.image_ids()
-                for a, b in pairs:
+                for q, (a, b) in enumerate(pairs):
+                    self.progress("matching", q, len(pairs), "pairs")
                     if self.project.cancelled:
                         raise ProjectError("matching cancelled")
+                    try:
+                        self.project.check_deadline("matching")
+                    except ProjectError as e:
+                        stop = e
+                        break
                     ka, kb = self.keyframes.get(a), self.keyframes.get(b)
                     if ka is None or kb is None:
                         self.errors[(a, b)] = "no pose for %s" % (a if ka is None else b)
                         continue
                     result = guided.match_pair(self.features(a, d), self.features(b, d), ka, kb, self.options)
-                    self.paths[(a, b)] = result.summary()
+                    self._count_path((a, b), result.summary())
                     if result.path == guided.FALLBACK:
                         fallback.append((a, b))
                         continue
                     d.write_matches(ids[a], ids[b], result.matches)
-                    d.write_two_view_geometry(ids[a], ids[b], result.inliers, db.CALIBRATED, F=result.F, E=result.E,
-                                              qvec=_quaternion(result.R), tvec=result.t)
-        done = [p for p in pairs if p not in fallback and p not in self.errors]
-        self.project.ledger("matched", ["%s %s" % p for p in done])
+                    g = result.geometry  # estimated from the matches, in the database's pixel convention
+                    d.write_two_view_geometry(ids[a], ids[b], g.inliers, db.CALIBRATED, F=g.F, E=g.E,
+                                              qvec=_quaternion(g.R), tvec=g.t)
+                    written.append(((a, b), len(g.inliers)))
+            for pair, rows in written:  # after the commit: the catalogue holds what the database does
+                self.project.catalogue().geometry_written(pair, rows)
+        self.progress("matching", len(pairs), len(pairs), "pairs")
+        self.project.ledger("matched", ["%s %s" % p for p, _ in written])
+        if stop is not None:
+            raise stop
         if fallback:
             with self.clock.measure("fallback_matching", len(fallback)):
+                self.progress("matching by COLMAP's matcher", 0, len(fallback), "pairs")  # one run: no count between
                 self.project.match(fallback)  # COLMAP's own; it writes the ledger
+                self.progress("matching by COLMAP's matcher", len(fallback), len(fallback), "pairs")
         return len(pairs)
+
+    def _count_path(self, pair, summary):
+        old = self.paths.get(pair)
+        if old is not None:
+            self._path_totals[old["path"]] -= 1
+        self.paths[pair] = summary
+        self._path_totals[summary["path"]] += 1
+
+    def path_totals(self):
+        """{'guided': n, 'fallback': n} of the pairs matched so far, without looking at each pair
+        (the diagnostics ask once a second; path_counts() formats every pair)."""
+        totals = dict(self._path_totals)
+        return {"guided": totals.get(guided.GUIDED, 0), "fallback": totals.get(guided.FALLBACK, 0)}
 
     def path_counts(self):
         """Which path the pairs matched so far took: {'guided': n, 'fallback': n}, the fallbacks'

@@ -18,8 +18,10 @@ epipolar line F x_a.
      the mutual check; the ratio test's second best is looked for in the whole window (a feature
      with a look-alike along its epipolar line is ambiguous: measured, this gives both more
      points and a lower reprojection error than a second best from the band alone, docs/live.md).
-     The matches whose point lies in front of both cameras are the inliers (at least COLMAP's
-     min_num_inliers, 15, or the pair falls back).
+  4. Verify as COLMAP does (two_view.py): the geometry the matches give, estimated with COLMAP's
+     threshold (4 px), and the matches within it and in front of both cameras are the inliers (at
+     least COLMAP's min_num_inliers, 15, or the pair falls back). The band may be wider than 4 px
+     where the poses drift; what COLMAP reads as verified may not.
 
 Descriptor distances are angles between unit RootSIFT descriptors, as COLMAP's matcher measures
 them. The search is a dense product of the two descriptor matrices with the band as a mask: for
@@ -28,10 +30,10 @@ them. The search is a dense product of the two descriptor matrices with the band
 
 import math
 
-import cv2
 import numpy as np
 
 from .. import geometry
+from . import two_view
 
 GUIDED, FALLBACK = "guided", "fallback"
 
@@ -46,17 +48,19 @@ class GuidedOptions:
 
 
 class PairResult:
-    """path: 'guided' (inliers verified here) or 'fallback' (why: the poses cannot be trusted).
-    matches: the putative matches of step 3 (M x 2 indices into a's and b's features);
-    inliers: the verified ones; E, F (b's against a's), R, t (x_b = R x_a + t, |t| = 1): the
-    poses' geometry; band_px: the band used; searched: the matches of step 1."""
+    """path: 'guided' (inliers verified here) or 'fallback' (why: the poses cannot be trusted, or
+    the matches do not verify). matches: the putative matches of step 3 (M x 2 indices into a's
+    and b's features); inliers: the verified ones; geometry: what they verify against
+    (two_view.TwoViewGeometry: E, F in COLMAP's pixel convention, R, t), the one the database
+    gets; pose_F: the poses' fundamental matrix in the features' (OpenCV's) pixel convention, the
+    band's reference; band_px: the band used; searched: the matches of step 1."""
 
-    def __init__(self, path, why="", matches=None, inliers=None, E=None, F=None, R=None, t=None, band_px=None,
-                 searched=0):
+    def __init__(self, path, why="", matches=None, geometry=None, pose_F=None, band_px=None, searched=0):
         self.path, self.why = path, why
         self.matches = np.zeros((0, 2), np.int64) if matches is None else matches
-        self.inliers = np.zeros((0, 2), np.int64) if inliers is None else inliers
-        self.E, self.F, self.R, self.t = E, F, R, t
+        self.geometry = geometry
+        self.inliers = np.zeros((0, 2), np.int64) if geometry is None else geometry.inliers
+        self.pose_F = pose_F
         self.band_px, self.searched = band_px, searched
 
     def summary(self):
@@ -133,10 +137,6 @@ def mutual_ratio_matches(similarity, ratio, max_distance, competitors=None):
     return np.stack([i[keep], j[keep]], axis=1).astype(np.int64)
 
 
-def normalised(points, k):
-    return cv2.undistortPoints(np.ascontiguousarray(points, np.float64).reshape(-1, 1, 2), k, None).reshape(-1, 2)
-
-
 def match_pair(fa, fb, ka, kb, options=None):
     """Pose-guided matching of features fa, fb (features.sift.Features) of keyframes ka, kb."""
     o = options or GuidedOptions()
@@ -170,26 +170,11 @@ def match_pair(fa, fb, ka, kb, options=None):
     similarity[distances > window] = -1.0
     in_band = np.where(distances <= band, similarity, np.float32(-1.0))
     matches = mutual_ratio_matches(in_band, o.ratio, o.max_distance, competitors=similarity)
-    inliers = in_front_of_both(matches, fa, fb, kma, kmb, r, t_unit)
-    if len(inliers) < o.min_inliers:
-        return PairResult(FALLBACK, "%d inliers within %.1f px" % (len(inliers), band), matches=matches,
+    # 4. verified as COLMAP verifies: within its threshold of the geometry the matches give
+    verified = two_view.estimate(matches, fa, fb, ka, kb)
+    count = 0 if verified is None else len(verified.inliers)
+    if count < o.min_inliers:
+        return PairResult(FALLBACK, "%d inliers of %d matches within %.1f px (within %.0f px of the geometry they give)"
+                          % (count, len(matches), band, two_view.COLMAP_MAX_ERROR_PX), matches=matches, pose_F=f,
                           band_px=band, searched=len(searched))
-    return PairResult(GUIDED, matches=matches, inliers=inliers, E=e, F=f, R=r, t=t_unit, band_px=band,
-                      searched=len(searched))
-
-
-def in_front_of_both(matches, fa, fb, kma, kmb, r, t):
-    """The matches whose triangulated point lies in front of both cameras (x_b = R x_a + t)."""
-    if len(matches) == 0:
-        return matches
-    na, nb = normalised(fa.xy[matches[:, 0]], kma), normalised(fb.xy[matches[:, 1]], kmb)
-    pa = np.hstack([np.eye(3), np.zeros((3, 1))])
-    pb = np.hstack([r, t.reshape(3, 1)])
-    x = cv2.triangulatePoints(pa, pb, na.T, nb.T)
-    w = x[3]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        pts = (x[:3] / w).T
-    za = pts[:, 2]
-    zb = (pts @ r.T + t)[:, 2]
-    ok = np.isfinite(za) & (za > 0) & np.isfinite(zb) & (zb > 0)
-    return matches[ok]
+    return PairResult(GUIDED, matches=matches, geometry=verified, pose_F=f, band_px=band, searched=len(searched))

@@ -97,10 +97,13 @@ def find_refine_tool(explicit=None):
 
 
 def run_refine_model(tool, model, output, report, options, fixed=(), reference=None, log_path=None, timeout=None,
-                     matches=None):
+                     matches=None, progress=None):
     """One refine_model process; returns its report (dict). RefinementError when it cannot run,
-    fails or exceeds the timeout (then it is killed)."""
+    fails or exceeds the timeout (then it is killed). progress: called with each of its progress
+    lines as it prints them (a line a second; None: they go to the log at the end, one every 10 s)."""
     args = [tool, "--input", model, "--output", output, "--report", report, "--quiet"] + options.arguments()
+    if progress:
+        args += ["--progress-interval", "1"]
     if reference:
         args += ["--reference", reference]
     if matches:
@@ -123,7 +126,10 @@ def run_refine_model(tool, model, output, report, options, fixed=(), reference=N
         except OSError as e:
             raise RefinementError("cannot run %s: %s" % (tool, e.strerror or e))
         try:
-            _, err = proc.communicate(timeout=max(1.0, timeout))
+            if progress:
+                err = _relay(proc, progress, max(1.0, timeout))
+            else:
+                _, err = proc.communicate(timeout=max(1.0, timeout))
         except subprocess.TimeoutExpired:
             Colmap._kill(proc)
             raise RefinementError("refine_model did not finish within %.0f s and was killed" % timeout)
@@ -143,6 +149,23 @@ def run_refine_model(tool, model, output, report, options, fixed=(), reference=N
             return json.load(f)
     except (OSError, ValueError) as e:
         raise RefinementError("refine_model wrote no readable report (%s)" % e)
+
+
+def _relay(proc, progress, timeout):
+    """Waits for `proc` as communicate() does, handing each line of its stderr to `progress` as it
+    comes; returns the whole stderr. subprocess.TimeoutExpired after `timeout` seconds."""
+    import threading
+    lines = []
+
+    def read():
+        for line in proc.stderr:
+            lines.append(line)
+            progress(line.rstrip("\n"))
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    proc.wait(timeout=timeout)
+    reader.join(timeout=5.0)  # the pipe ends with the process
+    return "".join(lines)
 
 
 def poses_only(model):
@@ -188,12 +211,13 @@ def write_matches(database_path, path):
 
 
 def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, log_path=None, deadline=None,
-           log=None):
+           log=None, progress=None):
     """Refines the model in `model_dir` into `output` (replaced only at the end; on any error
     `output` is untouched and RefinementError says why). `fixed`: image names that must not
     move. `database`: the project's database, whose verified matches the points are
     triangulated anew from (None: the model's own points only). `deadline`: time.monotonic()
-    by which it must be done. Returns the report's `refinement` section (dict)."""
+    by which it must be done. `progress`: called with each of refine_model's progress lines.
+    Returns the report's `refinement` section (dict)."""
     options = options or RefinementOptions()
     log = log or (lambda text: None)
     tool = find_refine_tool(tool)
@@ -215,7 +239,7 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
         import resource
         children = resource.getrusage(resource.RUSAGE_CHILDREN)
         report = run_refine_model(tool, os.path.abspath(model_dir), made, made + ".json", options, fixed,
-                                  log_path=log_path, timeout=timeout, matches=matches)
+                                  log_path=log_path, timeout=timeout, matches=matches, progress=progress)
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu = (after.ru_utime + after.ru_stime) - (children.ru_utime + children.ru_stime)
         log("refinement: %s" % report["message"])
@@ -258,10 +282,12 @@ class ModelRefinement:
     matches), and give the report's `refinement` section. Whatever fails, the unrefined model
     stays in DIR/sparse/0 and the section says why."""
 
-    def __init__(self, options=None, tool=None, log=None):
+    def __init__(self, options=None, tool=None, log=None, progress=None):
+        """progress: called with each of refine_model's progress lines (a line a second), or None."""
         self.options = options or RefinementOptions()
         self.tool = tool
         self.log = log or (lambda level, text: None)
+        self.progress = progress
 
     def apply(self, project, model_path):
         from ..colmap.database import DatabaseError
@@ -274,7 +300,7 @@ class ModelRefinement:
             shutil.copytree(model_path, unrefined)
             section = refine(model_path, model_path, self.options, database=project.database, tool=self.tool,
                              log_path=project.log_path, deadline=project.deadline,
-                             log=lambda text: self.log("info", text))
+                             log=lambda text: self.log("info", text), progress=self.progress)
         except (RefinementError, ProjectError, DatabaseError, colmap_model.ModelError, OSError, KeyError,
                 ValueError) as e:
             message = "refinement failed, the unrefined model stays in %s: %s" % (model_path, e)

@@ -25,6 +25,11 @@ OUT/report.json.
 
   rosrun view_selection colmap_from_selection /tmp/my_selection
   rosrun view_selection colmap_from_selection /tmp/my_selection --out /tmp/my_model --threads 2
+
+Every selected pair is matched (and, with known_poses, each keyframe with the one before it). Exit
+status: 0 when the model has them all (a pair that COLMAP's verification refused counts: it was
+matched), 1 on an error, 3 when a wanted pair was never matched (an image missing or without
+features, a COLMAP run that kept failing): report.json's pairs_lost names each with its reason.
 """
 import argparse
 import os
@@ -39,6 +44,7 @@ from ..export_folder import ExportError, ExportFolder
 from ..live.work import LiveWork
 from ..refinement.refiner import ModelRefinement, RefinementOptions
 from ..matching.backend import PoseGuidedBackend
+from ..progress import Progress
 
 
 def log(msg):
@@ -96,6 +102,13 @@ def link_images(export, images, project):
 
 def main(argv=None):
     args = parse_args(sys.argv[1:] if argv is None else argv)
+    # Long work says how far it is on stderr: extraction and matching by their counts, the
+    # refinement by refine_model's own lines (docstring of view_selection.progress).
+    progress = Progress()
+
+    def say(level, text):
+        progress.clear()
+        log(text)
     try:
         export = ExportFolder(args.export)
         if len(export.keyframes) < 2:
@@ -113,22 +126,24 @@ def main(argv=None):
             cv2.setNumThreads(args.threads)
         known = args.model == "known_poses"
         matcher = args.matcher or ("guided" if known else "colmap")
-        backend = PoseGuidedBackend(project) if matcher == "guided" else None
+        backend = PoseGuidedBackend(project, progress=progress.report) if matcher == "guided" else None
         refinement = None
         if known and args.refine == "on":
             refinement = ModelRefinement(RefinementOptions(retriangulations=args.refine_retriangulations,
                                                            max_seconds=args.refine_max_seconds,
                                                            timeout=3600.0,  # offline: a large model may take long
                                                            threads=args.threads),
-                                         tool=args.refine_tool, log=lambda level, text: log(text))
-        work = LiveWork(project, continuity=known and not args.no_continuity, max_batch_pairs=len(export.pairs) + 1,
-                        log=lambda level, text: log(text), backend=backend,
+                                         tool=args.refine_tool, log=say,
+                                         progress=lambda line: progress.note("refining: " + line))
+        work = LiveWork(project, continuity=known and not args.no_continuity,
+                        log=say, backend=backend,
                         triangulation=args.triangulation if known else "colmap", refinement=refinement)
         log("%s model of %d keyframes, %d pairs" % ("known-pose" if known else "mapper", len(export.keyframes),
                                                     len(export.pairs)))
         if not known:
             project.init_pair = export.initial_pair() if args.init_pair == "on" else None
         report = work.build_model(export.keyframes, export.pairs, args.model, seed=args.seed)
+        progress.end()
         report.update({"export": export.folder, "images": images, "seconds": project.seconds,
                        "init_pair": args.init_pair, "matcher": matcher})
         stages = work.clock.summary()
@@ -137,12 +152,21 @@ def main(argv=None):
             stages.update(backend.clock.summary())
         report["stages"] = stages
         write_json_atomically(os.path.join(out, "report.json"), report)
+        lost = report.get("pairs_lost", [])
         print("colmap_from_selection: %d of %d keyframes %s, %d points, reprojection error %.3f px in %s (%d of %d "
-              "pairs verified); %s" % (report.get("registered", 0), len(export.keyframes),
-                                       "at their poses" if known else "registered", report.get("points", 0),
-                                       report.get("reprojection_error", 0.0), report["model_path"],
-                                       report["pairs_verified"], len(export.pairs), os.path.join(out, "report.json")))
+              "pairs verified, %d not verified, %d lost); %s"
+              % (report.get("registered", 0), len(export.keyframes), "at their poses" if known else "registered",
+                 report.get("points", 0), report.get("reprojection_error", 0.0), report["model_path"],
+                 report["pairs_verified"], report.get("pairs_wanted", len(export.pairs)),
+                 report.get("pairs_not_verified", 0), len(lost), os.path.join(out, "report.json")))
+        if lost:
+            # A wanted pair that never got matched (not one that COLMAP's verification refused)
+            # is a model missing what was asked for: not a success.
+            print("colmap_from_selection: error: %d wanted pairs are not in the model, e.g. %s (%s); report.json "
+                  "lists them (pairs_lost)" % (len(lost), lost[0]["pair"], lost[0]["reason"]), file=sys.stderr)
+            return 3
         return 0
     except (ExportError, ProjectError, DatabaseError, sqlite3.Error, OSError) as e:
+        progress.clear()
         print("colmap_from_selection: error: %s" % e, file=sys.stderr)
         return 1

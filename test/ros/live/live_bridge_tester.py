@@ -4,7 +4,8 @@ played with rosbag play through view_selection_node at its shipped defaults, bes
 colmap_bridge processes running the real COLMAP 3.8:
 
   - bridge A is SIGKILLed once it has matched something, and started again on its project;
-  - bridge B runs uninterrupted on a project that shares A's images folder.
+  - bridge B runs uninterrupted on a project that shares A's images folder;
+  - bridge C too, with a ~max_backlog of 0, so that every pair waits for the finish.
 
 Two pair-stream consumers of the tester's own follow ~pairs: one drops every third message and
 catches up through ~get_pairs, one joins halfway. After the bag: both consumers hold exactly the
@@ -12,6 +13,12 @@ node's final pairs; each bridge's ~finish builds the known-pose model; A's datab
 (features, matches, verified pairs); nothing was extracted or matched twice (the ledger); every
 final pair is in the database; every keyframe is in the model at its node pose within 1e-6
 (sparse/unrefined), and in the refined model (sparse/0) within the refinement's precision.
+
+Bridge B's model on ROS (issue 36), watched from before the bag plays: the last ~points message
+is sparse/0's points (count and coordinates, float precision), coloured from the keyframe images
+at their keypoints, in the node's world frame; ~cameras has one frustum a keyframe at sparse/0's
+poses, which are the node's (the model's world is the node's); a subscriber that joins after the
+finish gets the same latched messages.
 """
 import json
 import math
@@ -25,11 +32,16 @@ import threading
 import time
 import unittest
 
+import cv2
 import numpy as np
 import rospy
 import rostest
+from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
+from visualization_msgs.msg import Marker, MarkerArray
 
+from view_selection import geometry
+from view_selection.colmap.model import read_model
 from view_selection.msg import PairChanges
 from view_selection.srv import ExportRequest, Export, GetPairs, GetPairsRequest, GetSelection
 
@@ -90,6 +102,35 @@ class Consumer:
     def current(self):
         with self.lock:
             return set(self.pairs)
+
+
+class ModelListener:
+    """The last ~points and ~cameras messages of a bridge, and how many came."""
+
+    def __init__(self, bridge):
+        self.lock = threading.Lock()
+        self.points, self.cameras, self.sizes = None, None, []
+        self.subs = [rospy.Subscriber(bridge + '/points', PointCloud2, self.on_points, queue_size=5),
+                     rospy.Subscriber(bridge + '/cameras', MarkerArray, self.on_cameras, queue_size=5)]
+
+    def on_points(self, m):
+        with self.lock:
+            self.points = m
+            self.sizes.append(m.width)
+
+    def on_cameras(self, m):
+        with self.lock:
+            self.cameras = m
+
+    def close(self):
+        for sub in self.subs:
+            sub.unregister()
+
+
+def cloud_rows(msg):
+    """x, y, z (float32 -> float64) and rgb (uint32) of a PointCloud2 as colmap_bridge packs it."""
+    rows = np.frombuffer(msg.data, np.dtype('<f4')).reshape(-1, 4)
+    return rows[:, :3].astype(np.float64), rows.view(np.dtype('<u4'))[:, 3]
 
 
 def database_content(path):
@@ -170,9 +211,11 @@ class LiveBridge(unittest.TestCase):
         run([find_tool('tum_to_bag'), '--dataset', source, '--out', cls.bag, '--quiet'], 600, 'tum_to_bag')
 
         cls.a, cls.b = os.path.join(cls.tmp, 'project_a'), os.path.join(cls.tmp, 'project_b')
-        os.makedirs(cls.b)
+        cls.c = os.path.join(cls.tmp, 'project_c')
         os.makedirs(os.path.join(cls.a, 'images'))
-        os.symlink(os.path.join(cls.a, 'images'), os.path.join(cls.b, 'images'))  # the node writes one folder
+        for other in (cls.b, cls.c):
+            os.makedirs(other)
+            os.symlink(os.path.join(cls.a, 'images'), os.path.join(other, 'images'))  # the node writes one folder
 
         # The node at its shipped defaults, poses from the bag's /camera/pose.
         cls.node = NodeProcess(NODE, {'pose_source': 'topic'}, remaps=TOPICS).start()
@@ -180,11 +223,17 @@ class LiveBridge(unittest.TestCase):
         cls.statistics = Statistics(NODE)
         cls.bridge_a = NodeProcess('/bridge_a', {'project': cls.a, 'node': NODE}, binary=bridge)
         cls.bridge_b = NodeProcess('/bridge_b', {'project': cls.b, 'node': NODE}, binary=bridge)
-        cls.bridge_a.start()
-        cls.bridge_b.start()
-        for b in (cls.bridge_a, cls.bridge_b):
+        # Not the default (2000): this short sequence never has that many pairs waiting, and the
+        # finish must match a backlog beyond ~max_backlog whole (issue 34). With 0 every pair
+        # waits for the finish.
+        cls.bridge_c = NodeProcess('/bridge_c', {'project': cls.c, 'node': NODE, 'max_backlog': 0}, binary=bridge)
+        cls.bridges = (cls.bridge_a, cls.bridge_b, cls.bridge_c)
+        for b in cls.bridges:
+            b.start()
+        for b in cls.bridges:
             cls.wait_service(b.name + '/finish', b)
         cls.dropping = Consumer(NODE, drop_every=3)
+        cls.model_b = ModelListener(cls.bridge_b.name)  # from the start: every message of the run
 
         player = subprocess.Popen(['rosbag', 'play', '-q', '-d', '1', cls.bag], stdout=subprocess.PIPE,
                                   stderr=subprocess.STDOUT, universal_newlines=True)
@@ -231,8 +280,42 @@ class LiveBridge(unittest.TestCase):
             cls.bridge_a.start()
             cls.wait_service(cls.bridge_a.name + '/finish', cls.bridge_a)
         cls.selection = call(NODE + '/get_selection', GetSelection, None, 30.0).selection
-        cls.finish_a = call(cls.bridge_a.name + '/finish', Trigger, None, 900.0)
-        cls.finish_b = call(cls.bridge_b.name + '/finish', Trigger, None, 900.0)
+        cls.finish_a = cls.finish(cls.bridge_a.name)
+        cls.finish_b = cls.finish(cls.bridge_b.name)
+        cls.finish_c = cls.finish(cls.bridge_c.name)
+        # The finished model goes out after the finish (at most ~publish_period later): the last
+        # message is sparse/0's points once one is.
+        cls.sparse_b = read_model(os.path.join(cls.b, 'sparse', '0'))
+        want = np.array([cls.sparse_b.points[i].xyz for i in sorted(cls.sparse_b.points)])
+        seen = {}
+
+        def published():
+            with cls.model_b.lock:
+                msg = cls.model_b.points
+            if msg is None or cls.model_b.cameras is None or msg.width != len(want) or seen.get('last') is msg:
+                return False
+            seen['last'] = msg
+            xyz, _ = cloud_rows(msg)
+            return all(np.min(np.sum((want - x) ** 2, axis=1)) < 1e-10 for x in xyz)
+        try:
+            wait_until(published, 60.0, 'bridge B publishes its finished model', period=0.1)
+        except AssertionError as e:
+            cls.model_error = '%s (point counts of its messages: %s)' % (e, cls.model_b.sizes)
+        else:
+            cls.model_error = None
+
+    @classmethod
+    def finish(cls, bridge):
+        """~finish, asked again while the bridge's own finish (~finish_after_idle, after the bag)
+        is running: it refuses a second one meanwhile. On the loaded machine bridge_b's idle
+        finish began 4.5-12 s after the last keyframe, while bridge_a's ~finish ran."""
+        answer = {}
+
+        def answered():
+            answer['r'] = call(bridge + '/finish', Trigger, None, 900.0)
+            return answer['r'].success or answer['r'].message != 'a finish is running'
+        wait_until(answered, cls.timeout, bridge + '/finish while its own finish runs', period=0.5)
+        return answer['r']
 
     @classmethod
     def wait_service(cls, name, process):
@@ -243,7 +326,7 @@ class LiveBridge(unittest.TestCase):
 
     @classmethod
     def tearDownClass(cls):
-        for p in ('bridge_a', 'bridge_b', 'node'):
+        for p in ('bridge_a', 'bridge_b', 'bridge_c', 'node'):
             proc = getattr(cls, p, None)
             if proc:
                 try:
@@ -272,10 +355,23 @@ class LiveBridge(unittest.TestCase):
             self.assertEqual(set(), final - set(content['verified']), project)
             self.assertEqual(set(), set(names.values()) - set(content['descriptors']), project)
 
+    def test_a_backlog_beyond_max_backlog_is_matched_whole_at_the_finish(self):
+        self.assertTrue(self.finish_c.success, self.finish_c.message + self.bridge_c.output()[-3000:])
+        report = json.load(open(os.path.join(self.c, 'report.json')))
+        self.assertGreater(report['deferred_to_finish'], 0, 'the backlog never went beyond ~max_backlog')
+        self.assertEqual([], report['pairs_lost'])
+        self.assertEqual(len(self.final), report['final_pairs'])
+        self.assertEqual(report['final_pairs'], report['final_pairs_matched'])
+        names = self.names()
+        final = {tuple(sorted((names[a], names[b]))) for a, b in self.final}
+        self.assertEqual(set(), final - set(database_content(os.path.join(self.c, 'database.db'))['matches']))
+
     def test_model_has_every_keyframe_at_its_pose(self):
         """sparse/unrefined: every keyframe at its node pose. sparse/0, the refined model (issue
         29): every keyframe, and since this node's poses are exact, corrections within what the
-        refinement's own precision allows (measured: 1-3 mm of ATE on the built-in sequence)."""
+        refinement's own precision allows: measured here (two runs, the same figures) at most
+        6.5 mm and 0.71 deg, median 3.4 mm and 0.60 deg; the limits are 1.5 times those (the
+        largest rotation's 1 deg, 1.4 times)."""
         poses = model_poses(self.colmap, os.path.join(self.a, 'sparse', 'unrefined'), os.path.join(self.tmp, 'model_txt'))
         refined = model_poses(self.colmap, os.path.join(self.a, 'sparse', '0'), os.path.join(self.tmp, 'refined_txt'))
         for k in self.selection.keyframes:
@@ -291,9 +387,14 @@ class LiveBridge(unittest.TestCase):
         r = report['refinement']
         self.assertTrue(r['refined'], r)
         self.assertEqual({k.image_name for k in self.selection.keyframes}, {k['name'] for k in r['keyframes']})
+        rospy.loginfo('refinement with exact poses: the largest correction %.5f m, %.4f deg; median %.5f m, %.4f deg',
+                      max(k['translation'] for k in r['keyframes']), max(k['rotation_deg'] for k in r['keyframes']),
+                      r['translation_median'], r['rotation_median_deg'])
         for k in r['keyframes']:
-            self.assertLess(k['translation'], 0.02, k)
-            self.assertLess(k['rotation_deg'], 1.0, k)
+            self.assertLess(k['translation'], 1.5 * 0.0065, k)
+            self.assertLess(k['rotation_deg'], 1.0, k)  # 1.4 times the measured 0.71
+        self.assertLess(r['translation_median'], 1.5 * 0.0034, r['translation_median'])
+        self.assertLess(r['rotation_median_deg'], 1.5 * 0.60, r['rotation_median_deg'])
 
     def test_offline_gives_the_same_model(self):
         """colmap_from_selection --model known_poses on the node's ~export of the same keyframes
@@ -335,6 +436,84 @@ class LiveBridge(unittest.TestCase):
         # The same pairs matched; points within COLMAP's run-to-run SIFT differences.
         self.assertLessEqual(abs(online['points'] - off['points']), 0.03 * online['points'] + 5,
                              (online['points'], off['points']))
+
+    def test_points_are_the_model(self):
+        """~points: sparse/0's points, the same coordinates as float32 (the same multiset: the
+        model has points at identical coordinates, from SIFT keypoints that OpenCV gives twice at
+        one place with two orientations), each coloured as a keyframe image that sees it is at its
+        keypoint, in the node's world frame."""
+        self.assertIsNone(self.model_error, 'messages %s' % self.model_b.sizes)
+        msg = self.model_b.points
+        rospy.loginfo('bridge B ~points: %d messages, points %s', len(self.model_b.sizes), self.model_b.sizes)
+        self.assertTrue(self.selection.header.frame_id)
+        self.assertEqual(self.selection.header.frame_id, msg.header.frame_id)
+        self.assertEqual(['x', 'y', 'z', 'rgb'], [f.name for f in msg.fields])
+        self.assertEqual([0, 4, 8, 12], [f.offset for f in msg.fields])
+        self.assertEqual((1, 16, len(msg.data)), (msg.height, msg.point_step, 16 * msg.width))
+        xyz, rgb = cloud_rows(msg)
+        points = [self.sparse_b.points[i] for i in sorted(self.sparse_b.points)]
+        want = np.array([p.xyz for p in points])
+        self.assertGreater(len(want), 100)
+        self.assertEqual(len(want), len(xyz))
+        published = xyz.astype(np.float32)
+        model32 = want.astype(np.float32)
+        np.testing.assert_array_equal(published[np.lexsort(published.T)], model32[np.lexsort(model32.T)])
+        rows = {}  # coordinates -> published rows
+        for row, x in enumerate(published):
+            rows.setdefault(x.tobytes(), []).append(row)
+        same = {}  # coordinates -> model points
+        for p, x in zip(points, model32):
+            same.setdefault(x.tobytes(), []).append(p)
+        images, read = self.sparse_b.images, {}
+
+        def colour(iid, idx):
+            im = images[int(iid)]
+            if im.name not in read:
+                read[im.name] = cv2.imread(os.path.join(self.a, 'images', im.name), cv2.IMREAD_COLOR)
+            x, y = (int(math.floor(v)) for v in im.xys[int(idx)])
+            b, g, r = (int(v) for v in read[im.name][y, x])
+            return (r << 16) | (g << 8) | b
+        for q in range(0, len(points), max(1, len(points) // 200)):  # 200 of them: the colour
+            key = model32[q].tobytes()
+            seen = {colour(iid, idx) for p in same[key] for iid, idx in zip(p.image_ids, p.point2D_idxs)}
+            for row in rows[key]:
+                self.assertIn(int(rgb[row]), seen, 'point %d' % points[q].id)
+
+    def test_cameras_are_the_models_keyframes(self):
+        """~cameras: one frustum a keyframe at sparse/0's camera-to-world pose, in the world
+        frame; the refined poses are the node's within the refinement's corrections (2 cm): the
+        model's world is the node's."""
+        self.assertIsNone(self.model_error)
+        msg = self.model_b.cameras
+        self.assertEqual(Marker.DELETEALL, msg.markers[0].action)
+        frusta = {m.id: m for m in msg.markers[1:]}
+        self.assertEqual(len(msg.markers) - 1, len(frusta))
+        self.assertEqual(sorted(self.sparse_b.images), sorted(frusta))
+        node = {k.image_name: k for k in self.selection.keyframes}
+        self.assertEqual(set(node), {self.sparse_b.images[i].name for i in frusta})
+        for iid, im in self.sparse_b.images.items():
+            m = frusta[iid]
+            self.assertEqual(self.selection.header.frame_id, m.header.frame_id)
+            self.assertEqual((Marker.LINE_LIST, 16), (m.type, len(m.points)))
+            centre, (w, x, y, z) = geometry.camera_to_world(im.qvec, im.tvec)
+            p, o = m.pose.position, m.pose.orientation
+            np.testing.assert_allclose([p.x, p.y, p.z], centre, atol=1e-9)
+            np.testing.assert_allclose([o.w, o.x, o.y, o.z], [w, x, y, z], atol=1e-9)
+            k = node[im.name].pose.position
+            self.assertLess(np.linalg.norm(np.array([k.x, k.y, k.z]) - centre), 0.02, im.name)
+
+    def test_a_late_subscriber_gets_the_same_model(self):
+        self.assertIsNone(self.model_error)
+        late = ModelListener(self.bridge_b.name)
+        try:
+            wait_until(lambda: late.points is not None and late.cameras is not None, 30.0,
+                       'the latched ~points and ~cameras')
+            self.assertEqual(bytes(self.model_b.points.data), bytes(late.points.data))
+            self.assertEqual(self.model_b.points.header.frame_id, late.points.header.frame_id)
+            self.assertEqual([(m.id, m.pose) for m in self.model_b.cameras.markers],
+                             [(m.id, m.pose) for m in late.cameras.markers])
+        finally:
+            late.close()
 
     def test_killed_bridge_ends_like_an_uninterrupted_one(self):
         """The same images extracted (the same keypoints), the same pairs matched and verified.

@@ -9,6 +9,7 @@ import signal
 import stat
 import sys
 import tempfile
+import time
 import unittest
 
 import rospy
@@ -22,6 +23,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'
 from vs_robust import (FramePublisher, NodeProcess, Statistics, call, find_tool,  # noqa: E402
                        shut_down, synthetic_frames, wait_until)
 from faults_tester import small_file_system, umount  # noqa: E402
+from view_selection.colmap.model import read_model  # noqa: E402
 
 NODE = '/live_faults_vs'
 
@@ -110,7 +112,9 @@ class LiveFaults(unittest.TestCase):
             wait_until(lambda: call(NODE + '/get_pairs', GetPairs, GetPairsRequest(since=0), 10.0).keyframe_image_dir
                        == images, 30, 'the node writes images into the project')
             self.publish(40)  # new keyframes: their images go into the project
-            answer = call(bridge.name + '/finish', Trigger, None, 300.0)
+            # (An idle finish may be running: ~finish says so, and is asked again.)
+            answer = wait_until(lambda: (lambda a: a if a.message != 'a finish is running' else None)(
+                call(bridge.name + '/finish', Trigger, None, 300.0)), 300, '~finish', period=0.5)
             self.assertIn('skipped', answer.message)
             self.assertIn('matches_importer', answer.message)
             self.assertIn('failed (exit 3)', answer.message)
@@ -167,16 +171,80 @@ class LiveFaults(unittest.TestCase):
                        == os.path.join(folder, 'images'), 30, 'the node writes images into the project')
             self.publish(30)  # keyframes, their images and pairs: work for the bridge
             ledger = os.path.join(folder, 'ledger.txt')
-            wait_until(lambda: os.path.exists(ledger) and ' extracted ' in open(ledger).read(), 60,
+            # Two images with features at least: a model needs two (with one, the shutdown's
+            # finish rightly says so and writes none).
+            wait_until(lambda: os.path.exists(ledger) and open(ledger).read().count(' extracted ') >= 2, 60,
                        'the bridge at work')
             self.assertFalse(os.path.exists(os.path.join(folder, 'report.json')))
             bridge.signal(signal.SIGINT)
             code = bridge.wait(15.0)  # roslaunch's SIGINT timeout (then SIGTERM, then SIGKILL)
             self.assertEqual(0, code, bridge.output()[-3000:])
+            self.assertTrue(os.path.exists(os.path.join(folder, 'report.json')), bridge.output()[-3000:])
             report = json.load(open(os.path.join(folder, 'report.json')))
             self.assertEqual('shutdown', report['why'])
             self.assertGreaterEqual(report['registered'], 2)
             self.assertTrue(os.path.isdir(os.path.join(folder, 'sparse', '0')))
+            self.assert_node_serves()
+        finally:
+            if bridge.alive():
+                bridge.kill()
+
+    def test_the_shutdown_during_a_finish_writes_the_model_within_the_budget(self):
+        """SIGINT while a finish (an idle one, started with no deadline) is refining, with a
+        refine_model that would take for ever (a stand-in on ~refine_tool that hangs; the real
+        one is bounded by ~refine_max_seconds, but its reading and writing are not, issue 35):
+        the finish gets the shutdown's deadline, refine_model is killed there, and the model is
+        on disk, unrefined, with report.json saying so, before roslaunch would escalate (15 s)."""
+        folder = os.path.join(self.tmp, 'finishing')
+        refining = os.path.join(self.tmp, 'refining')
+        tool = os.path.join(self.tmp, 'hanging_refine_model')
+        with open(tool, 'w') as f:
+            f.write('#!/bin/sh\ntouch %s\nexec sleep 3600\n' % refining)
+        os.chmod(tool, stat.S_IRWXU)
+        bridge = self.start_bridge('/bridge_finishing', {'project': folder, 'refine_tool': tool})
+        try:
+            rospy.wait_for_service(bridge.name + '/finish', timeout=60)
+            wait_until(lambda: call(NODE + '/get_pairs', GetPairs, GetPairsRequest(since=0), 10.0).keyframe_image_dir
+                       == os.path.join(folder, 'images'), 30, 'the node writes images into the project')
+            # 80 frames more (the wall is further away this late, so keyframes come more slowly:
+            # four or so, with their images here); the frames after the 160th see another wall.
+            cls = type(self)
+            cls.frames = cls.frames + synthetic_frames(cls.published + 80, width=320, height=240,
+                                                       step=0.02)[len(cls.frames):]
+            self.publish(80)
+            try:
+                wait_until(lambda: os.path.exists(refining), 120, 'the idle finish refining', period=0.1)
+            except AssertionError as e:
+                raise AssertionError('%s; the bridge said:\n%s' % (e, bridge.output()[-3000:]))
+            # (An earlier idle finish, with no pair verified yet, wrote a model without refining.)
+            start, signalled = time.monotonic(), time.time()
+            bridge.signal(signal.SIGINT)
+            code = bridge.wait(15.0)  # roslaunch's SIGINT timeout (then SIGTERM, then SIGKILL)
+            took = time.monotonic() - start
+            self.assertEqual(0, code, bridge.output()[-3000:])
+            self.assertLess(took, 12.0 + 1.0, 'the default ~shutdown_budget is 12 s')
+            report = json.load(open(os.path.join(folder, 'report.json')))
+            self.assertGreater(report['finished_at'], signalled)  # the model of the finish interrupted
+            # The idle finish's report, or the shutdown's own finish after it (when the node
+            # announced more meanwhile): either way written within the budget and saying what it is.
+            self.assertIn(report['complete'], (True, False))
+            if not report['complete']:
+                self.assertIn('out of time', report['incomplete'])
+            if 'refinement' in report:  # refine_model killed at the deadline, or given no time
+                self.assertFalse(report['refinement']['refined'])
+                self.assertIn('refinement failed', report['refinement']['error'])
+            else:  # not tried: out of time before it, or no pair verified
+                self.assertTrue(not report['complete'] or report.get('model_error'), report)
+            # Every keyframe whose image the node wrote here (the earlier ones' it no longer has);
+            # out of time, those the live model had (a keyframe that came at the end has no
+            # features yet).
+            self.assertGreaterEqual(report['registered'], 2)
+            with_images = report['keyframes'] - len(report['images_missing'])
+            if report['complete']:
+                self.assertEqual(with_images, report['registered'])
+            else:
+                self.assertLessEqual(report['registered'], with_images)
+            self.assertEqual(report['registered'], len(read_model(os.path.join(folder, 'sparse', '0')).images))
             self.assert_node_serves()
         finally:
             if bridge.alive():

@@ -257,10 +257,14 @@ class LiveOdometry(unittest.TestCase):
         """colmap_from_selection on the export (the odometry's poses) refines to the same model.
         The two differ only where the databases do: the bridge also matched pairs announced and
         later taken back (and COLMAP's RANSAC for the pairs that fell back to it), so the same
-        keyframes must be in both, at the same unrefined poses, and the refined centres within a
-        fifth of the refinement's own median correction of each other (RMS): a difference much
-        smaller than what the refinement changed, that a wrong refinement (one that does not
-        converge to the same place from the same input) breaks."""
+        keyframes must be in both, at the same unrefined poses. The offline refinement has no
+        time budget (colmap_from_selection's default). When both converged, the refined centres
+        are within a fifth of the refinement's own median correction of each other (RMS): a
+        difference much smaller than what the refinement changed, that a wrong refinement (one
+        that does not converge to the same place from the same input) breaks. When the online
+        one stopped at its budget (~refine_max_seconds, 5 s: a loaded machine may not give it the
+        2 s of CPU it takes here), it ended on its way there: no further from the offline
+        (converged) model than its input was, within the same fifth of the median correction."""
         online = centres(os.path.join(self.project, 'sparse', '0'))
         offline = centres(os.path.join(self.offline, 'sparse', '0'))
         self.assertEqual(sorted(online), sorted(offline))
@@ -271,17 +275,21 @@ class LiveOdometry(unittest.TestCase):
         with open(os.path.join(self.offline, 'report.json')) as f:
             off_report = json.load(f)
         self.assertTrue(off_report['refinement']['refined'], off_report['refinement'])
-        if self.report['refinement']['status'] == 'out_of_time':
-            # The finish's refinement stops at ~refine_max_seconds (5 s; about 2 s of CPU here):
-            # on a machine too loaded to give it that, it ends where it got to, and the offline
-            # one, without a budget, goes further. Then the two are not meant to be equal.
-            self.skipTest('the online refinement stopped at its time budget: %s' % self.report['refinement']['message'])
-        rms = math.sqrt(sum(math.dist(online[n], offline[n]) ** 2 for n in online) / len(online))
-        median = self.report['refinement']['translation_median']
-        rospy.loginfo('online vs offline refined: RMS %.5f m; the median correction %.5f m', rms, median)
-        self.assertLess(rms, 0.2 * median, 'online and offline refinements differ by %.5f m (median correction %.5f)'
-                        % (rms, median))
+        self.assertNotEqual('out_of_time', off_report['refinement']['status'])  # offline: no budget
 
+        def rms(a):
+            return math.sqrt(sum(math.dist(a[n], offline[n]) ** 2 for n in offline) / len(offline))
+        median = self.report['refinement']['translation_median']
+        statuses = (self.report['refinement']['status'], off_report['refinement']['status'])
+        rospy.loginfo('online vs offline refined (%s, %s): RMS %.5f m; the online input vs the offline refined: '
+                      '%.5f m; the median correction %.5f m', statuses[0], statuses[1], rms(online), rms(on_u), median)
+        if statuses == ('converged', 'converged'):
+            self.assertLess(rms(online), 0.2 * median, 'online and offline refinements differ by %.5f m (median '
+                            'correction %.5f)' % (rms(online), median))
+        else:
+            self.assertLess(rms(online), rms(on_u) + 0.2 * median,
+                            'the online refinement (%s) moved away from the offline one (%s): %.5f m, its input '
+                            '%.5f m' % (statuses[0], statuses[1], rms(online), rms(on_u)))
 
 if __name__ == '__main__':
     rospy.init_node('live_odometry_tester')

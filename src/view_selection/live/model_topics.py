@@ -1,0 +1,156 @@
+"""colmap_bridge's model on ROS topics (issue 36), for RViz beside the node's markers:
+
+  ~points   sensor_msgs/PointCloud2 (x, y, z float32, rgb), latched: the model's points, coloured
+            from the keyframe images, in the node's world frame;
+  ~cameras  visualization_msgs/MarkerArray, latched: one frustum (LINE_LIST, green) a keyframe of
+            the model at its pose (marker id: the COLMAP image id, ns "cameras").
+
+What is shown comes from live/visualisation.py: the live model as it grows, the finished
+(refined) model after a finish. Updates are taken in the bridge's worker (under its `work` lock,
+so the live model does not change meanwhile) and sent by a thread of their own at most once per
+`period` (the newest state; a subscriber that joins late gets it latched).
+"""
+import threading
+import time
+
+import rospy
+from geometry_msgs.msg import Point
+from sensor_msgs.msg import PointCloud2, PointField
+from visualization_msgs.msg import Marker, MarkerArray
+
+from ..colmap import model as colmap_model
+from .visualisation import FIELDS, POINT_STEP, ModelView
+
+
+class ModelTopics:
+    def __init__(self, image_dir, frame, period=0.5, frustum_depth=0.1, log=None):
+        """frame: a function giving the node's world frame ("" while it is not known)."""
+        self.view = ModelView(image_dir, frustum_depth)
+        self.frame, self.period = frame, max(0.0, float(period))
+        self.log = log or (lambda level, text: None)
+        self.points = rospy.Publisher("~points", PointCloud2, queue_size=1, latch=True)
+        self.cameras = rospy.Publisher("~cameras", MarkerArray, queue_size=1, latch=True)
+        self.lock = threading.Condition()
+        self.sent = (0, 0)         # the view's (cloud, cameras) versions last published
+        self.stopping = False
+        self.published = 0         # rounds sent: ~points, and ~cameras when they changed
+        self.update_cpu = 0.0      # [s] CPU of the updates (the bridge's worker, under `lock`)
+        self.send_cpu = 0.0        # [s] CPU of the sending thread: copies, messages, serialisation
+        self.thread = threading.Thread(target=self.loop, name="model_topics", daemon=True)
+        self.thread.start()
+
+    # -- from the bridge's worker ------------------------------------------------------------------
+    def live(self, model):
+        """After an update of the live model (live/model.py; None: no live model)."""
+        if model is None:
+            return
+        with self.lock:
+            start = time.thread_time()
+            self.view.live(model)
+            self.update_cpu += time.thread_time() - start
+            if self.sent != (self.view.cloud_version, self.view.cameras_version):
+                self.lock.notify_all()
+
+    def finished(self, live_model, report):
+        """After a finish: the model written (report["model_path"]: sparse/0, refined when the
+        refinement ran). The mapper's model is in a frame of its own, not the node's world: the
+        live model stays shown then."""
+        self.live(live_model)
+        if report.get("model") == "mapper" or not report.get("model_path"):
+            return
+        try:
+            model = colmap_model.read_model(report["model_path"])
+        except colmap_model.ModelError as e:
+            self.log("error", "the finished model is not shown: %s" % e)
+            return
+        with self.lock:
+            start = time.thread_time()
+            self.view.finished(model)
+            self.update_cpu += time.thread_time() - start
+            self.lock.notify_all()
+
+    def stop(self):
+        with self.lock:
+            self.stopping = True
+            self.lock.notify_all()
+
+    # -- the sending thread ------------------------------------------------------------------------
+    def loop(self):
+        last = 0.0
+        while not rospy.is_shutdown():
+            with self.lock:
+                while not self.stopping and (self.sent == (self.view.cloud_version, self.view.cameras_version)
+                                             or not self.frame()):
+                    self.lock.wait(1.0)
+                    if rospy.is_shutdown():
+                        return
+                if self.stopping:
+                    return
+            wait = last + self.period - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)  # at most once a period: what changed meanwhile goes out together
+            last = time.monotonic()
+            try:
+                self.publish()
+            except rospy.ROSException:
+                return  # shutting down
+
+    def figures(self):
+        """What publishing cost, for report.json: messages sent, CPU seconds of the updates and of
+        the sending (this process's threads only; the thread's own clock, so a loaded machine
+        does not inflate it), the points shown."""
+        with self.lock:
+            return {"messages": self.published, "update_cpu_seconds": round(self.update_cpu, 4),
+                    "send_cpu_seconds": round(self.send_cpu, 4), "points": len(self.view.cloud()),
+                    "cameras": len(self.view.frusta()), "images_decoded": self.view.colours.decoded}
+
+    def publish(self):
+        start = time.thread_time()
+        frame = self.frame()
+        with self.lock:  # a consistent snapshot: the buffer's bytes and the frusta as they are now
+            versions = (self.view.cloud_version, self.view.cameras_version)
+            cloud = self.view.cloud()
+            payload, count = cloud.payload(), len(cloud)
+            frusta = list(self.view.frusta()) if versions[1] != self.sent[1] else None
+        stamp = rospy.Time.now()
+        if versions[0] != self.sent[0]:
+            self.points.publish(cloud_message(payload, count, frame, stamp))
+        if frusta is not None:
+            self.cameras.publish(camera_markers(frusta, frame, stamp, self.view.frustum_depth))
+        with self.lock:
+            self.sent = versions
+            self.published += 1
+            self.send_cpu += time.thread_time() - start
+
+
+def cloud_message(payload, count, frame, stamp):
+    msg = PointCloud2()
+    msg.header.frame_id, msg.header.stamp = frame, stamp
+    msg.height, msg.width = 1, count
+    msg.fields = [PointField(name=name, offset=offset, datatype=PointField.FLOAT32, count=1) for name, offset in FIELDS]
+    msg.is_bigendian = False
+    msg.point_step, msg.row_step = POINT_STEP, POINT_STEP * count
+    msg.data = payload
+    msg.is_dense = True
+    return msg
+
+
+def camera_markers(frusta, frame, stamp, depth):
+    """DELETEALL, then one LINE_LIST a keyframe: its pose is the camera's in the world frame, its
+    points the frustum in the camera frame."""
+    out = MarkerArray()
+    clear = Marker()
+    clear.header.frame_id, clear.header.stamp = frame, stamp
+    clear.ns, clear.action = "cameras", Marker.DELETEALL
+    out.markers.append(clear)
+    for f in frusta:
+        m = Marker()
+        m.header.frame_id, m.header.stamp = frame, stamp
+        m.ns, m.id, m.type, m.action = "cameras", f.id, Marker.LINE_LIST, Marker.ADD
+        m.pose.position.x, m.pose.position.y, m.pose.position.z = f.centre
+        (m.pose.orientation.w, m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z) = f.orientation
+        m.scale.x = 0.08 * depth
+        m.color.r, m.color.g, m.color.b, m.color.a = 0.2, 0.9, 0.4, 1.0
+        m.points = [Point(x=x, y=y, z=z) for x, y, z in f.lines]
+        out.markers.append(m)
+    return out
