@@ -81,9 +81,12 @@ PARAMETERS = """Parameters (private, ~name):
                      the adjustment reached by then (report.json: status out_of_time), so that a
                      long session's finish stays bounded (5; 0: no limit)
   refine_tool        the refine_model executable ("": beside this node)
-  refine_live        with live triangulation: refine while the recording goes on (true): windows of
+  refine_live        with live triangulation: refine while the recording goes on (false): windows of
                      new keyframes with what they see held, the whole model when the budget allows;
-                     the finish refines only what changed since (refinement/local.py)
+                     the finish refines only what changed since (refinement/local.py). Off by
+                     default: at 0.25 of a core it corrected a 20 s walk's drift (0.09x) but not a
+                     1-minute walk's better than the finish alone, and with exact poses it moved
+                     the keyframes further (median 5.8 mm against 3.3; docs/live.md)
   refine_live_cpu    [cores] the average CPU those runs may take over the session (0.25)
   publish_period     [s] ~points and ~cameras are sent at most once per this (0.5; 0: not published)
   camera_scale       frustum depth of ~cameras in RViz [m, scene units] (0.15: the node's ~markers'
@@ -155,7 +158,7 @@ class Bridge:
                                   threads=int(_param("threads", -1)),
                                   max_seconds=float(_param("refine_max_seconds", FINISH_MAX_SECONDS))),
                 tool=_param("refine_tool", "") or None, log=self._log)
-            if bool(_param("refine_live", True)) and _param("triangulation", "live") == "live":
+            if bool(_param("refine_live", False)) and _param("triangulation", "live") == "live":
                 refinement = LocalRefinement(refinement, cpu_share=float(_param("refine_live_cpu", 0.25)))
         self.work_state = LiveWork(self.project, continuity=bool(_param("continuity_pairs", True)),
                                    max_backlog=_param("max_backlog", 2000),
