@@ -50,7 +50,7 @@ DEPTH_E_TOLERANCE = 0.02   # relative, E of the depth points from quantised dept
 DEPTH_PAIRS_SHARED = 0.9    # measured 98.5% (65 vs 64 pairs); largest E difference 0.8%
 MAX_GATE_FLIPS = 3         # next-view entries finite in the node only (a point across the gate)
 FEATURE_KEYFRAME_COUNT = 0.2  # scale_free on feature points: keyframe counts within 20% of the raw images'
-FEATURE_KEYFRAMES_NEAR = 0.7  # ... and most keyframes within two frames of one on the raw images
+FEATURE_KEYFRAMES_NEAR = 0.7  # ... and most keyframes within five frames of one on the raw images
 QUANT_A = 100.0 * 101.0    # compressed_depth_image_transport's defaults: quantisation 100, 10 m
 
 
@@ -116,9 +116,12 @@ class Compressed(unittest.TestCase):
             self.assertEqual(node_stamps, folder_stamps, node + ': keyframes differ from select_views\'s on the raw images')
         else:
             # Feature points come from the decoded images, and the scale-free keyframe policy
-            # looks at them: JPEG moves a few keyframes by a frame or two.
-            near = sum(1 for t in node_stamps if any(abs(t - u) <= 70000 for u in folder_stamps))
-            rospy.loginfo('%s: %d keyframes (raw: %d), %d within two frames of a raw one', node, len(node_stamps),
+            # looks at them: JPEG moves some keyframes by a few frames. Since the revisit rule
+            # (docs/design.md) a frame covered by an earlier keyframe in one stream and not in
+            # the other moves the keyframes after it: measured 18 keyframes in both, 9 within two
+            # frames of a raw one, 17 within five, 18 within ten (two frames gave 13 or more before).
+            near = sum(1 for t in node_stamps if any(abs(t - u) <= 170000 for u in folder_stamps))
+            rospy.loginfo('%s: %d keyframes (raw: %d), %d within five frames of a raw one', node, len(node_stamps),
                           len(folder_stamps), near)
             self.assertLessEqual(abs(len(node_stamps) - len(folder_stamps)), FEATURE_KEYFRAME_COUNT * len(folder_stamps))
             self.assertGreaterEqual(near, FEATURE_KEYFRAMES_NEAR * len(node_stamps))
