@@ -241,17 +241,23 @@ class LiveModel:
             self.changed.update(root for root, _ in tracks)  # made, moved or removed
 
     # -- the COLMAP model --------------------------------------------------------------------
-    def to_model(self, image_ids=None):
+    def to_model(self, image_ids=None, seen_by=None):
         """A colmap.model.Model of the images (all, or those ids) and the points seen by at
-        least two of them; point ids are 1, 2, ... in track order."""
+        least two of them; point ids are 1, 2, ... in track order. seen_by: only the points with
+        an observation in one of these images (a window of the refinement, refinement/local.py)."""
         keep = set(self.images) if image_ids is None else set(image_ids) & set(self.images)
+        if seen_by is None:
+            roots = self.points
+        else:
+            seen_by = set(seen_by)
+            roots = {r for i in seen_by for r in self.by_image.get(i, ())} & self.points.keys()
         m = colmap_model.Model()
         point_of = {iid: [] for iid in keep}  # image id -> [(keypoint, point id)]
         next_id = 1
-        for root in sorted(self.points):
+        for root in sorted(roots):
             xyz, error, obs = self.points[root]
             obs = {i: kp for i, kp in obs.items() if i in keep}
-            if len(obs) < 2:
+            if len(obs) < 2 or (seen_by is not None and not any(i in seen_by for i in obs)):
                 continue
             ids = sorted(obs)
             m.points[next_id] = colmap_model.Point3D(next_id, xyz, (128, 128, 128), error, ids, [obs[i] for i in ids])

@@ -132,36 +132,7 @@ def crop(live, free, fixed):
     """The live model cropped to a window: the images `free` and `fixed` at their poses, and the
     points with an observation in a free image (observations in other images left out, points
     left with fewer than two dropped)."""
-    free, keep = set(free), set(free) | set(fixed)
-    roots = set()
-    for i in free:
-        roots |= live.by_image.get(i, set())
-    m = colmap_model.Model()
-    point_of = {iid: [] for iid in keep}
-    next_id = 1
-    for root in sorted(roots):
-        point = live.points.get(root)
-        if point is None:
-            continue
-        xyz, error, obs = point
-        obs = {i: kp for i, kp in obs.items() if i in keep}
-        if len(obs) < 2 or not any(i in free for i in obs):
-            continue
-        ids = sorted(obs)
-        m.points[next_id] = colmap_model.Point3D(next_id, xyz, (128, 128, 128), error, ids, [obs[i] for i in ids])
-        for i in ids:
-            point_of[i].append((obs[i], next_id))
-        next_id += 1
-    for iid in sorted(keep):
-        im = live.images[iid]
-        name, w, h, params = live.cameras[im.camera_id]
-        m.cameras[im.camera_id] = colmap_model.Camera(im.camera_id, name, w, h, params)
-        ids = np.full(len(im.keypoints), -1, np.int64)
-        for kp, pid in point_of[iid]:
-            ids[kp] = pid
-        m.images[iid] = colmap_model.Image(iid, geometry.quaternion_of(im.r), tuple(im.t), im.camera_id, im.name,
-                                           im.keypoints, ids)
-    return m
+    return live.to_model(set(free) | set(fixed), seen_by=free)
 
 
 def window_pairs(live, free, fixed):
