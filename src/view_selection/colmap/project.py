@@ -147,6 +147,17 @@ class ColmapProject:
         another until `cancelled` is cleared; the one killed raises ProjectError."""
         self.colmap.cancel()
 
+    def link_images(self, keyframes, source):
+        """DIR/images as the node writes it, from the folder `source` the keyframes' image names
+        are relative to: linked, not copied, where the file system allows."""
+        for k in keyframes:
+            target = os.path.join(self.images, k.name)
+            os.makedirs(os.path.dirname(target), exist_ok=True)
+            try:
+                os.link(os.path.join(source, k.name), target)
+            except OSError:
+                shutil.copyfile(os.path.join(source, k.name), target)
+
     def has_image(self, name):
         return os.path.isfile(os.path.join(self.images, name))
 
@@ -172,10 +183,11 @@ class ColmapProject:
         if not new:
             return
         with self.db() as d:
-            added = []
+            added, names = [], set()
             for k in new:
-                if k.name in cat.ids or any(k.name == a[0] for a in added):
+                if k.name in names:  # the same image twice in the list
                     continue
+                names.add(k.name)
                 cid = d.camera_id(k.width, k.height, k.colmap_camera_params())
                 added.append((k.name, d.add_image(k.name, cid), cid))
             cameras = d.cameras() if any(cid not in cat.cameras for _, _, cid in added) else {}

@@ -21,16 +21,6 @@ from .local import LocalRefinement
 from .refiner import FINISH_MAX_SECONDS, ModelRefinement, RefinementOptions
 
 
-def link_images(keyframes, images, project):
-    for k in keyframes:
-        target = os.path.join(project.images, k.name)
-        os.makedirs(os.path.dirname(target), exist_ok=True)
-        try:
-            os.link(os.path.join(images, k.name), target)
-        except OSError:
-            shutil.copyfile(os.path.join(images, k.name), target)
-
-
 class Replay:
     """colmap_bridge's work on `export` into the project folder `out` (replaced), at its
     defaults: the pose-guided matcher, live triangulation, the finish's refinement within
@@ -43,7 +33,7 @@ class Replay:
             shutil.rmtree(out)
         self.project = ColmapProject(out, "colmap", threads)
         os.makedirs(self.project.images)
-        link_images(self.export.keyframes, self.export.image_root(), self.project)
+        self.project.link_images(self.export.keyframes, self.export.image_root())
         self.project.open()
         self.now = 0.0  # the recording's time [s]
         self.finish = ModelRefinement(RefinementOptions(max_seconds=FINISH_MAX_SECONDS, threads=threads),

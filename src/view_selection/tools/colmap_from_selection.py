@@ -89,17 +89,6 @@ def parse_args(argv):
     return p.parse_args(argv)
 
 
-def link_images(export, images, project):
-    """The project's images/ as the node writes it: linked, not copied, where possible."""
-    for k in export.keyframes:
-        target = os.path.join(project.images, k.name)
-        os.makedirs(os.path.dirname(target), exist_ok=True)
-        try:
-            os.link(os.path.join(images, k.name), target)
-        except OSError:
-            shutil.copyfile(os.path.join(images, k.name), target)
-
-
 def main(argv=None):
     args = parse_args(sys.argv[1:] if argv is None else argv)
     # Long work says how far it is on stderr: extraction and matching by their counts, the
@@ -119,7 +108,7 @@ def main(argv=None):
             shutil.rmtree(out)
         project = ColmapProject(out, args.colmap, args.threads)
         os.makedirs(project.images)
-        link_images(export, images, project)
+        project.link_images(export.keyframes, images)
         project.open()
         if args.threads > 0:
             import cv2
