@@ -48,16 +48,23 @@ def assert_cloud_is_the_model(view, m):
         assert rgb[q] in {int(pack_rgb(*COLOURS[i - 1])) for i in obs}, (root, hex(rgb[q]))
 
 
-def test_the_cloud_follows_the_live_model(tmp_path):
-    points, poses, kps = scene(n_images=4, n_points=120)
-    write_images(tmp_path, 4)
+def first_pair(tmp_path, n_images, n_points):
+    """A scene's images written, a live model with its first two images matched and updated,
+    and a view of it: (points, poses, keypoints, model, view)."""
     from view_selection.live.model import LiveModel
+    points, poses, kps = scene(n_images=n_images, n_points=n_points)
+    write_images(tmp_path, n_images)
     m = LiveModel()
     view = ModelView(str(tmp_path))
     add(m, kps, poses, 0)
     add(m, kps, poses, 1)
     match(m, kps, len(points), 0, 1)
     m.update()
+    return points, poses, kps, m, view
+
+
+def test_the_cloud_follows_the_live_model(tmp_path):
+    points, poses, kps, m, view = first_pair(tmp_path, 4, 120)
     assert view.live(m) == 120  # the first call takes every point the model has
     assert_cloud_is_the_model(view, m)
     version = view.cloud_version
@@ -87,15 +94,7 @@ def test_the_cloud_follows_the_live_model(tmp_path):
 
 def test_points_that_are_lost_leave_the_cloud(tmp_path):
     """Image 2 moved onto image 1's centre: no triangulation angle left, every point goes."""
-    points, poses, kps = scene(n_images=2, n_points=60)
-    write_images(tmp_path, 2)
-    from view_selection.live.model import LiveModel
-    m = LiveModel()
-    view = ModelView(str(tmp_path))
-    add(m, kps, poses, 0)
-    add(m, kps, poses, 1)
-    match(m, kps, len(points), 0, 1)
-    m.update()
+    points, poses, kps, m, view = first_pair(tmp_path, 2, 60)
     view.live(m)
     assert len(view.cloud()) == 60
     q, t = poses[0]

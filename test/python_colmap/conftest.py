@@ -32,6 +32,17 @@ def run(cmd, timeout=1800, expect=0):
     return done.stdout
 
 
+def walk_selection(tmp_path, frames):
+    """The built-in walk rendered at QVGA (`frames` frames) and its selection with a keyframe
+    every 6 frames: (the sequence's folder, the selection's folder)."""
+    sequence, selection = tmp_path / "walk", tmp_path / "selection"
+    run([tool("generate_sequence"), "--out", str(sequence), "--frames", str(frames), "--width", "320", "--height",
+         "240", "--quiet"])
+    run([tool("select_views"), "--dataset", str(sequence), "--every", "6", "--out", str(selection), "--quiet",
+         "--print-sets", "0"])
+    return sequence, selection
+
+
 def colmap_from_selection(*args, expect=0):
     return run([sys.executable, os.path.join(REPO, "scripts", "colmap_from_selection")] + [str(a) for a in args],
                expect=expect)

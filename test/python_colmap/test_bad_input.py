@@ -7,18 +7,13 @@ import shutil
 
 import numpy as np
 
-from conftest import colmap_from_selection, run, tool
+from conftest import colmap_from_selection, walk_selection
 from view_selection import geometry
 from view_selection.colmap.model import read_model
 
 
 def test_bad_images_and_a_wrong_pose_are_reported_and_the_rest_is_built(tmp_path):
-    sequence = tmp_path / "walk"
-    run([tool("generate_sequence"), "--out", str(sequence), "--frames", "90", "--width", "320", "--height", "240",
-         "--quiet"])
-    selection = tmp_path / "selection"
-    run([tool("select_views"), "--dataset", str(sequence), "--every", "6", "--out", str(selection), "--quiet",
-         "--print-sets", "0"])
+    sequence, selection = walk_selection(tmp_path, 90)
     doc = json.load(open(str(selection / "selection.json")))
     keyframes = doc["keyframes"]
     assert len(keyframes) == 15

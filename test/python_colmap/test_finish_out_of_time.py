@@ -6,7 +6,7 @@ import os
 import shutil
 import time
 
-from conftest import run, tool
+from conftest import tool, walk_selection
 from view_selection.colmap.model import read_model
 from view_selection.colmap.project import ColmapProject
 from view_selection.export_folder import ExportFolder
@@ -17,11 +17,7 @@ from view_selection.refinement.refiner import ModelRefinement, RefinementOptions
 
 
 def test_a_finish_out_of_time_writes_the_live_model_as_it_stands(tmp_path):
-    sequence, selection = tmp_path / "walk", tmp_path / "selection"
-    run([tool("generate_sequence"), "--out", str(sequence), "--frames", "90", "--width", "320", "--height", "240",
-         "--quiet"])
-    run([tool("select_views"), "--dataset", str(sequence), "--every", "6", "--out", str(selection), "--quiet",
-         "--print-sets", "0"])
+    _, selection = walk_selection(tmp_path, 90)
     export = ExportFolder(str(selection))
     images = export.image_root(None)
     project = ColmapProject(str(tmp_path / "project"), threads=2)

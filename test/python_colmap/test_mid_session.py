@@ -9,7 +9,7 @@ import shutil
 
 import numpy as np
 
-from conftest import run, tool
+from conftest import walk_selection
 from view_selection.colmap.model import read_model
 from view_selection.colmap.project import ColmapProject
 from view_selection.export_folder import ExportFolder
@@ -32,12 +32,7 @@ def ledger_items(project, what):
 
 
 def test_a_loop_closure_and_a_missing_image_mid_session(tmp_path):
-    sequence = tmp_path / "walk"
-    run([tool("generate_sequence"), "--out", str(sequence), "--frames", "90", "--width", "320", "--height", "240",
-         "--quiet"])
-    selection = tmp_path / "selection"
-    run([tool("select_views"), "--dataset", str(sequence), "--every", "6", "--out", str(selection), "--quiet",
-         "--print-sets", "0"])
+    _, selection = walk_selection(tmp_path, 90)
     export = ExportFolder(str(selection))
     keyframes, pairs = export.keyframes, export.pairs
     assert len(keyframes) == 15

@@ -11,7 +11,7 @@ import sys
 
 import numpy as np
 
-from conftest import REPO, colmap_from_selection, run, tool
+from conftest import REPO, colmap_from_selection, run, walk_selection
 from view_selection import geometry
 from view_selection.colmap.model import read_model
 
@@ -35,12 +35,7 @@ os.execvp("colmap", ["colmap"] + args)
 
 
 def test_the_summary_names_a_skipped_image_and_a_skipped_pair(tmp_path):
-    sequence = tmp_path / "walk"
-    run([tool("generate_sequence"), "--out", str(sequence), "--frames", "60", "--width", "320", "--height", "240",
-         "--quiet"])
-    selection = tmp_path / "selection"
-    run([tool("select_views"), "--dataset", str(sequence), "--every", "6", "--out", str(selection), "--quiet",
-         "--print-sets", "0"])
+    sequence, selection = walk_selection(tmp_path, 60)
     doc = json.load(open(str(selection / "selection.json")))
     keyframes = doc["keyframes"]
     assert len(keyframes) == 10
