@@ -363,12 +363,11 @@ class NoPoints : public PointSource {
   void reset() override {}
 };
 
-// The default keyframe policy's decision (scale_free: the next frame against the last
-// keyframe's 256 points) with n keyframes in the selector: ViewSelector::wantsFrame, which is
-// the whole policy step of addFrame (a frame it skips costs nothing else). Frames 0.02 m apart
-// along the corridor past the last keyframe. It compares with the last keyframe only, so the
-// time must not grow with n.
-void BM_ScaleFreeDecisionAtScale(benchmark::State& state) {
+// The scale_free decision (ViewSelector::wantsFrame, the whole policy step of addFrame: a frame
+// it skips costs nothing else) with state.range(0) keyframes in the selector, for frames 0.02 m
+// apart along the corridor from the pose of keyframe `at` (its index, given the keyframe count).
+template <typename At>
+void scaleFreeDecisions(benchmark::State& state, At at) {
   const int n = static_cast<int>(state.range(0));
   Grown& g = grownCorridor(n);
   ViewSelectorState saved;  // the grown matrix in a selector (its finite entries as they are)
@@ -381,12 +380,12 @@ void BM_ScaleFreeDecisionAtScale(benchmark::State& state) {
   ViewSelector selector(saved.config, std::make_unique<NoPoints>());
   selector.restore(saved);
   saved = {};
-  const Keyframe& last = m.keyframe(static_cast<ViewId>(m.size() - 1));
+  const Keyframe& from = m.keyframe(static_cast<ViewId>(at(m.size())));
   Frame frame;
-  frame.intrinsics = last.intrinsics;
+  frame.intrinsics = from.intrinsics;
   size_t wanted = 0, offered = 0;
   for (auto _ : state) {
-    frame.pose = last.pose;
+    frame.pose = from.pose;
     frame.pose.position.z() += 0.02 * static_cast<double>(offered % 10);
     wanted += selector.wantsFrame(frame) ? 1 : 0;
     ++offered;
@@ -394,36 +393,20 @@ void BM_ScaleFreeDecisionAtScale(benchmark::State& state) {
   state.counters["keyframes"] = static_cast<double>(selector.matrix().size());
   state.counters["wanted_share"] = static_cast<double>(wanted) / static_cast<double>(offered);
 }
+
+// The default keyframe policy's decision (scale_free: the next frame against the last
+// keyframe's 256 points), frames past the last keyframe. It compares with the last keyframe
+// only, so the time must not grow with n.
+void BM_ScaleFreeDecisionAtScale(benchmark::State& state) {
+  scaleFreeDecisions(state, [](size_t keyframes) { return keyframes - 1; });
+}
 BENCHMARK(BM_ScaleFreeDecisionAtScale)->Arg(10000)->Arg(100000)->Unit(benchmark::kMicrosecond);
 
 // The same decision for a frame back at an earlier place of the corridor (at keyframe n/2, give
 // or take a few cm): new against the last keyframe, so the revisit rule searches the keyframes
 // near it (KeyframeNeighbours) and measures the most alike until one has the view.
 void BM_ScaleFreeRevisitDecisionAtScale(benchmark::State& state) {
-  const int n = static_cast<int>(state.range(0));
-  Grown& g = grownCorridor(n);
-  ViewSelectorState saved;
-  saved.config.keyframes.mode = KeyframeMode::kScaleFree;
-  const ErrorResistanceMatrix& m = *g.matrix;
-  for (size_t i = 0; i < m.size(); ++i) {
-    saved.keyframes.push_back(m.keyframe(static_cast<ViewId>(i)));
-    saved.rows.push_back(m.table().row(static_cast<ViewId>(i)));
-  }
-  ViewSelector selector(saved.config, std::make_unique<NoPoints>());
-  selector.restore(saved);
-  saved = {};
-  const Keyframe& earlier = m.keyframe(static_cast<ViewId>(m.size() / 2));
-  Frame frame;
-  frame.intrinsics = earlier.intrinsics;
-  size_t wanted = 0, offered = 0;
-  for (auto _ : state) {
-    frame.pose = earlier.pose;
-    frame.pose.position.z() += 0.02 * static_cast<double>(offered % 10);
-    wanted += selector.wantsFrame(frame) ? 1 : 0;
-    ++offered;
-  }
-  state.counters["keyframes"] = static_cast<double>(selector.matrix().size());
-  state.counters["wanted_share"] = static_cast<double>(wanted) / static_cast<double>(offered);
+  scaleFreeDecisions(state, [](size_t keyframes) { return keyframes / 2; });
 }
 BENCHMARK(BM_ScaleFreeRevisitDecisionAtScale)->Arg(10000)->Arg(100000)->Unit(benchmark::kMicrosecond);
 
