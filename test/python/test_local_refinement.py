@@ -4,7 +4,6 @@ refined. test/python_colmap/test_local_refinement.py runs it with refine_model."
 import numpy as np
 
 from view_selection import geometry
-from view_selection.colmap import model as cm
 from view_selection.keyframes import Keyframe
 from view_selection.refinement import local
 from test_live_model import build, scene

@@ -237,7 +237,6 @@ class LiveWork:
         """The live model takes the keyframes' poses (new ones, and corrected ones) and the
         verified pairs it does not have yet, and triangulates the tracks that changed; returns
         how many. Also after a restart: the database's pairs all come in once."""
-        from .. import geometry
         from ..colmap.model import CAMERA_MODELS
         m = self.model
         cat = self.project.catalogue()  # what the database holds, in memory: no table is read whole
