@@ -183,3 +183,19 @@ def test_a_verified_partner_is_held_even_when_it_shares_no_point_and_the_cap_is_
                                       size=4, max_fixed=2, partners=lambda f: {2, 28})  # 2: a revisit's pair
     assert free == [27, 28, 29, 30]
     assert fixed == [2, 5, 6, 26]  # 28 is free itself; 7 beyond the cap
+
+
+def test_a_run_that_outlives_its_timeout_is_killed_and_counted(tmp_path):
+    # A refine_model that hangs (here: sleep) is killed at the options' timeout by the next
+    # step, not left to hold every later run back until the finish.
+    import subprocess
+    import types
+    proc = subprocess.Popen(["sleep", "60"], start_new_session=True)
+    lr = local.LocalRefinement(None)
+    lr.work = types.SimpleNamespace(model=object())
+    folder = tmp_path / "run"
+    folder.mkdir()
+    lr.running = local._Run("local", [1], [], str(folder), proc, {}, set(), 0.0, 3.0, timeout=0.0)
+    assert lr.step() is False
+    assert lr.running is None and lr.failures == 1
+    assert proc.poll() is not None and not folder.exists()

@@ -215,10 +215,10 @@ def at_node_poses(model, node_poses, max_error=4.0):
 class _Run:
     """One refine_model child: what it was given and what it is."""
 
-    def __init__(self, kind, free, fixed, folder, proc, node, pairs, cpu, max_seconds):
+    def __init__(self, kind, free, fixed, folder, proc, node, pairs, cpu, max_seconds, timeout):
         self.kind, self.free, self.fixed, self.folder, self.proc = kind, free, fixed, folder, proc
         self.node, self.pairs, self.cpu = node, pairs, cpu
-        self.started, self.max_seconds = time.monotonic(), max_seconds
+        self.started, self.max_seconds, self.timeout = time.monotonic(), max_seconds, timeout
         self.rusage = None
         self.status = None
 
@@ -351,9 +351,18 @@ class LocalRefinement:
         if self.work is None or self.work.model is None:
             return False
         if self.running is not None:
-            if not self.running.poll():
-                return True
-            self._finish_run(self.running)
+            run = self.running
+            if not run.poll():
+                if time.monotonic() - run.started <= run.timeout:
+                    return True
+                # refine_model stops itself at its --max-seconds; one that does not (a hung
+                # tool) is killed at the options' timeout, as the finish's own run would be.
+                run.kill()
+                self.running = None
+                self.failures += 1
+                self.log("warn", "the %s refinement did not end within %.0f s and was killed" % (run.kind, run.timeout))
+                return False
+            self._finish_run(run)
             self.running = None
         order, observed, node, current = self._state()
         pairs = len(self.work.model.matched_pairs)
@@ -420,7 +429,7 @@ class LocalRefinement:
             self.cpu_by_kind[kind] += time.process_time() - t0
             return
         self.running = _Run(kind, free, fixed, folder, proc, {i: node.get(i) for i in free},
-                            used, time.process_time() - t0, max_seconds)
+                            used, time.process_time() - t0, max_seconds, options.timeout)
 
     def _options(self, max_seconds):
         base = self.finish_refinement.options
