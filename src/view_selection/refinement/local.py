@@ -50,7 +50,7 @@ import time
 import numpy as np
 
 from .. import geometry
-from ..colmap import model as colmap_model
+from ..colmap import durable, model as colmap_model
 from ..colmap.database import DatabaseError
 from ..colmap.project import ProjectError
 from . import refiner
@@ -625,7 +625,7 @@ class LocalRefinement:
         try:
             model = colmap_model.read_model(model_path)
             colmap_model.write_model(at_node_poses(model, node_poses), os.path.join(made, "m"), binary=True)
-            refiner.swap_folder(os.path.join(made, "m"), unrefined)
+            durable.replace_folder(os.path.join(made, "m"), unrefined)
         finally:
             shutil.rmtree(made, ignore_errors=True)
 

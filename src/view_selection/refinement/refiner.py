@@ -26,7 +26,7 @@ import time
 import numpy as np
 
 from .. import geometry
-from ..colmap import model as colmap_model
+from ..colmap import durable, model as colmap_model
 from ..colmap.process import Colmap, _death_signal_prefix
 
 
@@ -262,8 +262,7 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu = (after.ru_utime + after.ru_stime) - (children.ru_utime + children.ru_stime)
         log("refinement: %s" % report["message"])
-        from ..colmap.project import replace_folder
-        replace_folder(made, os.path.abspath(output))
+        durable.replace_folder(made, os.path.abspath(output))
         keyframes = []
         for im in report["images"]:
             keyframes.append({"name": im["name"], "refined": im["refined"], "kept": im["kept"] or None,
@@ -295,54 +294,15 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
         shutil.rmtree(work, ignore_errors=True)
 
 
-_RENAME_EXCHANGE = 2  # linux/fs.h
-
-
-def _exchange(a, b):
-    """Swaps the names a and b in one step (renameat2 RENAME_EXCHANGE); False where the C
-    library or the filesystem cannot."""
-    import ctypes
-    import errno
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        renameat2 = libc.renameat2
-    except (OSError, AttributeError):
-        return False
-    renameat2.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
-    at_fdcwd = -100
-    if renameat2(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE) == 0:
-        return True
-    err = ctypes.get_errno()
-    if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP, errno.EPERM):
-        return False
-    raise OSError(err, os.strerror(err), b)
-
-
-def swap_folder(made, output):
-    """`made` becomes `output`; a reader of `output` finds the old folder or the new one, whole,
-    at every moment: the new one is complete beside it before the two names are exchanged
-    (renameat2 RENAME_EXCHANGE; where the filesystem cannot, two renames a few microseconds
-    apart), then the old one is removed."""
-    if not os.path.exists(output):
-        os.rename(made, output)
-        return
-    if _exchange(made, output):
-        shutil.rmtree(made, ignore_errors=True)  # the old one, under the new one's former name
-        return
-    old = made + ".old"
-    os.rename(output, old)
-    os.rename(made, output)
-    shutil.rmtree(old, ignore_errors=True)
-
-
 def keep_copy(model_path, unrefined):
-    """A copy of the model folder in `unrefined`, written beside it and swapped in (swap_folder):
-    sparse/unrefined is never missing or half written (it was removed, then copied again)."""
+    """A copy of the model folder in `unrefined`, written beside it and swapped in
+    (durable.replace_folder): sparse/unrefined is never missing or half written (it was removed,
+    then copied again)."""
     made = tempfile.mkdtemp(prefix=".unrefined_", dir=os.path.dirname(os.path.abspath(unrefined)))
     try:
         os.rmdir(made)
         shutil.copytree(model_path, made)
-        swap_folder(made, unrefined)
+        durable.replace_folder(made, unrefined)
     finally:
         shutil.rmtree(made, ignore_errors=True)
 
