@@ -317,8 +317,13 @@ TEST_F(Refinement, ASpentBudgetStopsTheTriangulationAfterKeptImages) {
   // Without priors the least observed image keeps its input pose (min_observations above its
   // count); the tracks are then triangulated once more with it at that pose. Out of time that
   // triangulation does not run, and the kept image's input observations join the points.
+  // At exact poses: how far the budget's one short solve gets depends on the machine's speed,
+  // and from drifted poses a partial solve leaves the kept image's observations beyond the
+  // filter's limit on a slow or loaded machine (CI: none left). Exact poses fit them after any
+  // number of iterations, so what is asserted is which stages ran, not how far the solve got.
   std::vector<refine::Match> matches;
-  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.0, 4.0, &matches);
+  const io::ColmapModel input =
+      knownPoseModel(exact, exact.rotation, exact.translation, rng, 0.0, 4.0, &matches);
   std::map<int, int> seen;
   for (const auto& [id, p] : input.points)
     for (const auto& e : p.track) ++seen[e.image_id];
