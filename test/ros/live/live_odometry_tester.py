@@ -272,20 +272,22 @@ class LiveOdometry(unittest.TestCase):
             off_report = json.load(f)
         self.assertTrue(off_report['refinement']['refined'], off_report['refinement'])
         self.assertNotEqual('out_of_time', off_report['refinement']['status'])  # offline: no budget
-        if self.report['refinement']['status'] == 'out_of_time':
-            # The finish's refinement stops at ~refine_max_seconds (5 s; about 2 s of CPU here):
-            # on a machine too loaded to give it that, it ends where it got to, and the offline
-            # one, without a budget, goes further. Then the two are not meant to be equal.
-            self.skipTest('the online refinement stopped at its time budget: %s' % self.report['refinement']['message'])
-
         def ate(c):
             names = sorted(n for n in c if stamp_of(n) in self.exact)
             return ate_rmse([c[n] for n in names], [self.exact[stamp_of(n)] for n in names])
-        on, off = ate(online), ate(offline)
-        rospy.loginfo('refined ATE online %.5f m, offline %.5f m (%s)', on, off,
+        on, off, odometry = ate(online), ate(offline), ate(on_u)
+        rospy.loginfo('refined ATE online %.5f m, offline %.5f m, odometry %.5f m (%s)', on, off, odometry,
                       self.report['refinement'].get('live'))
+        if self.report['refinement']['status'] == 'out_of_time':
+            # The finish's refinement stops at ~refine_max_seconds (5 s; about 2 s of CPU here):
+            # on a machine too loaded to give it that, it ends where it got to, and the offline
+            # one, without a budget, goes further; how far depends on the load, so the 1.1x is
+            # measured in a benchmark (dev/benchmark_drift live), not asserted here. What holds
+            # at any load: the report names the budget, and what was reached is a correction.
+            self.assertIn('time budget', self.report['refinement']['message'])
+            self.assertLess(on, odometry, 'online refined ATE %.5f m, odometry %.5f m' % (on, odometry))
+            return
         self.assertLess(on, 1.1 * off + 0.002, 'online refined ATE %.5f m, offline %.5f m' % (on, off))
-
 
 if __name__ == '__main__':
     rospy.init_node('live_odometry_tester')
