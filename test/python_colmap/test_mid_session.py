@@ -1,8 +1,8 @@
 """Bad input in the middle of a session, through the bridge's work (LiveWork with the pose-guided
 backend, the real COLMAP for the fallback), without ROS (issue 34): a loop closure that moves
-earlier keyframes, and a keyframe whose image never arrives. The live model takes the moved poses
-(its points follow them), nothing already matched is matched again, and the finish names what is
-missing and builds the rest."""
+earlier keyframes, a pose that jumps (a SLAM glitch, put right by a later message), and a keyframe
+whose image never arrives. The live model takes the moved poses (its points follow them), nothing
+already matched is matched again, and the finish names what is missing and builds the rest."""
 import json
 import os
 import shutil
@@ -19,6 +19,7 @@ from view_selection.live.work import LiveWork
 from view_selection.matching.backend import PoseGuidedBackend
 
 SHIFT = np.array([0.03, -0.02, 0.01])  # [m] the loop closure's correction of the first half
+JUMP = np.array([0.5, 0.0, -0.3])  # [m] a glitch of one keyframe's pose in the second half
 
 
 def moved(k, shift):
@@ -56,11 +57,21 @@ def test_a_loop_closure_and_a_missing_image_mid_session(tmp_path):
     centres_before = {work.model.images[i].name: work.model.images[i].centre.copy() for i in work.model.images}
     triangulated = work.model.observations_triangulated
 
-    # A loop closure moves the first half; the rest of the session comes.
+    # A loop closure moves the first half; the rest of the session comes, one keyframe with its
+    # pose 0.58 m off (its pairs cannot be guided by that pose: COLMAP's matcher verifies them),
+    # and the next message puts that pose right.
     corrected = [moved(k, SHIFT) for k in half] + keyframes[8:]
-    work.extract(corrected)
+    jumped = corrected[10].name
+    glitch = corrected[:10] + [moved(corrected[10], JUMP)] + corrected[11:]
+    work.extract(glitch)
+    work.match_all(glitch, pairs)
+    work.feed_model(glitch)
+    iid = project.image_ids()[jumped]
+    assert np.allclose(work.model.images[iid].centre, np.asarray(corrected[10].position) + JUMP, atol=1e-9)
     work.match_all(corrected, pairs)
     work.feed_model(corrected)
+    assert np.allclose(work.model.images[iid].centre, corrected[10].position, atol=1e-9)  # put right
+    assert {p for p in pairs if jumped in p and missing not in p} <= set(project.matched())
     for k in half:
         iid = project.image_ids()[k.name]
         assert np.allclose(work.model.images[iid].centre, centres_before[k.name] + SHIFT, atol=1e-9), k.name
@@ -78,6 +89,7 @@ def test_a_loop_closure_and_a_missing_image_mid_session(tmp_path):
     assert wanted_elsewhere <= set(project.matched())
     model = read_model(report["model_path"]).image_by_name()
     assert sorted(model) == sorted(k.name for k in corrected if k.name != missing)
+    assert np.allclose(centre_of(model[jumped].qvec, model[jumped].tvec), corrected[10].position, atol=1e-6)
     for k in half:  # the model holds the corrected poses
         assert np.allclose(centre_of(model[k.name].qvec, model[k.name].tvec), np.asarray(k.position) + SHIFT,
                            atol=1e-6)
