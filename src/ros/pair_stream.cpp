@@ -53,7 +53,12 @@ void PairStream::onTimer(const ros::WallTimerEvent&) {
   if (last == 0) return;
   if (ros::WallTime::now().toNSec() - last < static_cast<uint64_t>(config_.pair_flush_idle * 1e9))
     return;
-  flush();
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (announcer_.pending() > 0)
+    emitLocked(announcer_.flush(), false, true);
+  else if (!pause_told_.load() && output_.size() > 0)
+    emitLocked({}, false, true);  // nothing pending: the pause alone is news (a consumer finishes)
+  pause_told_ = true;
 }
 
 uint64_t PairStream::sequence() const {
@@ -102,6 +107,7 @@ view_selection::PairChanges PairStream::fullMessageLocked() const {
   if (n > 0) msg.header.stamp = ros::Time(output_.keyframes[n - 1].stamp);
   msg.sequence = sequence_;
   msg.full = true;
+  msg.flushed = pause_told_.load() && announcer_.pending() == 0;  // the frames stopped and all is announced
   for (const core::Pair& p : announcer_.announced()) msg.added.push_back(pairToMsg(p.first, p.second));
   for (std::size_t i = 0; i < n; ++i) msg.keyframes.push_back(keyframeToMsg(output_, static_cast<core::ViewId>(i)));
   msg.total_keyframes = static_cast<uint32_t>(n);

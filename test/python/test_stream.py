@@ -10,8 +10,8 @@ def keyframe(i):
               intrinsics=[500.0, 500.0, 320.0, 240.0], width=640, height=480)
 
 
-def msg(seq, added=(), removed=(), keyframes=(), full=False, total=None, pending=0):
-    return NS(sequence=seq, full=full, added=[NS(first=a, second=b) for a, b in added],
+def msg(seq, added=(), removed=(), keyframes=(), full=False, total=None, pending=0, flushed=False):
+    return NS(sequence=seq, full=full, flushed=flushed, added=[NS(first=a, second=b) for a, b in added],
               removed=[NS(first=a, second=b) for a, b in removed], keyframes=[keyframe(i) for i in keyframes],
               total_keyframes=total if total is not None else len(keyframes), pending_pairs=pending)
 
@@ -83,6 +83,31 @@ def test_new_keyframes_are_timed_by_the_clock():
     now[0] = 12.0
     s.receive(msg(2, keyframes=[0], total=1))  # the same keyframe again (a pose update)
     assert s.last_keyframe_time == 10.0 and s.last_change_time == 12.0
+
+
+def test_the_node_s_pauses_are_told_apart_from_pauses_of_keyframes():
+    # colmap_bridge finishes once the node says its frames stopped (a flushed message), not
+    # whenever keyframes pause: walking where the camera has been makes none.
+    now = [10.0]
+    s = PairStream(clock=lambda: now[0])
+    s.receive(msg(1, added=[(0, 1)], keyframes=[0, 1]))
+    assert not s.pauses_told and not s.frames_paused()
+    now[0] = 11.0
+    s.receive(msg(2, total=2, flushed=True))  # nothing pending: the pause alone
+    assert s.pauses_told and s.frames_paused()
+    assert s.last_change_time == 10.0  # a pause alone changes nothing: no second finish for it
+    now[0] = 20.0
+    s.receive(msg(3, keyframes=[2], added=[(1, 2)], total=3))  # frames came again, and a keyframe
+    assert not s.frames_paused()
+    now[0] = 21.0
+    s.receive(msg(4, added=[(0, 2)], keyframes=[0, 2], total=3, flushed=True))  # pairs flushed at a pause
+    assert s.frames_paused() and s.last_change_time == 21.0
+    now[0] = 22.0
+    s.receive(msg(5, keyframes=[3], total=4))  # a keyframe after the pause
+    assert not s.frames_paused()
+    t = PairStream(clock=lambda: now[0])
+    t.catch_up(5, [msg(5, added=[(0, 1)], keyframes=[0, 1, 2, 3], full=True, flushed=True)])
+    assert t.frames_paused()  # a bridge that joins after the recording ended
 
 
 def test_the_names_follow_every_change_as_a_full_conversion_would():

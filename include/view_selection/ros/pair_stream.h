@@ -3,7 +3,10 @@
 // and went after each change of the selection; it applies the stability rule
 // (core::PairAnnouncer, ~pair_stable_keyframes), numbers what it announces, publishes it on
 // ~pairs and keeps the last ~pair_history messages for ~get_pairs. When no frame arrived for
-// ~pair_flush_idle seconds it announces every pending pair (the recording paused or ended). Its
+// ~pair_flush_idle seconds it announces every pending pair (the recording paused or ended) in a
+// `flushed` message, sent once a pause even when nothing was pending: that the frames stopped
+// is what tells colmap_bridge to finish (keyframes alone pause whenever the camera walks where
+// it has been). Its
 // own lock only: the worker calls it under the state lock, services and the timer never wait
 // for an insertion.
 #pragma once
@@ -38,7 +41,10 @@ class PairStream {
   /// after `sequence`; a full message follows.
   void restore(uint64_t sequence, const core::SelectionOutput& output);
   /// A frame arrived or was handled (for ~pair_flush_idle).
-  void frameSeen() { last_frame_ns_ = ros::WallTime::now().toNSec(); }
+  void frameSeen() {
+    last_frame_ns_ = ros::WallTime::now().toNSec();
+    pause_told_ = false;
+  }
   /// Announces every pending pair now (the timer does when no frame came for a while).
   void flush();
 
@@ -58,6 +64,7 @@ class PairStream {
   ros::Publisher publisher_;
   ros::WallTimer timer_;
   std::atomic<uint64_t> last_frame_ns_{0};
+  std::atomic<bool> pause_told_{false};  ///< a flushed message went out since the last frame
 
   mutable std::mutex mutex_;
   core::PairAnnouncer announcer_;

@@ -53,7 +53,8 @@ PARAMETERS = """Parameters (private, ~name):
                      0: everything at the finish)
   max_batch_pairs    pairs per matching run while the recording goes on (24)
   max_attempts       tries of an image or pair that fails before it is skipped (3)
-  finish_after_idle  [s] build the model once no keyframe came for this long, again after more
+  finish_after_idle  [s] build the model once no keyframe came for this long and the node said its
+                     frames stopped (its ~pair_flush_idle), again after more
                      (1.0; 0: off, only on ~finish and at shutdown; with the mapper model, 0)
   shutdown_budget    [s] the finish at shutdown must be done within this (12; roslaunch waits 15)
   model              known_poses (the keyframes at the node's poses) or mapper (COLMAP's own)
@@ -110,6 +111,12 @@ FINISH_WRITE_RESERVE = 2.0
 # ~refined_path is published when a keyframe moved more than this [m, deg]: half the node's
 # ~correction_min_translation and ~correction_min_rotation_deg defaults.
 PATH_MIN_TRANSLATION, PATH_MIN_ROTATION_DEG = 0.001, 0.05
+
+# A node that tells its pauses but has sent no pause since its last keyframe: the bridge
+# finishes anyway after this long without keyframes [s] (the node gone mid-recording, or frames
+# that stopped before reaching it). Longer than the keyframe gaps of walking round a room seen
+# before (the revisit rule), so that those do not finish.
+FINISH_WITHOUT_PAUSE = 30.0
 
 
 def _param(name, default):
@@ -274,14 +281,22 @@ class Bridge:
             if need_sync or time.monotonic() - last_poll > self.poll_period:
                 last_poll = time.monotonic()
                 self.sync()
-            # Due: no keyframe for ~finish_after_idle, and the node announced every pair it
-            # selected (it does once no frame came for its ~pair_flush_idle), or three times as
-            # long without keyframes (a node that never flushes).
+            # Due: no keyframe for ~finish_after_idle, and the node said its frames stopped
+            # (its `flushed` message, once no frame came for its ~pair_flush_idle: every pair it
+            # selected is announced then). While frames still come the camera is walking where
+            # it has been (the revisit rule makes no keyframe there): a finish then would be
+            # work thrown away (a 30-minute walk finished 126 times, 0.5 of a core). A node that
+            # never tells its pauses (~pair_flush_idle 0): no pending pair, or three times as
+            # long without keyframes; one that told pauses and then went quiet (gone, or its
+            # camera stopped unseen): FINISH_WITHOUT_PAUSE seconds without keyframes.
             with self.lock:
                 s = self.stream
                 idle = time.monotonic() - (s.last_keyframe_time or time.monotonic())
-                due = (self.finish_after_idle > 0 and s.keyframes and idle >= self.finish_after_idle
-                       and (s.pending_pairs == 0 or idle >= 3 * self.finish_after_idle)
+                if s.pauses_told:
+                    stopped = s.frames_paused() or idle >= FINISH_WITHOUT_PAUSE
+                else:
+                    stopped = s.pending_pairs == 0 or idle >= 3 * self.finish_after_idle
+                due = (self.finish_after_idle > 0 and s.keyframes and idle >= self.finish_after_idle and stopped
                        and self.finished_at_change != s.last_change_time)
             more = False
             if due:

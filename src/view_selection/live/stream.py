@@ -29,6 +29,10 @@ class PairStream:
         self.pending_pairs = 0         # the node's selected pairs not announced yet
         self.last_keyframe_time = None  # when a keyframe new to us last came
         self.last_change_time = clock()
+        # The node's `flushed` messages: no frame reached it for ~pair_flush_idle (the recording
+        # paused or ended). Keyframes alone pause whenever the camera walks where it has been.
+        self.last_pause_time = None     # when the last one came
+        self.pauses_told = False        # this node tells its pauses (every pause, since issue 34)
 
     def apply(self, msg):
         """Applies one message (in sequence, or `full`)."""
@@ -64,7 +68,16 @@ class PairStream:
         self.sequence = msg.sequence
         self.messages += 1
         self.pending_pairs = msg.pending_pairs
-        self.last_change_time = self.clock()
+        if getattr(msg, "flushed", False):
+            self.last_pause_time = self.clock()
+            self.pauses_told = True
+        if msg.full or msg.keyframes or msg.added or msg.removed:  # a pause alone changes nothing
+            self.last_change_time = self.clock()
+
+    def frames_paused(self):
+        """True when the node said its frames stopped after the last keyframe new to us."""
+        return self.last_pause_time is not None and (self.last_keyframe_time is None
+                                                     or self.last_pause_time >= self.last_keyframe_time)
 
     def receive(self, msg):
         """A message from ~pairs: applied when it is the next one (or full); True if applied.
