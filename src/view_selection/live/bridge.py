@@ -189,6 +189,7 @@ class Bridge:
         self.stopping = False
         self.last_report = None
         self.sub = None
+        self.node_tells_pauses = False  # read from the node's ~pair_flush_idle once it is found
 
         self.diagnostics = rospy.Publisher("/diagnostics", DiagnosticArray, queue_size=10)
         # On wall time: with /use_sim_time a bag's clock stops at its end, and the report
@@ -249,6 +250,14 @@ class Bridge:
             return False
         if self.sub is None:
             self.sub = rospy.Subscriber(self.node + "/pairs", PairChanges, self.on_pairs, queue_size=1000)
+            # Whether the node will say when its frames stop: it does at every pause unless its
+            # ~pair_flush_idle is 0 (a parameter not set is its default, 0.5 s).
+            try:
+                self.node_tells_pauses = float(rospy.get_param(self.node + "/pair_flush_idle", 0.5)) > 0.0
+            except (KeyError, TypeError, ValueError, rospy.ROSException) as e:
+                rospy.logwarn("colmap_bridge: cannot read %s/pair_flush_idle (%s): finishing on pauses of "
+                              "keyframes" % (self.node, e))
+                self.node_tells_pauses = False
         name = self.node + "/get_pairs"
         with self.lock:
             since = self.stream.sequence
@@ -287,12 +296,12 @@ class Bridge:
             # it has been (the revisit rule makes no keyframe there): a finish then would be
             # work thrown away (a 30-minute walk finished 126 times, 0.5 of a core). A node that
             # never tells its pauses (~pair_flush_idle 0): no pending pair, or three times as
-            # long without keyframes; one that told pauses and then went quiet (gone, or its
-            # camera stopped unseen): FINISH_WITHOUT_PAUSE seconds without keyframes.
+            # long without keyframes; one that tells them but went quiet (gone, or its camera
+            # stopped unseen): FINISH_WITHOUT_PAUSE seconds without keyframes.
             with self.lock:
                 s = self.stream
                 idle = time.monotonic() - (s.last_keyframe_time or time.monotonic())
-                if s.pauses_told:
+                if self.node_tells_pauses or s.pauses_told:
                     stopped = s.frames_paused() or idle >= FINISH_WITHOUT_PAUSE
                 else:
                     stopped = s.pending_pairs == 0 or idle >= 3 * self.finish_after_idle
