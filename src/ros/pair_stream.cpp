@@ -54,10 +54,9 @@ void PairStream::onTimer(const ros::WallTimerEvent&) {
   if (ros::WallTime::now().toNSec() - last < static_cast<uint64_t>(config_.pair_flush_idle * 1e9))
     return;
   std::lock_guard<std::mutex> lock(mutex_);
-  if (announcer_.pending() > 0)
+  // Pending pairs go out at once; with none, the pause alone is news once (a consumer finishes).
+  if (announcer_.pending() > 0 || (!pause_told_.load() && output_.size() > 0))
     emitLocked(announcer_.flush(), false, true);
-  else if (!pause_told_.load() && output_.size() > 0)
-    emitLocked({}, false, true);  // nothing pending: the pause alone is news (a consumer finishes)
   pause_told_ = true;
 }
 

@@ -6,9 +6,8 @@
 // ~pair_flush_idle seconds it announces every pending pair (the recording paused or ended) in a
 // `flushed` message, sent once a pause even when nothing was pending: that the frames stopped
 // is what tells colmap_bridge to finish (keyframes alone pause whenever the camera walks where
-// it has been). Its
-// own lock only: the worker calls it under the state lock, services and the timer never wait
-// for an insertion.
+// it has been). Its own lock only: the worker calls it under the state lock, services and the
+// timer never wait for an insertion.
 #pragma once
 
 #include "view_selection/core/pair_announcer.h"
