@@ -2,6 +2,7 @@
 
 #include "view_selection/core/exceptions.h"
 #include "view_selection/eval/trajectory_alignment.h"
+#include "view_selection/refine/epipolar.h"
 #include "view_selection/refine/tracks.h"
 #include "view_selection/refine/triangulation.h"
 
@@ -239,11 +240,13 @@ struct Deadline {
   double left() const { return set ? std::chrono::duration<double>(at - Clock::now()).count() : 1e30; }
   bool passed() const { return set && Clock::now() >= at; }
   /// Half of what is left from now (none stays none).
-  Deadline half() const {
+  Deadline half() const { return share(0.5); }
+  /// `fraction` of what is left from now (none stays none).
+  Deadline share(double fraction) const {
     Deadline d = *this;
     if (set)
       d.at = Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                std::chrono::duration<double>(std::max(0.0, left()) / 2.0));
+                                std::chrono::duration<double>(std::max(0.0, left()) * fraction));
     return d;
   }
 };
@@ -528,12 +531,127 @@ struct PassResult {
   bool aligned = false;
   double scale = 1.0;
   int retriangulations = 0;
+  size_t epipolar_correspondences = 0;
+  int epipolar_iterations = 0;
+  double epipolar_median_input = 0.0, epipolar_median_refined = 0.0;
 };
 
 /// Where a pass is, for the progress lines: "(pass 1, stage 2 of 3)".
 std::string stageName(int pass_number, int stage, int stages) {
   return "(pass " + std::to_string(pass_number) + ", stage " + std::to_string(stage + 1) + " of " +
          std::to_string(stages) + ")";
+}
+
+/// A pose as the refinement's parameter blocks hold it: Eigen's quaternion (x, y, z, w), the translation.
+std::array<double, 7> poseBlock(const State::Pose& p) {
+  return {p.rotation.x(), p.rotation.y(), p.rotation.z(), p.rotation.w(),
+          p.translation.x(), p.translation.y(), p.translation.z()};
+}
+
+/// The median |Sampson distance| [px] of the pairs' matches at the poses of `s`.
+double medianSampson(const State& s, const std::vector<EpipolarPair>& pairs) {
+  std::vector<double> d;
+  for (const auto& p : pairs) {
+    const std::array<double, 7> pa = poseBlock(s.poses.at(p.a)), pb = poseBlock(s.poses.at(p.b));
+    std::vector<double> r(p.rays_a.size());
+    const EpipolarErrors errors(p);
+    errors(pa.data(), pb.data(), r.data());
+    for (double v : r) d.push_back(std::abs(v));
+  }
+  if (d.empty()) return 0.0;
+  std::nth_element(d.begin(), d.begin() + static_cast<long>(d.size() / 2), d.end());
+  return d[d.size() / 2];
+}
+
+/// The poses of the gauge's moving images adjusted to the matches' epipolar geometry and the
+/// priors, before the first triangulation (epipolar.h; config.epipolar_first). Needs the priors:
+/// they alone hold the scale. Images in `kept` and their pairs take no part. A pair's matches are
+/// one residual block under a Huber loss on their root mean square (a pair verified with a wrong
+/// geometry weighs as one, however many matches it has). A solve that fails leaves the poses as
+/// they were; the points are left where they are (the stage after triangulates them anew).
+void epipolarStage(PassResult& r, const Gauge& gauge, const std::vector<EpipolarPair>& all, const std::set<int>& kept,
+                   const RefinementConfig& config, const Deadline& deadline, const std::string& where,
+                   io::Progress* progress) {
+  State& s = r.state;
+  std::vector<const EpipolarPair*> pairs;
+  for (const auto& p : all)
+    if (!kept.count(p.a) && !kept.count(p.b) && s.poses.count(p.a) && s.poses.count(p.b) &&
+        (gauge.moving.count(p.a) || gauge.moving.count(p.b)))
+      pairs.push_back(&p);
+  if (pairs.empty() || gauge.priors.empty() || gauge.moving.empty()) return;
+  std::vector<EpipolarPair> taking_part;
+  for (const auto* p : pairs) taking_part.push_back(*p);
+  for (const auto& p : taking_part) r.epipolar_correspondences += p.rays_a.size();
+  r.epipolar_median_input = medianSampson(s, taking_part);
+  ceres::Problem problem;  // owns the cost functions and the pairs' losses
+  ceres::CauchyLoss* prior_loss = new ceres::CauchyLoss(config.prior_loss_scale);
+  std::map<int, std::array<double, 7>> pose;
+  for (const auto& [id, p] : s.poses) pose[id] = poseBlock(p);
+  std::set<int> used;
+  for (const auto& p : taking_part) {
+    const int n = static_cast<int>(p.rays_a.size());
+    auto* cost = new ceres::AutoDiffCostFunction<EpipolarErrors, ceres::DYNAMIC, 7, 7>(new EpipolarErrors(p), n);
+    // Huber on the block's sum of squares: quadratic while the pair's RMS is within the scale.
+    problem.AddResidualBlock(cost, new ceres::HuberLoss(config.epipolar_loss_scale * std::sqrt(n)), pose[p.a].data(),
+                             pose[p.b].data());
+    used.insert(p.a);
+    used.insert(p.b);
+  }
+  bool prior_loss_used = false;
+  for (const Prior& p : gauge.priors) {
+    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<RelativePosePrior, 6, 7, 7>(
+                                 new RelativePosePrior(p.rotation_ba, p.translation_ba, p.sigma_r, p.sigma_t)),
+                             prior_loss, pose[p.a].data(), pose[p.b].data());
+    prior_loss_used = true;
+    used.insert(p.a);
+    used.insert(p.b);
+  }
+  if (!prior_loss_used) delete prior_loss;
+  using PoseManifold = ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>;
+  bool any_moving = false;
+  for (int id : used) {
+    problem.SetManifold(pose[id].data(), new PoseManifold);
+    if (!gauge.moving.count(id))
+      problem.SetParameterBlockConstant(pose[id].data());
+    else
+      any_moving = true;
+  }
+  if (!any_moving) return;
+  ceres::Solver::Options options;
+  options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+  options.max_num_iterations = config.epipolar_max_iterations;
+  options.function_tolerance = config.function_tolerance;
+  if (deadline.set) options.max_solver_time_in_seconds = std::max(0.01, deadline.left());
+  options.num_threads = config.threads > 0 ? config.threads
+                                           : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  options.logging_type = ceres::SILENT;
+  const std::string label = "epipolar adjustment " + where;
+  const std::function<void(int)> on_iteration = [&](int iteration) {
+    if (progress)
+      progress->report(label, static_cast<size_t>(iteration), static_cast<size_t>(config.epipolar_max_iterations),
+                       "iterations");
+  };
+  std::unique_ptr<IterationReporter> reporter;
+  if (progress) {
+    reporter = std::make_unique<IterationReporter>(on_iteration);
+    options.callbacks.push_back(reporter.get());
+  }
+  ceres::Solver::Summary summary;
+  ceres::Solve(options, &problem, &summary);
+  if (progress) progress->end();
+  if (config.verbose) std::fprintf(stderr, "%s\n", summary.FullReport().c_str());
+  r.epipolar_iterations = static_cast<int>(summary.iterations.size());
+  if (summary.termination_type == ceres::FAILURE || summary.termination_type == ceres::USER_FAILURE ||
+      !std::isfinite(summary.final_cost) || summary.final_cost > summary.initial_cost) {
+    r.epipolar_median_refined = r.epipolar_median_input;
+    return;
+  }
+  for (int id : used) {
+    const auto& v = pose[id];
+    s.poses[id].rotation = Eigen::Quaterniond(v[3], v[0], v[1], v[2]).normalized();
+    s.poses[id].translation = Eigen::Vector3d(v[4], v[5], v[6]);
+  }
+  r.epipolar_median_refined = medianSampson(s, taking_part);
 }
 
 /// Stage `stage` of a pass begins with the points triangulated anew from the tracks, at the
@@ -638,7 +756,8 @@ void alignToReference(PassResult& r, const std::map<int, State::Pose>& reference
 /// to the reference when the caller held nothing. `pass_number` names the pass in the progress.
 PassResult pass(const State& input, const std::map<int, State::Pose>& reference, const std::set<int>& movable,
                 const std::set<int>& kept, const RefinementConfig& config, const Tracks* tracks,
-                const Deadline& deadline, int pass_number = 1, io::Progress* progress = nullptr) {
+                const std::vector<EpipolarPair>* epipolar, const Deadline& deadline, int pass_number = 1,
+                io::Progress* progress = nullptr) {
   PassResult r;
   r.state = input;
   State& s = r.state;
@@ -652,6 +771,9 @@ PassResult pass(const State& input, const std::map<int, State::Pose>& reference,
   r.points_filtered += pts;
   const Gauge gauge = gaugeOf(s, reference, movable, kept, config);
   const int stages = tracks ? 1 + config.retriangulations : 1;
+  if (tracks && config.triangulate_first && config.epipolar_first && epipolar)
+    epipolarStage(r, gauge, *epipolar, kept, config, deadline.share(config.epipolar_time_share),
+                  "(pass " + std::to_string(pass_number) + ")", progress);
   for (int stage = 0; stage < stages && !r.out_of_time; ++stage) {
     if (stage > 0 && deadline.passed()) {
       r.out_of_time = true;
@@ -701,6 +823,12 @@ std::map<int, std::string> implausibleCorrections(const State& s, const std::set
                                                   const std::map<int, State::Pose>& reference,
                                                   const std::map<int, double>& depth, const RefinementConfig& config) {
   const bool priors = config.prior_translation_ratio > 0.0;
+  // Drift grows with the distance travelled: a long session's correction is not implausible
+  // because it is large (a 5-minute walk's odometry: 0.3 m and 12 degrees median, 20 at most).
+  double path = 0.0;
+  for (auto it = reference.begin(), next = std::next(it); it != reference.end() && next != reference.end(); ++it, ++next)
+    path += (next->second.centre() - it->second.centre()).norm();
+  const double max_turn = std::max(config.max_correction_deg, config.max_correction_deg_per_path * path);
   std::map<int, std::string> found;
   const std::map<int, int> observations = s.observationsPerImage();
   for (int id : movable) {
@@ -708,12 +836,13 @@ std::map<int, std::string> implausibleCorrections(const State& s, const std::set
     const double moved = (s.poses.at(id).centre() - reference.at(id).centre()).norm();
     const double turned = rotationBetweenDeg(s.poses.at(id).rotation, reference.at(id).rotation);
     std::ostringstream why;
-    if (moved > config.max_correction_depth_ratio * depth.at(id))
+    const double max_move = std::max(config.max_correction_depth_ratio * depth.at(id), config.max_correction_path_ratio * path);
+    if (moved > max_move)
       why << "implausible correction: moved " << moved << " (more than " << config.max_correction_depth_ratio
-          << " x its median depth " << depth.at(id) << ")";
-    else if (turned > config.max_correction_deg)
-      why << "implausible correction: turned " << turned << " deg (more than " << config.max_correction_deg
-          << ")";
+          << " x its median depth " << depth.at(id) << " and " << config.max_correction_path_ratio
+          << " x the path " << path << ")";
+    else if (turned > max_turn)
+      why << "implausible correction: turned " << turned << " deg (more than " << max_turn << ")";
     else if (!priors && observations.at(id) < config.min_observations)
       why << "too few observations after filtering (" << observations.at(id) << " < "
           << config.min_observations << ")";
@@ -750,6 +879,10 @@ void reportRefined(RefinementReport& rep, const PassResult& result, const std::m
   rep.aligned = result.aligned;
   rep.retriangulations = result.retriangulations;
   rep.alignment_scale = result.scale;
+  rep.epipolar_correspondences = result.epipolar_correspondences;
+  rep.epipolar_iterations = result.epipolar_iterations;
+  rep.epipolar_median_input = result.epipolar_median_input;
+  rep.epipolar_median_refined = result.epipolar_median_refined;
   for (auto& c : rep.images) {
     if (!c.movable) continue;
     const auto k = kept.find(c.image_id);
@@ -790,6 +923,13 @@ void RefinementConfig::validate() const {
   if (!(prior_translation_ratio >= 0.0)) throw core::InvalidArgument("prior_translation_ratio must be >= 0");
   if (!(prior_rotation_deg > 0.0)) throw core::InvalidArgument("prior_rotation_deg must be positive");
   if (!(prior_loss_scale > 0.0)) throw core::InvalidArgument("prior_loss_scale must be positive");
+  if (!(max_correction_path_ratio >= 0.0)) throw core::InvalidArgument("max_correction_path_ratio must be >= 0");
+  if (!(max_correction_deg_per_path >= 0.0)) throw core::InvalidArgument("max_correction_deg_per_path must be >= 0");
+  if (epipolar_max_iterations < 1) throw core::InvalidArgument("epipolar_max_iterations must be >= 1");
+  if (epipolar_matches_per_pair < 1) throw core::InvalidArgument("epipolar_matches_per_pair must be >= 1");
+  if (!(epipolar_loss_scale > 0.0)) throw core::InvalidArgument("epipolar_loss_scale must be positive [px]");
+  if (!(epipolar_time_share > 0.0 && epipolar_time_share <= 1.0))
+    throw core::InvalidArgument("epipolar_time_share must be in (0, 1]");
 }
 
 std::set<int> allImages(const io::ColmapModel& model) {
@@ -828,6 +968,17 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
     if (initial.poses.count(id)) movable.insert(id);
   Tracks tracks;
   if (matches) tracks = buildTracks(*matches);
+  std::vector<EpipolarPair> epipolar;
+  if (matches && config.epipolar_first)
+    epipolar = epipolarPairs(
+        *matches, config.epipolar_matches_per_pair, config.epipolar_min_matches,
+        [&](int id) { return initial.images.count(id) > 0; },
+        [&](int id, int index) -> Eigen::Vector2d {
+          const auto& points = initial.images.at(id)->points2D;
+          return index >= 0 && static_cast<size_t>(index) < points.size() ? points[static_cast<size_t>(index)].xy
+                                                                           : Eigen::Vector2d(NAN, NAN);
+        },
+        [&](int id) { return initial.intrinsics.at(id); });
   const Tracks* with_tracks = matches ? &tracks : nullptr;
   rep.tracks = tracks.tracks.size();
   rep.track_conflicts = tracks.conflicts;
@@ -900,7 +1051,7 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
     for (const auto& [id, why] : kept) ids.insert(id);
     return ids;
   };
-  PassResult result = pass(initial, reference, movable, keptIds(), config, with_tracks, deadline, 1, progress);
+  PassResult result = pass(initial, reference, movable, keptIds(), config, with_tracks, &epipolar, deadline, 1, progress);
   // Implausible corrections, or images left without enough observations: start again with them
   // kept at their input poses (once; what the second pass still moves too far is put back).
   if (!result.diverged) {
@@ -909,7 +1060,7 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
     kept.insert(offenders.begin(), offenders.end());
     if (!offenders.empty() && !deadline.passed()) {
       rep.passes = 2;
-      result = pass(initial, reference, movable, keptIds(), config, with_tracks, deadline, 2, progress);
+      result = pass(initial, reference, movable, keptIds(), config, with_tracks, &epipolar, deadline, 2, progress);
     }
   }
   if (progress) progress->end();

@@ -52,6 +52,13 @@ Cameras must be PINHOLE or SIMPLE_PINHOLE.
   --triangulation-growth G  ... and this factor more in each earlier one (default 3: 9 px in the
                      first, made at the input poses before the first adjustment)
   --no-triangulate-first  with --matches: the first adjustment on the input's own points
+  --no-epipolar      with --matches and priors, the poses are first adjusted to the matches'
+                     epipolar geometry (Sampson distances, no points: a long session's drift
+                     corrected at the cost of its keyframes), then triangulated; this skips it
+  --epipolar-matches-per-pair N  matches of each pair in it (default 8) ...
+  --epipolar-loss-scale PX       ... under a Huber loss from PX (default 4) ...
+  --epipolar-time-share F        ... within F of the time budget (default 0.3) ...
+  --epipolar-iterations N        ... and N Ceres iterations at most (default 100)
   --fixed FILE       image names (one a line) that must not move; default: every image moves
   --reference MODEL  the poses corrections are measured against, the result is aligned to and
                      kept images return to (default: the input's); e.g. the SLAM poses when the
@@ -66,6 +73,8 @@ Cameras must be PINHOLE or SIMPLE_PINHOLE.
   --min-observations N  images with fewer keep their pose (default 15)
   --max-correction-depth-ratio R  (default 0.5)
   --max-correction-deg DEG        (default 15)
+  --max-correction-path-ratio R   ... unless within R x the path the input poses travel (default 0.01) ...
+  --max-correction-deg-per-path D ... and D degrees a metre of it (default 0.2): drift grows with the distance
   --prior-translation-ratio R     the given poses' relative motion between consecutive images
                      (by id) is a soft constraint: a step may change by R of its length (1 sigma;
                      default 0.2; 0: no such priors)
@@ -111,6 +120,10 @@ nlohmann::json reportJson(const refine::RefinementReport& r) {
           {"iterations", r.iterations},
           {"passes", r.passes},
           {"retriangulations", r.retriangulations},
+          {"epipolar", {{"correspondences", r.epipolar_correspondences},
+                        {"iterations", r.epipolar_iterations},
+                        {"median_sampson_input", r.epipolar_median_input},
+                        {"median_sampson_refined", r.epipolar_median_refined}}},
           {"tracks", r.tracks},
           {"track_conflicts", r.track_conflicts},
           {"initial_cost", r.initial_cost},
@@ -136,8 +149,9 @@ int run(int argc, char** argv) {
                          "max-correction-deg", "threads", "prior-translation-ratio", "prior-rotation-deg",
                          "prior-loss-scale", "dense-up-to", "function-tolerance", "matches", "retriangulations",
                          "triangulation-max-error", "triangulation-growth", "max-seconds", "sparse-up-to",
-                         "progress-interval"},
-                        {"no-align", "quiet", "verbose", "no-triangulate-first", "no-progress", "help"});
+                         "progress-interval", "epipolar-matches-per-pair", "epipolar-loss-scale", "epipolar-time-share", "epipolar-iterations", "max-correction-path-ratio",
+                         "max-correction-deg-per-path"},
+                        {"no-align", "quiet", "verbose", "no-triangulate-first", "no-epipolar", "no-progress", "help"});
   if (cli.flag("help")) {
     std::cout << kUsage;
     return 0;
@@ -154,6 +168,9 @@ int run(int argc, char** argv) {
   config.max_correction_depth_ratio =
       cli.real("max-correction-depth-ratio", config.max_correction_depth_ratio, 1e-9, 1e9);
   config.max_correction_deg = cli.real("max-correction-deg", config.max_correction_deg, 1e-9, 180.0);
+  config.max_correction_path_ratio = cli.real("max-correction-path-ratio", config.max_correction_path_ratio, 0.0, 1e6);
+  config.max_correction_deg_per_path =
+      cli.real("max-correction-deg-per-path", config.max_correction_deg_per_path, 0.0, 1e6);
   config.prior_translation_ratio = cli.real("prior-translation-ratio", config.prior_translation_ratio, 0.0, 1e6);
   config.prior_rotation_deg = cli.real("prior-rotation-deg", config.prior_rotation_deg, 1e-9, 180.0);
   config.prior_loss_scale = cli.real("prior-loss-scale", config.prior_loss_scale, 1e-9, 1e9);
@@ -163,6 +180,13 @@ int run(int argc, char** argv) {
   config.triangulation_max_error = cli.real("triangulation-max-error", config.triangulation_max_error, 1e-6, 1e6);
   config.triangulation_growth = cli.real("triangulation-growth", config.triangulation_growth, 1.0, 100.0);
   config.triangulate_first = !cli.flag("no-triangulate-first");
+  config.epipolar_first = !cli.flag("no-epipolar");
+  config.epipolar_matches_per_pair = static_cast<size_t>(
+      cli.integer("epipolar-matches-per-pair", static_cast<long>(config.epipolar_matches_per_pair), 1, 100000));
+  config.epipolar_loss_scale = cli.real("epipolar-loss-scale", config.epipolar_loss_scale, 1e-6, 1e6);
+  config.epipolar_time_share = cli.real("epipolar-time-share", config.epipolar_time_share, 1e-6, 1.0);
+  config.epipolar_max_iterations =
+      static_cast<int>(cli.integer("epipolar-iterations", config.epipolar_max_iterations, 1, 100000));
   config.function_tolerance = cli.real("function-tolerance", config.function_tolerance, 1e-12, 0.5);
   config.dense_up_to = static_cast<size_t>(cli.integer("dense-up-to", static_cast<long>(config.dense_up_to), 0, 100000));
   config.threads = static_cast<int>(cli.integer("threads", config.threads, 0, 256));

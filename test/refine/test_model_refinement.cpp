@@ -4,6 +4,7 @@
 #include "view_selection/core/exceptions.h"
 #include "view_selection/eval/trajectory_alignment.h"
 #include "view_selection/io/colmap_model.h"
+#include "view_selection/refine/epipolar.h"
 #include "view_selection/refine/model_refinement.h"
 #include "view_selection/refine/tracks.h"
 
@@ -233,11 +234,19 @@ TEST_F(Refinement, ProgressNamesEachStageAndChangesNothing) {
   std::istringstream in(out.str());
   std::set<std::string> stages;
   size_t iterations = 0;
+  size_t epipolar = 0;
   for (std::string line; std::getline(in, line);) {
+    if (line.rfind("epipolar adjustment (pass 1) ", 0) == 0) {  // the poses to the matches, first
+      EXPECT_TRUE(stages.empty()) << line;
+      ++epipolar;
+      continue;
+    }
     ASSERT_EQ(line.rfind("adjusting (pass 1, stage ", 0), 0u) << line;  // 600 tracks: under a triangulation's 1024
     stages.insert(line.substr(0, line.find(')') + 1));
     if (line.find("rounds (iteration ") != std::string::npos) ++iterations;
   }
+  EXPECT_EQ(static_cast<int>(epipolar), reported.epipolar_iterations);
+  EXPECT_GT(epipolar, 0u);
   EXPECT_EQ(stages, (std::set<std::string>{"adjusting (pass 1, stage 1 of 2)", "adjusting (pass 1, stage 2 of 2)"}));
   EXPECT_GT(iterations, 2u);
 }
@@ -481,3 +490,102 @@ TEST(ColmapModelFiles, WrittenModelReadsBackTheSame) {
 }
 
 }  // namespace
+
+namespace {
+
+/// A pose block as the refinement holds it: Eigen's quaternion (x, y, z, w), then the translation.
+std::array<double, 7> block(const Eigen::Quaterniond& q, const Eigen::Vector3d& t) {
+  return {q.x(), q.y(), q.z(), q.w(), t.x(), t.y(), t.z()};
+}
+
+}  // namespace
+
+TEST(EpipolarErrors, AreTheDistanceFromTheEpipolarLinesInPixels) {
+  // Two cameras side by side (b 0.2 m to the right of a, same orientation): epipolar lines are
+  // image rows. A match on the same row fits (0); one 3 px below it is 3 px off, which the
+  // Sampson distance shares between the two images: 3 / sqrt(2). Free of the baseline's length.
+  refine::EpipolarPair pair;
+  pair.a = 1;
+  pair.b = 2;
+  pair.focal_a = pair.focal_b = {500.0, 500.0};
+  const Eigen::Vector3d x(0.3, -0.2, 4.0);  // a point in a's frame (= the world)
+  const Eigen::Vector3d in_b = x - Eigen::Vector3d(0.2, 0.0, 0.0);
+  pair.rays_a = {x / x.z(), x / x.z()};
+  pair.rays_b = {in_b / in_b.z(), in_b / in_b.z() + Eigen::Vector3d(0.0, 3.0 / 500.0, 0.0)};
+  const auto a = block(Eigen::Quaterniond::Identity(), Eigen::Vector3d::Zero());
+  for (const double baseline : {0.2, 2.0}) {
+    const auto b = block(Eigen::Quaterniond::Identity(), Eigen::Vector3d(-baseline, 0.0, 0.0));
+    double r[2];
+    ASSERT_TRUE(refine::EpipolarErrors(pair)(a.data(), b.data(), r));
+    EXPECT_NEAR(0.0, r[0], 1e-9);
+    EXPECT_NEAR(3.0 / std::sqrt(2.0), std::abs(r[1]), 1e-6);
+  }
+  // No baseline: no epipolar geometry, and no error (not a NaN).
+  const auto same = block(Eigen::Quaterniond::Identity(), Eigen::Vector3d::Zero());
+  double r[2];
+  ASSERT_TRUE(refine::EpipolarErrors(pair)(a.data(), same.data(), r));
+  EXPECT_TRUE(std::isfinite(r[0]) && std::isfinite(r[1]));
+}
+
+TEST(EpipolarPairs, TakeAtMostTheirShareOfEachPairAndLeaveOutSmallOnes) {
+  std::vector<refine::Match> matches;
+  for (int q = 0; q < 50; ++q) matches.push_back({{2, q}, {1, q}});  // given b first: stored a < b
+  for (int q = 0; q < 10; ++q) matches.push_back({{1, q}, {3, q}});  // too few
+  for (int q = 0; q < 20; ++q) matches.push_back({{1, q}, {9, q}});  // an unknown image
+  const auto pairs = refine::epipolarPairs(
+      matches, 8, 15, [](int id) { return id != 9; },
+      [](int id, int q) { return Eigen::Vector2d(100.0 * id + q, 7.0); },
+      [](int) { return Eigen::Vector4d(500.0, 400.0, 10.0, 7.0); });
+  ASSERT_EQ(1u, pairs.size());
+  EXPECT_EQ(1, pairs[0].a);
+  EXPECT_EQ(2, pairs[0].b);
+  ASSERT_EQ(8u, pairs[0].rays_a.size());
+  std::set<double> spread;
+  for (size_t q = 0; q < 8; ++q) {
+    const double index = pairs[0].rays_a[q].x() * 500.0 + 10.0 - 100.0;  // image 1's 2D point index
+    EXPECT_NEAR(pairs[0].rays_b[q].x() * 500.0 + 10.0 - 200.0, index, 1e-9);  // the same match's other side
+    EXPECT_NEAR(0.0, pairs[0].rays_a[q].y(), 1e-12);
+    spread.insert(index);
+  }
+  EXPECT_EQ(8u, spread.size());
+  EXPECT_GE(*spread.rbegin() - *spread.begin(), 40.0);  // spread over the 50, not the first 8
+}
+
+TEST_F(Refinement, TheEpipolarStageBringsThePosesToTheMatches) {
+  // The poses adjusted to the matches' epipolar geometry, no points: the matches' Sampson
+  // distances at the poses it reached (measured on the poses themselves, before any point is
+  // triangulated) are down to the noise, and one bundle-adjustment iteration after it leaves
+  // less than half the drift. Without it, the stage reports nothing.
+  std::vector<refine::Match> matches;
+  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.0, 4.0, &matches);
+  refine::RefinementConfig config;
+  config.max_iterations = 1;
+  config.max_rounds = 1;
+  config.retriangulations = 0;
+  config.threads = 1;
+  refine::RefinementReport with, without;
+  const io::ColmapModel out = refine::refineModel(input, refine::allImages(input), config, &with, nullptr, &matches);
+  EXPECT_GT(with.epipolar_correspondences, 0u);
+  EXPECT_LE(with.epipolar_correspondences, 8u * 435u);  // at most 8 of each pair of the 30 images
+  EXPECT_GT(with.epipolar_iterations, 1);
+  EXPECT_GT(with.epipolar_median_input, 1.0);           // the drift puts matches off their lines
+  EXPECT_LT(with.epipolar_median_refined, 0.5);         // 0.5 px noise: about 0.3 px Sampson
+  EXPECT_LT(ate(out, exact), 0.5 * ate(input, exact)) << with.message;
+  config.epipolar_first = false;
+  refine::refineModel(input, refine::allImages(input), config, &without, nullptr, &matches);
+  EXPECT_EQ(0u, without.epipolar_correspondences);
+  EXPECT_EQ(0, without.epipolar_iterations);
+}
+
+TEST_F(Refinement, WithoutPriorsTheEpipolarStageDoesNotRun) {
+  // Epipolar geometry has no scale: without the SLAM's steps to hold it the stage would shrink
+  // the baselines; it does not run.
+  std::vector<refine::Match> matches;
+  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.0, 4.0, &matches);
+  refine::RefinementConfig config;
+  config.prior_translation_ratio = 0.0;
+  refine::RefinementReport report;
+  refine::refineModel(input, refine::allImages(input), config, &report, nullptr, &matches);
+  EXPECT_EQ(0u, report.epipolar_correspondences);
+  EXPECT_TRUE(report.refined) << report.message;
+}

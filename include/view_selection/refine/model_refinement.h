@@ -51,6 +51,19 @@ struct RefinementConfig {
   /// less time. In general the k-th of n triangulations admits max_error x growth^(n - k).
   double triangulation_growth = 3.0;
   bool triangulate_first = true;
+  /// With matches and the priors below: before the first triangulation the poses are adjusted to
+  /// the matches' epipolar geometry (epipolar.h: Sampson distances, no points), with at most
+  /// epipolar_matches_per_pair matches of each pair of at least epipolar_min_matches, under a
+  /// Huber loss at epipolar_loss_scale px (the matches are verified, so a pair far off is drift
+  /// to correct, not an outlier to discount), within epipolar_time_share of what is left of the
+  /// budget. It is what corrects a long session's drift within a finish's few seconds, where the
+  /// bundle adjustment makes a few iterations (issue 34).
+  bool epipolar_first = true;
+  size_t epipolar_matches_per_pair = 8;
+  size_t epipolar_min_matches = 15;
+  double epipolar_loss_scale = 4.0;
+  double epipolar_time_share = 0.3;
+  int epipolar_max_iterations = 100;
   /// Adjust-then-filter rounds; stops earlier when a round filters (almost) nothing.
   int max_rounds = 4;
   int max_iterations = 100;  ///< Ceres iterations per adjustment
@@ -64,9 +77,17 @@ struct RefinementConfig {
   /// it cannot be held by so few points. With priors it moves with its neighbours (`weak`).
   int min_observations = 15;
   /// A movable image that the adjustment would move further than this fraction of the median
-  /// depth of its points, or turn by more than max_correction_deg, keeps its input pose.
+  /// depth of its points, or turn by more than max_correction_deg, keeps its input pose ...
   double max_correction_depth_ratio = 0.5;
   double max_correction_deg = 15.0;
+  /// ... unless it is within these of the path the reference poses travel (by image id): drift
+  /// grows with the distance, and a long session's correction is large without being implausible
+  /// (a 5-minute walk with the odometry stand-in's poses, 217 m: refined to convergence, its
+  /// keyframes moved 0.32 m and turned 12 degrees median, 0.84 m and 20 degrees at most). A
+  /// translation up to max_correction_path_ratio x the path, a rotation up to
+  /// max_correction_deg_per_path x the path [deg/m], count as plausible.
+  double max_correction_path_ratio = 0.01;
+  double max_correction_deg_per_path = 0.2;
   /// The SLAM's relative motion between consecutive images (by id) as soft constraints: a
   /// step's translation may change by this fraction of its length (1 sigma; at least this
   /// fraction of a tenth of the median step), its rotation by prior_rotation_deg, under a
@@ -128,6 +149,11 @@ struct RefinementReport {
   int iterations = 0;  ///< Ceres iterations, all rounds
   int passes = 1;      ///< 2 when implausible corrections made it start again with them held
   int retriangulations = 0;  ///< times the points were triangulated anew from the matches
+  /// The epipolar adjustment before the first triangulation (epipolar_first): its correspondences
+  /// (0: it did not run), Ceres iterations, and the median |Sampson distance| [px] before and after.
+  size_t epipolar_correspondences = 0;
+  int epipolar_iterations = 0;
+  double epipolar_median_input = 0.0, epipolar_median_refined = 0.0;
   size_t tracks = 0, track_conflicts = 0;  ///< of the matches given, and matches left out
   double initial_cost = 0.0, final_cost = 0.0;  ///< of the last solve [px^2, robust]
   size_t points_input = 0, points_refined = 0;
