@@ -10,6 +10,7 @@ from .. import geometry
 from ..colmap import durable
 from ..colmap.project import ColmapProject, ProjectError
 from ..keyframes import continuity_pairs, pair_of
+from ..matching.loops import LoopCandidates
 from .attempts import Attempts
 
 
@@ -21,13 +22,15 @@ FINISH_BATCH_PAIRS = 256
 
 class LiveWork:
     def __init__(self, project: ColmapProject, continuity=True, max_backlog=2000, max_batch_pairs=24,
-                 max_attempts=3, log=None, backend=None, triangulation="live", refinement=None):
+                 max_attempts=3, log=None, backend=None, triangulation="live", refinement=None, loops=None):
         """backend: what extracts and matches (register, extract, match, extracted, matched,
         has_image): the project itself (COLMAP's commands) or matching.backend's pose-guided
         one. triangulation: "live" (live/model.py: points as pairs verify, the finish writes
         them) or "colmap" (point_triangulator over the whole model at the finish).
         refinement: refinement.refiner.ModelRefinement (issue 29: the known-pose model refined,
-        DIR/sparse/0 refined, DIR/sparse/unrefined kept), or None."""
+        DIR/sparse/0 refined, DIR/sparse/unrefined kept), or None. loops: matching.loops.LoopOptions
+        (pairs across revisits the poses do not show, wanted beside the announced ones: what lets
+        the refinement see a long session's drift), or None."""
         from ..matching.backend import StageClock
         from .model import LiveModel
         self.project = project
@@ -43,6 +46,7 @@ class LiveWork:
         self.pairs = Attempts(max_attempts)
         self.log = log or (lambda level, text: None)
         self.model = LiveModel() if triangulation == "live" else None
+        self.loops = LoopCandidates(loops) if loops is not None else None
         self.fed_poses = {}        # name -> the pose the model has for it
         self.unfed_pairs = []      # verified pairs (image ids) the live model does not have yet
         self.fed_keyframes = {}    # name -> the Keyframe object last fed with its keypoints
@@ -174,12 +178,16 @@ class LiveWork:
 
     # -- matches -----------------------------------------------------------------------------
     def wanted_pairs(self, keyframes, pairs):
-        """The announced pairs (names) plus, with continuity, each keyframe with the one before.
+        """The announced pairs (names) plus, with continuity, each keyframe with the one before,
+        and with loops the pairs across revisits proposed so far (matching/loops.py).
         A set is taken as it is (its pairs sorted within, as PairStream.announced_names gives
         them): a batch does not convert the whole session's pairs again."""
         wanted = set(pairs) if isinstance(pairs, (set, frozenset)) else {pair_of(a, b) for a, b in pairs}
         if self.continuity:
             wanted |= set(continuity_pairs(keyframes))
+        if self.loops is not None:
+            self.loops.update(keyframes, wanted)  # the new keyframes' pairs across a revisit
+            wanted |= self.loops.pairs
         return wanted
 
     def match(self, keyframes, pairs, limit=None):
@@ -343,6 +351,10 @@ class LiveWork:
         project = self.project
         final = sorted({pair_of(*p) for p in final_pairs})
         extra = sorted(set(continuity_pairs(keyframes)) - set(final)) if self.continuity else []
+        loops = set()
+        if self.loops is not None:
+            self.loops.update(keyframes, set(final) | set(extra))
+            loops = self.loops.pairs - set(final) - set(extra)
         durable.write_atomically(os.path.join(project.root, "pairs.txt"),  # COLMAP's match list
                                  "".join("%s %s\n" % p for p in final))
         # Everything due now, in one run each (halved where a run fails): the finish does not
@@ -370,7 +382,7 @@ class LiveWork:
         matched = set(project.matched())
         with project.db() as d:
             featureless = sorted(d.images_without_keypoints())
-        wanted = set(final) | set(extra)
+        wanted = set(final) | set(extra) | loops
         lost = self.lost_pairs(wanted, matched, extracted, missing, stopped=incomplete)
         if lost:
             self.error("%d of %d wanted pairs are not in the model (report.json: pairs_lost), e.g. %s: %s"
@@ -378,7 +390,9 @@ class LiveWork:
         out = {"keyframes": len(keyframes), "images_missing": missing,
                "images_without_features": [k.name for k in keyframes if k.name not in extracted and k.name not in missing],
                "images_with_no_features": featureless,
-               "final_pairs": len(final), "continuity_pairs": len(extra), "pairs_matched": len(matched),
+               "final_pairs": len(final), "continuity_pairs": len(extra), "loop_pairs": len(loops),
+               "loop_pairs_verified": sum(1 for p, n in project.inlier_counts().items() if p in loops and n > 0),
+               "pairs_matched": len(matched),
                "final_pairs_matched": len(set(final) & matched), "pairs_wasted": len(matched - wanted),
                "pairs_wanted": len(wanted), "pairs_lost": lost,
                "pairs_not_verified": sum(1 for p, n in project.inlier_counts().items() if p in wanted and n == 0),

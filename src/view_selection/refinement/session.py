@@ -17,6 +17,7 @@ from ..export_folder import ExportFolder
 from ..keyframes import pair_of
 from ..live.work import LiveWork
 from ..matching.backend import PoseGuidedBackend
+from ..matching.loops import LoopOptions
 from .local import LocalRefinement
 from .refiner import FINISH_MAX_SECONDS, ModelRefinement, RefinementOptions
 
@@ -40,7 +41,7 @@ class Replay:
                                       tool=refine_tool, log=self.log)
         self.local = LocalRefinement(self.finish, clock=lambda: self.now, **(local or {})) if refine_live else None
         self.work = LiveWork(self.project, backend=PoseGuidedBackend(self.project), log=self.log,
-                             refinement=self.local or self.finish)
+                             refinement=self.local or self.finish, loops=LoopOptions())
         self.batch = max(1, int(batch))
         self.seconds = {"session": 0.0, "finish": 0.0}
 

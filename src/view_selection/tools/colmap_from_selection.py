@@ -44,6 +44,7 @@ from ..export_folder import ExportError, ExportFolder
 from ..live.work import LiveWork
 from ..refinement.refiner import ModelRefinement, RefinementOptions
 from ..matching.backend import PoseGuidedBackend
+from ..matching.loops import LoopOptions
 from ..progress import Progress
 
 
@@ -86,6 +87,9 @@ def parse_args(argv):
     p.add_argument("--no-continuity", action="store_true",
                    help="known_poses: match only the selection's pairs, not also each keyframe with the "
                         "one before it (colmap_bridge's ~continuity_pairs)")
+    p.add_argument("--no-loop-pairs", action="store_true",
+                   help="known_poses: do not also match pairs across revisits that the poses do not show "
+                        "(colmap_bridge's ~loop_pairs; matching/loops.py: what lets the refinement see drift)")
     return p.parse_args(argv)
 
 
@@ -125,6 +129,7 @@ def main(argv=None):
                                          tool=args.refine_tool, log=say,
                                          progress=lambda line: progress.note("refining: " + line))
         work = LiveWork(project, continuity=known and not args.no_continuity,
+                        loops=LoopOptions() if known and not args.no_loop_pairs else None,
                         log=say, backend=backend,
                         triangulation=args.triangulation if known else "colmap", refinement=refinement)
         log("%s model of %d keyframes, %d pairs" % ("known-pose" if known else "mapper", len(export.keyframes),
