@@ -409,6 +409,26 @@ TEST_F(Refinement, AnImplausibleCorrectionKeepsTheInputPose) {
   }
 }
 
+TEST_F(Refinement, ACorrectionWithinTheDriftOfTheWholePathIsPlausible) {
+  // The same 2 m error, where the path the keyframes travel makes it plausible drift (a long
+  // session: here half the path, about 9 m with the glitch's detour, is allowed): image 12 is
+  // refined back to its place like the others instead of keeping its input pose.
+  std::vector<Eigen::Vector3d> t = translation;
+  io::ColmapModel input = knownPoseModel(exact, rotation, t, rng, 0.0, 1e9);
+  input.images.at(12).translation += Eigen::Vector3d(2.0, 0.0, 0.0);
+  refine::RefinementConfig config;
+  config.prior_translation_ratio = 0.0;
+  config.max_reprojection_error = 1e9;
+  config.max_correction_path_ratio = 0.5;
+  refine::RefinementReport report;
+  const io::ColmapModel out = refine::refineModel(input, refine::allImages(input), config, &report);
+  ASSERT_TRUE(report.refined) << report.message;
+  EXPECT_EQ(1, report.passes);
+  for (const auto& i : report.images) EXPECT_TRUE(i.refined) << i.name << ": " << i.kept;
+  EXPECT_GT(report.images.at(11).translation, 1.0);  // moved back most of the 2 m
+  EXPECT_LT(ate(out, exact), ate(input, exact));
+}
+
 TEST_F(Refinement, ARunawaySolveKeepsTheWholeInput) {
   // Observations that fit no geometry (every 2D point moved at random after triangulation):
   // no adjustment makes them agree, most end up beyond 4 px, and the input is kept as it came.
