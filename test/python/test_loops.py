@@ -47,7 +47,7 @@ def test_a_second_lap_is_paired_with_the_first_where_it_comes_back():
     # keyframe of the first lap near its twin 80 before. In the first lap only its last few,
     # coming back to where it began, get one (with its first ones).
     kfs = lap(0, laps=2, drift=(0.15, 0.0, 0.0))
-    loops = LoopCandidates(LoopOptions(neighbourhood=0))
+    loops = LoopCandidates(LoopOptions(neighbourhood=0, spacing=1))
     pairs = loops.update(kfs, wanted=set())
     found = proposals_by_keyframe(pairs, kfs)
     later = [(i, j) for i, j in found if j >= 80]
@@ -61,9 +61,9 @@ def test_a_second_lap_is_paired_with_the_first_where_it_comes_back():
 
 def test_keyframes_come_in_batches_as_the_recording_goes_on():
     kfs = lap(0, laps=2, drift=(0.15, 0.0, 0.0))
-    whole = LoopCandidates(LoopOptions(neighbourhood=0))
+    whole = LoopCandidates(LoopOptions(neighbourhood=0, spacing=1))
     whole.update(kfs, wanted=set())
-    batched = LoopCandidates(LoopOptions(neighbourhood=0))
+    batched = LoopCandidates(LoopOptions(neighbourhood=0, spacing=1))
     for end in range(3, len(kfs) + 3, 3):
         batched.update(kfs[:end], wanted=set())
     assert batched.pairs == whole.pairs
@@ -102,7 +102,7 @@ def test_a_revisit_the_wanted_pairs_already_join_gets_none():
     # keyframes either side), so the lap gets one pair every few keyframes, never two that close.
     kfs = lap(0, laps=2, drift=(0.15, 0.0, 0.0))
     wanted = {pair_of("0019.png", "0100.png")}
-    found = proposals_by_keyframe(LoopCandidates().update(kfs, wanted), kfs)
+    found = proposals_by_keyframe(LoopCandidates(LoopOptions(spacing=1)).update(kfs, wanted), kfs)
     assert not [(i, j) for i, j in found if 97 <= j <= 103 and 16 <= i <= 22], found
     for n, (i, j) in enumerate(found):
         assert not [(a, b) for a, b in found[n + 1:] if abs(a - i) <= 3 and abs(b - j) <= 3], found
@@ -112,13 +112,21 @@ def test_a_revisit_the_wanted_pairs_already_join_gets_none():
 
 def test_per_keyframe_bounds_the_pairs_of_a_keyframe():
     kfs = lap(0, laps=2, drift=(0.15, 0.0, 0.0))
-    two = LoopCandidates(LoopOptions(per_keyframe=2, neighbourhood=0))
+    two = LoopCandidates(LoopOptions(per_keyframe=2, neighbourhood=0, spacing=1))
     found = proposals_by_keyframe(two.update(kfs, set()), kfs)
     counts = {}
     for i, j in found:
         counts[j] = counts.get(j, 0) + 1
     assert max(counts.values()) == 2 and len(found) > 80
     assert LoopCandidates(LoopOptions(per_keyframe=0)).update(kfs, set()) == []
+
+
+def test_one_keyframe_in_spacing_gets_a_pair():
+    kfs = lap(0, laps=2, drift=(0.15, 0.0, 0.0))
+    found = proposals_by_keyframe(LoopCandidates(LoopOptions(neighbourhood=0, spacing=5)).update(kfs, set()), kfs)
+    later = [j for i, j in found]
+    assert all(b - a >= 5 for a, b in zip(later, later[1:])), later
+    assert len([j for j in later if j >= 80]) == 80 // 5
 
 
 def test_bad_options_are_refused():

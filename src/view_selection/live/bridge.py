@@ -68,12 +68,12 @@ PARAMETERS = """Parameters (private, ~name):
                      colmap (COLMAP's point_triangulator over the whole model at the finish) (live)
   node_timeout       [s] how long the finish waits for the node's ~get_selection (10)
   continuity_pairs   also match each keyframe with the one before it (true)
-  loop_pairs         also match each new keyframe with an earlier one it may revisit that the poses
-                     do not pair (true): at least loop_min_gap keyframes back (60), within 0.3 m +
-                     loop_drift_ratio x the path between them (0.02) and 30 deg of view, the nearest
-                     whose neighbourhoods no wanted pair joins yet (matching/loops.py): drift is only
-                     seen across a revisit (a 5-minute walk on odometry: 347 mm ATE refined to 273
-                     without them, to 22 with them; docs/live.md)
+  loop_pairs         also match a new keyframe (one in 5 at most) with an earlier one it may revisit
+                     that the poses do not pair (true): at least loop_min_gap keyframes back (60),
+                     within 0.3 m + loop_drift_ratio x the path between them (0.02) and 30 deg of
+                     view, the nearest whose neighbourhoods no wanted pair joins yet
+                     (matching/loops.py): drift is only seen across a revisit (a 5-minute walk on
+                     odometry: 347 mm ATE, refined within 5 s to 273 mm without them, 16 with them)
   colmap_timeout     [s] a COLMAP command may take this long, plus colmap_timeout_per_image for
                      each image and colmap_timeout_per_pair for each pair it works on; then it
                      is killed, and what it worked on is retried (120, 10, 5)

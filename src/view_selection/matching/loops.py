@@ -11,8 +11,13 @@ For each new keyframe (in the order they were accepted), the earlier keyframes a
 `min_gap` keyframes back, whose centre lies within `radius + drift_ratio x` the path travelled
 between the two, and whose optical axes differ by at most `max_angle_deg`, are candidates; the
 `per_keyframe` nearest whose neighbourhoods (`neighbourhood` keyframes either side) are not
-already joined by a wanted pair are proposed. Each keyframe is looked at once, when it first
-comes. The pairs go to the matching like the node's: guided by the poses where the drift is
+already joined by a wanted pair are proposed, for one keyframe in `spacing` at most (a keyframe
+`spacing` after the last one given a pair). Each keyframe is looked at once, when it first comes.
+
+On that walk, one loop pair every 5 keyframes (182 pairs, 4 s of COLMAP's matching) brought a
+5 s refinement to 15.6 mm (3.2 mm to convergence), one for every keyframe (871 pairs, 34 s) to
+22.5 mm (4.1 mm), one every 10 (92) to 52.8 mm (4.1 mm): a few pairs at each revisit close the
+loop, and a smaller problem converges further within the budget. The pairs go to the matching like the node's: guided by the poses where the drift is
 small, COLMAP's matcher where it is not, and only what verifies reaches the model and the
 refinement.
 """
@@ -26,8 +31,9 @@ from ..keyframes import pair_of
 
 class LoopOptions:
     def __init__(self, min_gap=60, radius=0.3, drift_ratio=0.02, max_angle_deg=30.0, per_keyframe=1,
-                 neighbourhood=3):
+                 neighbourhood=3, spacing=5):
         self.min_gap, self.radius, self.drift_ratio = int(min_gap), float(radius), float(drift_ratio)
+        self.spacing = max(1, int(spacing))
         self.max_angle_deg, self.per_keyframe = float(max_angle_deg), int(per_keyframe)
         self.neighbourhood = int(neighbourhood)
         if self.min_gap < 1 or self.per_keyframe < 0 or self.neighbourhood < 0:
@@ -48,6 +54,7 @@ class LoopCandidates:
         self._centres = np.zeros((0, 3))
         self._axes = np.zeros((0, 3))
         self._path = np.zeros(0)  # path travelled up to each keyframe, along the keyframes
+        self._last_proposed = -10 ** 9  # position of the last keyframe given a pair
 
     def update(self, keyframes, wanted):
         """Looks at the keyframes not seen yet (by id) and returns the pairs proposed now.
@@ -72,7 +79,7 @@ class LoopCandidates:
         cos_max = math.cos(math.radians(o.max_angle_deg))
         for j in range(start, len(self._names)):
             last = j - o.min_gap
-            if last < 0 or o.per_keyframe == 0:
+            if last < 0 or o.per_keyframe == 0 or j - self._last_proposed < o.spacing:
                 continue
             distance = np.linalg.norm(self._centres[:last + 1] - self._centres[j], axis=1)
             reach = o.radius + o.drift_ratio * (self._path[j] - self._path[:last + 1])
@@ -86,6 +93,7 @@ class LoopCandidates:
                 pair = pair_of(self._names[int(i)], self._names[j])
                 proposed.append(pair)
                 self.pairs.add(pair)
+                self._last_proposed = j
                 taken += 1
         return proposed
 
