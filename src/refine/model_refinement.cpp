@@ -534,6 +534,7 @@ struct PassResult {
   size_t epipolar_correspondences = 0;
   int epipolar_iterations = 0;
   double epipolar_median_input = 0.0, epipolar_median_refined = 0.0;
+  bool epipolar_undone = false;
 };
 
 /// Where a pass is, for the progress lines: "(pass 1, stage 2 of 3)".
@@ -771,6 +772,7 @@ PassResult pass(const State& input, const std::map<int, State::Pose>& reference,
   r.points_filtered += pts;
   const Gauge gauge = gaugeOf(s, reference, movable, kept, config);
   const int stages = tracks ? 1 + config.retriangulations : 1;
+  const std::map<int, State::Pose> before_epipolar = s.poses;
   if (tracks && config.triangulate_first && config.epipolar_first && epipolar)
     epipolarStage(r, gauge, *epipolar, kept, config, deadline.share(config.epipolar_time_share),
                   "(pass " + std::to_string(pass_number) + ")", progress);
@@ -780,8 +782,16 @@ PassResult pass(const State& input, const std::map<int, State::Pose>& reference,
       break;
     }
     const std::string where = stageName(pass_number, stage, stages);
+    const int triangulated = r.retriangulations;
     if (stage > 0 || (tracks && config.triangulate_first))
       triangulationStage(r, *tracks, kept, config, stage, deadline, where, progress);
+    if (stage == 0 && r.epipolar_iterations > 0 && r.retriangulations == triangulated) {
+      // No time to triangulate at the poses the epipolar stage reached: the model's points were
+      // made at the input poses, and adjusted against the moved ones they would all be outliers
+      // (a 30-minute walk: 629,530 of 631,714 observations, "ran away"). The input poses it is.
+      s.poses = before_epipolar;
+      r.epipolar_undone = true;
+    }
     if (r.out_of_time) break;
     if (!adjustmentRounds(r, gauge, kept, config, stage, deadline, where, progress)) return r;
   }
@@ -862,6 +872,11 @@ void reportDiverged(RefinementReport& rep, const PassResult& result) {
   rep.iterations = result.iterations;
   rep.initial_cost = result.initial_cost;
   rep.final_cost = result.final_cost;
+  rep.epipolar_correspondences = result.epipolar_correspondences;
+  rep.epipolar_iterations = result.epipolar_iterations;
+  rep.epipolar_median_input = result.epipolar_median_input;
+  rep.epipolar_median_refined = result.epipolar_median_refined;
+  rep.epipolar_undone = result.epipolar_undone;
 }
 
 /// The report of a refinement that ran: its figures, which images moved and which kept their
@@ -883,6 +898,7 @@ void reportRefined(RefinementReport& rep, const PassResult& result, const std::m
   rep.epipolar_iterations = result.epipolar_iterations;
   rep.epipolar_median_input = result.epipolar_median_input;
   rep.epipolar_median_refined = result.epipolar_median_refined;
+  rep.epipolar_undone = result.epipolar_undone;
   for (auto& c : rep.images) {
     if (!c.movable) continue;
     const auto k = kept.find(c.image_id);
@@ -895,6 +911,8 @@ void reportRefined(RefinementReport& rep, const PassResult& result, const std::m
   msg << "refined " << moved << " of " << movable << " movable images in " << rep.rounds << " rounds ("
       << rep.iterations << " iterations, " << rep.status << "); " << kept.size() << " kept their input pose";
   if (result.out_of_time) msg << "; stopped at its time budget of " << config.max_seconds << " s";
+  if (result.epipolar_undone)
+    msg << "; the epipolar stage's poses were undone (no time to triangulate at them)";
   rep.message = msg.str();
 }
 

@@ -597,6 +597,27 @@ TEST_F(Refinement, TheEpipolarStageBringsThePosesToTheMatches) {
   EXPECT_EQ(0, without.epipolar_iterations);
 }
 
+TEST_F(Refinement, WithNoTimeToTriangulateAfterTheEpipolarStageItsPosesAreUndone) {
+  // A budget so small that the epipolar stage makes its one step and the triangulation after it
+  // is given up: the adjustment then runs on the model's points, made at the input poses, so it
+  // must start from those (a 30-minute walk's finish adjusted them from the moved poses: every
+  // observation an outlier, "diverged", nothing refined).
+  std::vector<refine::Match> matches;
+  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.0, 4.0, &matches);
+  refine::RefinementConfig config;
+  config.max_seconds = 1e-6;
+  config.threads = 1;
+  config.epipolar_time_share = 1.0;  // the stage's Ceres solve runs its minimum 10 ms
+  refine::RefinementReport report;
+  const io::ColmapModel out = refine::refineModel(input, refine::allImages(input), config, &report, nullptr, &matches);
+  ASSERT_GT(report.epipolar_iterations, 0) << report.message;
+  EXPECT_EQ(0, report.retriangulations);
+  EXPECT_TRUE(report.epipolar_undone) << report.message;
+  EXPECT_NE(std::string::npos, report.message.find("undone")) << report.message;
+  EXPECT_EQ("out_of_time", report.status) << report.message;
+  EXPECT_LT(ate(out, exact), 1.05 * ate(input, exact));
+}
+
 TEST_F(Refinement, WithoutPriorsTheEpipolarStageDoesNotRun) {
   // Epipolar geometry has no scale: without the SLAM's steps to hold it the stage would shrink
   // the baselines; it does not run.

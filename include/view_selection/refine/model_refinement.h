@@ -154,6 +154,9 @@ struct RefinementReport {
   size_t epipolar_correspondences = 0;
   int epipolar_iterations = 0;
   double epipolar_median_input = 0.0, epipolar_median_refined = 0.0;
+  /// Its poses were given up: the budget left no time to triangulate at them, and the model's
+  /// points, made at the input poses, were adjusted from those.
+  bool epipolar_undone = false;
   size_t tracks = 0, track_conflicts = 0;  ///< of the matches given, and matches left out
   double initial_cost = 0.0, final_cost = 0.0;  ///< of the last solve [px^2, robust]
   size_t points_input = 0, points_refined = 0;
