@@ -264,6 +264,43 @@ class IterationReporter : public ceres::IterationCallback {
   const std::function<void(int)>& on_iteration_;
 };
 
+/// One parameter block a pose: Eigen's quaternion (x, y, z, w) and the translation, so that Ceres'
+/// Schur eliminator runs its fixed-size <2, 3, 6> kernels.
+using PoseBlock = std::array<double, 7>;
+
+PoseBlock poseBlock(const State::Pose& p) {
+  return {p.rotation.x(), p.rotation.y(), p.rotation.z(), p.rotation.w(),
+          p.translation.x(), p.translation.y(), p.translation.z()};
+}
+
+std::map<int, PoseBlock> poseBlocks(const State& s) {
+  std::map<int, PoseBlock> blocks;
+  for (const auto& [id, p] : s.poses) blocks[id] = poseBlock(p);
+  return blocks;
+}
+
+/// The poses of `ids` taken back from their blocks after a solve.
+void takePoses(State& s, const std::map<int, PoseBlock>& blocks, const std::set<int>& ids) {
+  for (int id : ids) {
+    const PoseBlock& v = blocks.at(id);
+    s.poses[id].rotation = Eigen::Quaterniond(v[3], v[0], v[1], v[2]).normalized();
+    s.poses[id].translation = Eigen::Vector3d(v[4], v[5], v[6]);
+  }
+}
+
+/// What every solve here shares: at most `iterations`, the function tolerance, stopped at the
+/// deadline (however briefly, it runs), the configured threads (0: one per core), silent.
+ceres::Solver::Options solverOptions(const RefinementConfig& config, const Deadline& deadline, int iterations) {
+  ceres::Solver::Options options;
+  options.max_num_iterations = iterations;
+  options.function_tolerance = config.function_tolerance;
+  if (deadline.set) options.max_solver_time_in_seconds = std::max(0.01, deadline.left());
+  options.num_threads = config.threads > 0 ? config.threads
+                                           : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  options.logging_type = ceres::SILENT;
+  return options;
+}
+
 /// One bundle adjustment of the poses the gauge lets move, and every point; `on_iteration`, when
 /// given, is told each iteration.
 ceres::Solver::Summary adjust(State& s, const Gauge& gauge, const RefinementConfig& config, const Deadline& deadline,
@@ -273,12 +310,7 @@ ceres::Solver::Summary adjust(State& s, const Gauge& gauge, const RefinementConf
   problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(problem_options);
   const std::unique_ptr<ceres::LossFunction> loss = lossOf(config);
-  // One block a pose: Eigen's quaternion (x, y, z, w) and the translation, so that Ceres' Schur
-  // eliminator runs its fixed-size <2, 3, 6> kernels.
-  std::map<int, std::array<double, 7>> pose;
-  for (const auto& [id, p] : s.poses)
-    pose[id] = {p.rotation.x(), p.rotation.y(), p.rotation.z(), p.rotation.w(),
-                p.translation.x(), p.translation.y(), p.translation.z()};
+  std::map<int, PoseBlock> pose = poseBlocks(s);
   std::set<int> used;
   for (auto& [id, track] : s.tracks)
     for (const auto& e : track) {
@@ -308,7 +340,7 @@ ceres::Solver::Summary adjust(State& s, const Gauge& gauge, const RefinementConf
       problem.SetManifold(pose[id].data(), new PoseManifold);
     }
   }
-  ceres::Solver::Options options;
+  ceres::Solver::Options options = solverOptions(config, deadline, config.max_iterations);
   // As COLMAP's bundle adjuster chooses: dense, sparse, then iterative Schur (a room walked for 10
   // minutes, 3,253 images seeing each other's points: one sparse Schur step took 58 s).
   if (used.size() <= config.dense_up_to) {
@@ -319,12 +351,6 @@ ceres::Solver::Summary adjust(State& s, const Gauge& gauge, const RefinementConf
     options.linear_solver_type = ceres::ITERATIVE_SCHUR;
     options.preconditioner_type = ceres::SCHUR_JACOBI;
   }
-  options.max_num_iterations = config.max_iterations;
-  options.function_tolerance = config.function_tolerance;
-  if (deadline.set) options.max_solver_time_in_seconds = std::max(0.01, deadline.left());
-  options.num_threads = config.threads > 0 ? config.threads
-                                           : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
-  options.logging_type = ceres::SILENT;
   std::unique_ptr<IterationReporter> reporter;
   if (on_iteration) {
     reporter = std::make_unique<IterationReporter>(*on_iteration);
@@ -334,11 +360,7 @@ ceres::Solver::Summary adjust(State& s, const Gauge& gauge, const RefinementConf
   if (problem.NumResidualBlocks() == 0) return summary;
   ceres::Solve(options, &problem, &summary);
   if (config.verbose) std::fprintf(stderr, "%s\n", summary.FullReport().c_str());
-  for (int id : used) {
-    const auto& v = pose[id];
-    s.poses[id].rotation = Eigen::Quaterniond(v[3], v[0], v[1], v[2]).normalized();
-    s.poses[id].translation = Eigen::Vector3d(v[4], v[5], v[6]);
-  }
+  takePoses(s, pose, used);
   return summary;
 }
 
@@ -543,19 +565,13 @@ std::string stageName(int pass_number, int stage, int stages) {
          std::to_string(stages) + ")";
 }
 
-/// A pose as the refinement's parameter blocks hold it: Eigen's quaternion (x, y, z, w), the translation.
-std::array<double, 7> poseBlock(const State::Pose& p) {
-  return {p.rotation.x(), p.rotation.y(), p.rotation.z(), p.rotation.w(),
-          p.translation.x(), p.translation.y(), p.translation.z()};
-}
-
 /// The median |Sampson distance| [px] of the pairs' matches at the poses of `s`.
-double medianSampson(const State& s, const std::vector<EpipolarPair>& pairs) {
+double medianSampson(const State& s, const std::vector<const EpipolarPair*>& pairs) {
   std::vector<double> d;
-  for (const auto& p : pairs) {
-    const std::array<double, 7> pa = poseBlock(s.poses.at(p.a)), pb = poseBlock(s.poses.at(p.b));
-    std::vector<double> r(p.rays_a.size());
-    const EpipolarErrors errors(p);
+  for (const EpipolarPair* p : pairs) {
+    const PoseBlock pa = poseBlock(s.poses.at(p->a)), pb = poseBlock(s.poses.at(p->b));
+    std::vector<double> r(p->rays_a.size());
+    const EpipolarErrors errors(*p);
     errors(pa.data(), pb.data(), r.data());
     for (double v : r) d.push_back(std::abs(v));
   }
@@ -580,23 +596,20 @@ void epipolarStage(PassResult& r, const Gauge& gauge, const std::vector<Epipolar
         (gauge.moving.count(p.a) || gauge.moving.count(p.b)))
       pairs.push_back(&p);
   if (pairs.empty() || gauge.priors.empty() || gauge.moving.empty()) return;
-  std::vector<EpipolarPair> taking_part;
-  for (const auto* p : pairs) taking_part.push_back(*p);
-  for (const auto& p : taking_part) r.epipolar_correspondences += p.rays_a.size();
-  r.epipolar_median_input = medianSampson(s, taking_part);
+  for (const EpipolarPair* p : pairs) r.epipolar_correspondences += p->rays_a.size();
+  r.epipolar_median_input = medianSampson(s, pairs);
   ceres::Problem problem;  // owns the cost functions and the pairs' losses
   ceres::CauchyLoss* prior_loss = new ceres::CauchyLoss(config.prior_loss_scale);
-  std::map<int, std::array<double, 7>> pose;
-  for (const auto& [id, p] : s.poses) pose[id] = poseBlock(p);
+  std::map<int, PoseBlock> pose = poseBlocks(s);
   std::set<int> used;
-  for (const auto& p : taking_part) {
-    const int n = static_cast<int>(p.rays_a.size());
-    auto* cost = new ceres::AutoDiffCostFunction<EpipolarErrors, ceres::DYNAMIC, 7, 7>(new EpipolarErrors(p), n);
+  for (const EpipolarPair* p : pairs) {
+    const int n = static_cast<int>(p->rays_a.size());
+    auto* cost = new ceres::AutoDiffCostFunction<EpipolarErrors, ceres::DYNAMIC, 7, 7>(new EpipolarErrors(*p), n);
     // Huber on the block's sum of squares: quadratic while the pair's RMS is within the scale.
-    problem.AddResidualBlock(cost, new ceres::HuberLoss(config.epipolar_loss_scale * std::sqrt(n)), pose[p.a].data(),
-                             pose[p.b].data());
-    used.insert(p.a);
-    used.insert(p.b);
+    problem.AddResidualBlock(cost, new ceres::HuberLoss(config.epipolar_loss_scale * std::sqrt(n)), pose[p->a].data(),
+                             pose[p->b].data());
+    used.insert(p->a);
+    used.insert(p->b);
   }
   bool prior_loss_used = false;
   for (const Prior& p : gauge.priors) {
@@ -618,14 +631,8 @@ void epipolarStage(PassResult& r, const Gauge& gauge, const std::vector<Epipolar
       any_moving = true;
   }
   if (!any_moving) return;
-  ceres::Solver::Options options;
-  options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
-  options.max_num_iterations = config.epipolar_max_iterations;
-  options.function_tolerance = config.function_tolerance;
-  if (deadline.set) options.max_solver_time_in_seconds = std::max(0.01, deadline.left());
-  options.num_threads = config.threads > 0 ? config.threads
-                                           : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
-  options.logging_type = ceres::SILENT;
+  ceres::Solver::Options options = solverOptions(config, deadline, config.epipolar_max_iterations);
+  options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;  // no points to eliminate
   const std::string label = "epipolar adjustment " + where;
   const std::function<void(int)> on_iteration = [&](int iteration) {
     if (progress)
@@ -647,12 +654,8 @@ void epipolarStage(PassResult& r, const Gauge& gauge, const std::vector<Epipolar
     r.epipolar_median_refined = r.epipolar_median_input;
     return;
   }
-  for (int id : used) {
-    const auto& v = pose[id];
-    s.poses[id].rotation = Eigen::Quaterniond(v[3], v[0], v[1], v[2]).normalized();
-    s.poses[id].translation = Eigen::Vector3d(v[4], v[5], v[6]);
-  }
-  r.epipolar_median_refined = medianSampson(s, taking_part);
+  takePoses(s, pose, used);
+  r.epipolar_median_refined = medianSampson(s, pairs);
 }
 
 /// Stage `stage` of a pass begins with the points triangulated anew from the tracks, at the
