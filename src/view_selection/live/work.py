@@ -383,6 +383,7 @@ class LiveWork:
         with project.db() as d:
             featureless = sorted(d.images_without_keypoints())
         wanted = set(final) | set(extra) | loops
+        inliers = project.inlier_counts()
         lost = self.lost_pairs(wanted, matched, extracted, missing, stopped=incomplete)
         if lost:
             self.error("%d of %d wanted pairs are not in the model (report.json: pairs_lost), e.g. %s: %s"
@@ -391,11 +392,11 @@ class LiveWork:
                "images_without_features": [k.name for k in keyframes if k.name not in extracted and k.name not in missing],
                "images_with_no_features": featureless,
                "final_pairs": len(final), "continuity_pairs": len(extra), "loop_pairs": len(loops),
-               "loop_pairs_verified": sum(1 for p, n in project.inlier_counts().items() if p in loops and n > 0),
+               "loop_pairs_verified": sum(1 for p in loops if inliers.get(p, 0) > 0),
                "pairs_matched": len(matched),
                "final_pairs_matched": len(set(final) & matched), "pairs_wasted": len(matched - wanted),
                "pairs_wanted": len(wanted), "pairs_lost": lost,
-               "pairs_not_verified": sum(1 for p, n in project.inlier_counts().items() if p in wanted and n == 0),
+               "pairs_not_verified": sum(1 for p, n in inliers.items() if p in wanted and n == 0),
                "pairs_verified": project.verified_count(), "model": model, "skipped": self.skipped(all_failed=True)}
         if model == "mapper":
             path = project.mapper_model(seed)
