@@ -372,11 +372,15 @@ class Bridge:
             return (self.stream.ordered_keyframes(), self.stream.announced_names(),
                     "the pairs announced so far (%s)" % why)
 
-    def finish(self, why, shutting_down=False):
+    def finish(self, why, shutting_down=False, wait=False):
         """Builds the model from the node's final selection (or, at shutdown, from what the
         stream announced) and writes report.json: the orchestration; the report, the message
-        and ~refined_path are each a function of their own. Returns (ok, message)."""
+        and ~refined_path are each a function of their own. Returns (ok, message). wait: a
+        finish running now (the idle one) is waited for, then this one runs (~finish: the
+        caller wants a model, not "busy")."""
         with self.lock:
+            while wait and self.finishing and not self.stopping:
+                self.wake.wait(1.0)
             if self.finishing:
                 return False, "a finish is running"
             self.finishing = True
@@ -422,6 +426,7 @@ class Bridge:
         finally:
             with self.lock:
                 self.finishing = False
+                self.wake.notify_all()
 
     def complete_report(self, report, why, source, last_keyframe, timing):
         """report.json: build_model's part, and the bridge's (the stream, the timing of the
@@ -580,7 +585,7 @@ class Bridge:
                 pass
 
     def on_finish(self, _req):
-        ok, msg = self.finish("~finish called")
+        ok, msg = self.finish("~finish called", wait=True)
         return TriggerResponse(success=ok, message=msg)
 
     def shutdown(self):

@@ -307,7 +307,8 @@ class LiveBridge(unittest.TestCase):
     @classmethod
     def finish(cls, bridge):
         """~finish, asked again while the bridge's own finish (~finish_after_idle, after the bag)
-        is running: it refuses a second one meanwhile. On the loaded machine bridge_b's idle
+        is running: it waits for that one, then finishes again (before, it answered 'a finish is
+        running', which the loop below still tolerates). On the loaded machine bridge_b's idle
         finish began 4.5-12 s after the last keyframe, while bridge_a's ~finish ran."""
         answer = {}
 

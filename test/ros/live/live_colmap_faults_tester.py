@@ -74,6 +74,8 @@ class LiveColmapFaults(unittest.TestCase):
         wait_until(lambda: os.path.exists(ledger) and open(ledger).read().count('skipped-image') >= 2
                    and open(ledger).read().count('skipped-pair') >= 2, 300,
                    'the bad and the hanging image and pair given up', period=0.2)
+        # ~finish waits for the idle finish if one runs (it answered "a finish is running" once:
+        # a suite run found no report.json after both calls).
         cls.first = call('/faulty_bridge/finish', Trigger, None, 300.0)
         cls.second = call('/faulty_bridge/finish', Trigger, None, 300.0)
         cls.report_second = json.load(open(os.path.join(cls.project, 'report.json')))

@@ -112,7 +112,7 @@ class LiveFaults(unittest.TestCase):
             wait_until(lambda: call(NODE + '/get_pairs', GetPairs, GetPairsRequest(since=0), 10.0).keyframe_image_dir
                        == images, 30, 'the node writes images into the project')
             self.publish(40)  # new keyframes: their images go into the project
-            # (An idle finish may be running: ~finish says so, and is asked again.)
+            # (An idle finish may be running: ~finish waits for it and then finishes again.)
             answer = wait_until(lambda: (lambda a: a if a.message != 'a finish is running' else None)(
                 call(bridge.name + '/finish', Trigger, None, 300.0)), 300, '~finish', period=0.5)
             self.assertIn('skipped', answer.message)
