@@ -10,14 +10,27 @@ std::vector<EpipolarPair> epipolarPairs(const std::vector<Match>& matches, size_
                                         const std::function<bool(int)>& known,
                                         const std::function<Eigen::Vector2d(int, int)>& pixel,
                                         const std::function<Eigen::Vector4d(int)>& intrinsics) {
-  std::map<std::pair<int, int>, std::vector<std::pair<Observation, Observation>>> by_pair;
+  using List = std::vector<std::pair<Observation, Observation>>;
+  std::map<std::pair<int, int>, List> by_pair;
+  // A pair's matches come one after the other (the bridge writes them pair by pair): the pair's
+  // list and whether its images are known are looked up once a run, not once a match (a
+  // 30-minute session has 3.7 million matches in 23,000 pairs).
+  std::pair<int, int> last_ids{0, 0};
+  List* last = nullptr;  // the run's list; nullptr: an image of the run's pair is not known
+  bool in_run = false;
   for (const Match& m : matches) {
-    if (m.a.image_id == m.b.image_id || !known(m.a.image_id) || !known(m.b.image_id)) continue;
+    if (m.a.image_id == m.b.image_id) continue;
+    const bool swap = m.a.image_id > m.b.image_id;
+    const std::pair<int, int> ids{std::min(m.a.image_id, m.b.image_id), std::max(m.a.image_id, m.b.image_id)};
+    if (!in_run || ids != last_ids) {
+      in_run = true;
+      last_ids = ids;
+      last = known(ids.first) && known(ids.second) ? &by_pair[ids] : nullptr;
+    }
+    if (!last) continue;
     if (!pixel(m.a.image_id, m.a.point2D_idx).allFinite() || !pixel(m.b.image_id, m.b.point2D_idx).allFinite())
       continue;
-    const bool swap = m.a.image_id > m.b.image_id;
-    by_pair[{std::min(m.a.image_id, m.b.image_id), std::max(m.a.image_id, m.b.image_id)}].emplace_back(
-        swap ? m.b : m.a, swap ? m.a : m.b);
+    last->emplace_back(swap ? m.b : m.a, swap ? m.a : m.b);
   }
   std::vector<EpipolarPair> out;
   const auto ray = [&](const Observation& o) {

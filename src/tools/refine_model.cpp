@@ -12,6 +12,7 @@
 #include <glog/logging.h>
 #include <nlohmann/json.hpp>
 
+#include <chrono>
 #include <fstream>
 #include <iostream>
 #include <set>
@@ -81,10 +82,13 @@ Cameras must be PINHOLE or SIMPLE_PINHOLE.
   --prior-rotation-deg DEG        ... and turn by DEG (1 sigma; default 3)
   --prior-loss-scale S            Cauchy loss on the priors at S sigmas (default 3)
   --no-align         do not align the result to the input poses
-  --max-seconds S    the time the refinement may take (default 0: no limit): once spent, the solve
+  --max-seconds S    the time the refinement may take, counted from the tool's start (reading the
+                     model and the matches included; default 0: no limit): once spent, the solve
                      under way stops at its best state, a triangulation under way is given up,
                      no further round, triangulation or pass begins, and the result is what was
-                     reached (status out_of_time)
+                     reached (status out_of_time; spent before anything was refined: the model as
+                     it came). Writing the result comes after it. The report's phase_seconds
+                     say where the time went
   --threads N        Ceres threads (default 0: one per core)
   --dense-up-to N    Ceres' dense Schur solver up to N images (default 50), ...
   --sparse-up-to N   ... the sparse one up to N (default 1000), the iterative one above
@@ -140,10 +144,15 @@ nlohmann::json reportJson(const refine::RefinementReport& r) {
           {"aligned", r.aligned},
           {"alignment_scale", r.alignment_scale},
           {"seconds", r.seconds},
+          {"phase_seconds", r.phase_seconds},
           {"images", images}};
 }
 
 int run(int argc, char** argv) {
+  const auto started = std::chrono::steady_clock::now();
+  const auto since = [](std::chrono::steady_clock::time_point t) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+  };
   const CommandLine cli(argc, argv,
                         {"input", "output", "report", "fixed", "reference", "loss", "loss-scale", "max-error", "min-angle",
                          "rounds", "iterations", "min-observations", "max-correction-depth-ratio",
@@ -194,6 +203,9 @@ int run(int argc, char** argv) {
   config.max_seconds = cli.real("max-seconds", config.max_seconds, 0.0, 1e9);
   config.sparse_up_to = static_cast<size_t>(cli.integer("sparse-up-to", static_cast<long>(config.sparse_up_to), 0, 10000000));
 
+  // The budget covers the whole run: reading the model and the matches too (a 30-minute session's
+  // 3.7 million matches take seconds to read and to build tracks from).
+  config.budget_start = started;
   const io::ColmapModel input = io::readColmapModel(*cli.text("input"));
   std::set<int> movable = refine::allImages(input);
   if (cli.has("fixed")) {
@@ -210,12 +222,16 @@ int run(int argc, char** argv) {
   if (cli.has("reference")) reference = io::readColmapModel(*cli.text("reference"));
   std::vector<refine::Match> matches;
   if (cli.has("matches")) matches = refine::readMatches(*cli.text("matches"));
+  const double reading = since(started);
   io::Progress progress =
       io::Progress::toStderr(!cli.flag("no-progress"), cli.real("progress-interval", io::Progress::kLogInterval, 0.1, 1e6));
   const io::ColmapModel out = refine::refineModel(input, movable, config, &report,
                                                   cli.has("reference") ? &reference : nullptr,
                                                   cli.has("matches") ? &matches : nullptr, &progress);
+  const auto writing = std::chrono::steady_clock::now();
   io::writeColmapModel(out, *cli.text("output"));
+  report.phase_seconds["reading"] = reading;
+  report.phase_seconds["writing"] = since(writing);
   if (cli.has("report"))
     io::writeAtomically(*cli.text("report"), [&](const std::string& tmp) {
       io::writeFileContents(tmp, reportJson(report).dump(2) + "\n");

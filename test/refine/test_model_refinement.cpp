@@ -12,6 +12,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -276,7 +277,9 @@ TEST_F(Refinement, ATimeBudgetStopsItEarlyWithWhatItReached) {
   refine::refineModel(input, refine::allImages(input), {}, &full, nullptr, &matches);
   ASSERT_EQ("converged", full.status) << full.message;
   refine::RefinementConfig config;
-  config.max_seconds = 0.3 * full.seconds;
+  // Half: below that the time left after the epipolar stage and the triangulation may not pay for
+  // one adjustment, and the model comes back as it came (ABudgetSpentBefore... below).
+  config.max_seconds = 0.5 * full.seconds;
   refine::RefinementReport report;
   const io::ColmapModel out = refine::refineModel(input, refine::allImages(input), config, &report, nullptr, &matches);
   EXPECT_EQ("out_of_time", report.status) << report.message;
@@ -478,6 +481,67 @@ TEST(Tracks, MatchesJoinIntoTracksWithoutTwoKeypointsOfOneImage) {
   fs::remove(file);
 }
 
+/// Tracks as the rule says, the slow way: each match in turn joins its two tracks (sets of
+/// observations) unless they share an image.
+std::set<std::vector<std::pair<int, int>>> referenceTracks(const std::vector<refine::Match>& matches, size_t* conflicts) {
+  std::map<std::pair<int, int>, size_t> track_of;
+  std::vector<std::set<std::pair<int, int>>> tracks;
+  const auto trackOf = [&](const refine::Observation& o) {
+    const auto [it, added] = track_of.emplace(std::make_pair(o.image_id, o.point2D_idx), tracks.size());
+    if (added) tracks.push_back({{o.image_id, o.point2D_idx}});
+    return it->second;
+  };
+  *conflicts = 0;
+  for (const auto& m : matches) {
+    const size_t a = trackOf(m.a), b = trackOf(m.b);
+    if (a == b) continue;
+    std::set<int> images;
+    for (const auto& o : tracks[a]) images.insert(o.first);
+    if (std::any_of(tracks[b].begin(), tracks[b].end(), [&](const auto& o) { return images.count(o.first) > 0; })) {
+      ++*conflicts;
+      continue;
+    }
+    for (const auto& o : tracks[b]) {
+      tracks[a].insert(o);
+      track_of[o] = a;
+    }
+    tracks[b].clear();
+  }
+  std::set<std::vector<std::pair<int, int>>> out;
+  for (const auto& t : tracks)
+    if (t.size() >= 2) out.insert(std::vector<std::pair<int, int>>(t.begin(), t.end()));
+  return out;
+}
+
+TEST(Tracks, TheTracksAreThoseOfTheRuleTakenMatchByMatch) {
+  // Random matches among few images and keypoints (many conflicts, long tracks, image ids far
+  // apart): the same tracks and the same matches left out as the rule applied the slow way.
+  std::mt19937 rng(17);
+  const std::vector<int> image_ids = {3, 7, 8, 1000, 123456, 9};
+  for (int round = 0; round < 20; ++round) {
+    std::uniform_int_distribution<size_t> image(0, image_ids.size() - 1);
+    std::uniform_int_distribution<int> keypoint(0, 2 + round);
+    std::vector<refine::Match> matches;
+    for (int q = 0; q < 30 + 10 * round; ++q) {
+      const int a = image_ids[image(rng)], b = image_ids[image(rng)];
+      if (a != b) matches.push_back({{a, keypoint(rng)}, {b, keypoint(rng)}});
+    }
+    size_t conflicts = 0;
+    const auto expected = referenceTracks(matches, &conflicts);
+    const refine::Tracks t = refine::buildTracks(matches);
+    std::set<std::vector<std::pair<int, int>>> got;
+    for (const auto& track : t.tracks) {
+      std::vector<std::pair<int, int>> v;
+      for (const auto& o : track) v.emplace_back(o.image_id, o.point2D_idx);
+      EXPECT_TRUE(std::is_sorted(v.begin(), v.end()));
+      got.insert(v);
+    }
+    EXPECT_EQ(expected, got) << "round " << round;
+    EXPECT_EQ(conflicts, t.conflicts) << "round " << round;
+    EXPECT_EQ(expected.size(), t.tracks.size()) << "round " << round;
+  }
+}
+
 TEST(ColmapModelFiles, WrittenModelReadsBackTheSame) {
   std::mt19937 rng(3);
   const Scene exact = makeScene(rng);
@@ -598,24 +662,63 @@ TEST_F(Refinement, TheEpipolarStageBringsThePosesToTheMatches) {
 }
 
 TEST_F(Refinement, WithNoTimeToTriangulateAfterTheEpipolarStageItsPosesAreUndone) {
-  // A budget so small that the epipolar stage makes its one step and the triangulation after it
-  // is given up: the adjustment then runs on the model's points, made at the input poses, so it
-  // must start from those (a 30-minute walk's finish adjusted them from the moved poses: every
-  // observation an outlier, "diverged", nothing refined).
+  // A budget that runs out during the epipolar stage (begun once the setup is done; its Ceres
+  // solve runs at least 10 ms): the triangulation after it is given up, and the adjustment
+  // would run on the model's points, made at the input poses, so it must start from those (a
+  // 30-minute walk's finish adjusted them from the moved poses: every observation an outlier,
+  // "diverged", nothing refined). The budget is set from the phases of a run without one, from
+  // a moment before the call, between the setup's end and the epipolar stage's; a loaded
+  // machine may miss that window, so it is tried at a few points of it.
   std::vector<refine::Match> matches;
   const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.0, 4.0, &matches);
   refine::RefinementConfig config;
-  config.max_seconds = 1e-6;
   config.threads = 1;
-  config.epipolar_time_share = 1.0;  // the stage's Ceres solve runs its minimum 10 ms
+  config.epipolar_time_share = 1.0;
+  refine::RefinementReport free_run;
+  refine::refineModel(input, refine::allImages(input), config, &free_run, nullptr, &matches);
+  ASSERT_GT(free_run.epipolar_iterations, 0) << free_run.message;
+  const double setup = free_run.phase_seconds.at("setup"), epipolar = free_run.phase_seconds.at("epipolar");
+  bool seen = false;
+  for (int attempt = 0; attempt < 30 && !seen; ++attempt) {
+    config.max_seconds = setup * (1.0 + 0.5 * (attempt % 5)) + epipolar * 0.1 * (attempt % 3);
+    config.budget_start = std::chrono::steady_clock::now();
+    refine::RefinementReport report;
+    const io::ColmapModel out = refine::refineModel(input, refine::allImages(input), config, &report, nullptr, &matches);
+    if (report.epipolar_iterations == 0 || report.retriangulations > 0) continue;  // outside the window
+    seen = true;
+    EXPECT_TRUE(report.epipolar_undone) << report.message;
+    EXPECT_NE(std::string::npos, report.message.find("undone")) << report.message;
+    EXPECT_EQ("out_of_time", report.status) << report.message;
+    EXPECT_LT(ate(out, exact), 1.05 * ate(input, exact));
+  }
+  EXPECT_TRUE(seen) << "no budget ran out within the epipolar stage (setup " << setup << " s, epipolar " << epipolar
+                    << " s)";
+}
+
+TEST_F(Refinement, ABudgetSpentBeforeItBeginsGivesTheModelAsItCameAtOnce) {
+  // refine_model counts its budget from its own start (budget_start): one spent reading the
+  // model and the matches leaves everything as it came, without building the tracks.
+  std::vector<refine::Match> matches;
+  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.0, 4.0, &matches);
+  refine::RefinementConfig config;
+  config.max_seconds = 5.0;
+  config.budget_start = std::chrono::steady_clock::now() - std::chrono::seconds(6);
   refine::RefinementReport report;
   const io::ColmapModel out = refine::refineModel(input, refine::allImages(input), config, &report, nullptr, &matches);
-  ASSERT_GT(report.epipolar_iterations, 0) << report.message;
-  EXPECT_EQ(0, report.retriangulations);
-  EXPECT_TRUE(report.epipolar_undone) << report.message;
-  EXPECT_NE(std::string::npos, report.message.find("undone")) << report.message;
   EXPECT_EQ("out_of_time", report.status) << report.message;
-  EXPECT_LT(ate(out, exact), 1.05 * ate(input, exact));
+  EXPECT_FALSE(report.refined);
+  EXPECT_EQ(0u, report.tracks);  // not built
+  EXPECT_EQ(0, report.epipolar_iterations);
+  EXPECT_EQ(0, report.rounds);
+  EXPECT_NE(std::string::npos, report.message.find("before the refinement began")) << report.message;
+  EXPECT_EQ(input.points.size(), out.points.size());
+  for (const auto& [id, im] : out.images) EXPECT_TRUE(im.translation.isApprox(input.images.at(id).translation, 1e-12));
+  // The same budget counted from now refines it, and says where its time went.
+  config.budget_start = {};
+  refine::refineModel(input, refine::allImages(input), config, &report, nullptr, &matches);
+  EXPECT_TRUE(report.refined) << report.message;
+  for (const char* phase : {"setup", "epipolar", "triangulation", "adjustment", "filter"})
+    EXPECT_GT(report.phase_seconds[phase], 0.0) << phase;
 }
 
 TEST_F(Refinement, WithoutPriorsTheEpipolarStageDoesNotRun) {

@@ -18,6 +18,8 @@
 #include "view_selection/io/progress.h"
 #include "view_selection/refine/tracks.h"
 
+#include <chrono>
+#include <map>
 #include <set>
 #include <string>
 #include <vector>
@@ -107,8 +109,12 @@ struct RefinementConfig {
   /// what they were; it looks at the clock every 1024 tracks), no further round, triangulation
   /// or pass begins, and the result is what the adjustments reached (status out_of_time; with
   /// no image movable, the model as it came): a live finish's refinement stays within a bound
-  /// however long the session was (issue 28). Reading and writing the model are not bounded.
+  /// however long the session was (issue 28). No stage begins once it is spent: a solve's
+  /// setup alone costs seconds on a 30-minute session's 600,000 observations.
   double max_seconds = 0.0;
+  /// When max_seconds counts from (default, the epoch: refineModel's start). refine_model sets
+  /// its own start, so that reading the model and the matches is within the budget.
+  std::chrono::steady_clock::time_point budget_start{};
   int threads = 0;  ///< Ceres threads; 0: one per core
   /// Ceres' dense Schur solver up to this many images, the sparse one up to sparse_up_to, the
   /// iterative one (Schur-Jacobi preconditioner) above: COLMAP's bundle adjuster's choice.
@@ -170,6 +176,10 @@ struct RefinementReport {
   std::string message;      ///< a sentence for the log
   std::vector<ImageCorrection> images;
   double seconds = 0.0;     ///< wall time of refineModel
+  /// Wall time [s] by step, both passes together: "setup" (tracks, the epipolar pairs, the
+  /// depths), "epipolar", "triangulation", "adjustment", "filter" (and refine_model adds
+  /// "reading" and "writing"): where a budget went.
+  std::map<std::string, double> phase_seconds;
 };
 
 /// The refined model; `movable` are the image ids that may move (others are held fixed).
