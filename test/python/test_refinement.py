@@ -180,7 +180,9 @@ def test_a_time_budget_gives_what_the_adjustment_reached(tmp_path):
     m = known_pose_model(exact, given, np.random.default_rng(29), database=str(tmp_path / "database.db"))
     cm.write_model(m, str(tmp_path / "in"))
     full = refiner.refine(str(tmp_path / "in"), str(tmp_path / "full"), tool=tool, database=str(tmp_path / "database.db"))
-    budget = 0.3 * full["adjustment_seconds"]
+    # Half: below that the time left after the epipolar stage and the triangulation does not pay
+    # for one adjustment, and the model comes back as it came (refine_model's rule).
+    budget = 0.5 * full["adjustment_seconds"]
     cut = refiner.refine(str(tmp_path / "in"), str(tmp_path / "out"), refiner.RefinementOptions(max_seconds=budget),
                          tool=tool, database=str(tmp_path / "database.db"))
     assert full["status"] == "converged" and cut["status"] == "out_of_time", cut["message"]

@@ -85,9 +85,11 @@ PARAMETERS = """Parameters (private, ~name):
   refine_max_correction_depth_ratio  a keyframe the refinement would move further than this x the
                      median depth of its points keeps the node's pose, reported (0.5)
   refine_max_correction_deg  ... or turn further than this [deg] (15)
-  refine_max_seconds  [s] the refinement's time budget in a finish: once spent, the model is what
-                     the adjustment reached by then (report.json: status out_of_time), so that a
-                     long session's finish stays bounded (5; 0: no limit)
+  refine_max_seconds  [s] the refinement's time budget in a finish, reading the matches and the
+                     model included: once spent, the model is what the adjustment reached by
+                     then, or the model as it came when none began (report.json: status
+                     out_of_time, refinement.phase_seconds), so that a long session's finish
+                     stays bounded (5; 0: no limit)
   refine_tool        the refine_model executable ("": beside this node)
   refine_live        with live triangulation: refine while the recording goes on (false): windows of
                      new keyframes with what they see held, the whole model when the budget allows;

@@ -450,10 +450,16 @@ class LiveWork:
             self.error(out["incomplete"])
         elif self.refinement is not None and model != "mapper" and "model_error" not in out:
             out["refinement"] = self.refinement.apply(project, path)  # issue 29: sparse/0 refined
-            made = None  # the statistics are the refined model's, read from sparse/0
+            # The statistics are the refined model's: from refine_model's report when it has
+            # them, else read from sparse/0 (unless the refinement failed: then it is `made`).
+            stats = out["refinement"].pop("statistics", None)
+            if out["refinement"].get("status") != "error":
+                made = stats
             phases["refinement"], t0 = time.monotonic() - t0, time.monotonic()
         out["model_path"] = path
-        out.update((made if made is not None else colmap_model.read_model(path)).statistics())
+        if not isinstance(made, dict):
+            made = (made if made is not None else colmap_model.read_model(path)).statistics()
+        out.update(made)
         phases["statistics"] = time.monotonic() - t0
         out["finish_phases"] = {k: round(v, 3) for k, v in phases.items()}
         out["waste_ratio"] = out["pairs_wasted"] / out["pairs_matched"] if out["pairs_matched"] else 0.0
