@@ -167,6 +167,13 @@ def test_refine_brings_a_drifted_model_closer(tmp_path):
         assert by_name[name]["rotation_deg"] == pytest.approx(r, abs=1e-6)
     assert section["translation_max"] >= section["translation_median"] > 0
     assert section["reprojection_error"][1] < section["reprojection_error"][0]
+    # The finish's statistics come from the report, not from reading the model back: the same.
+    stats, read = section["statistics"], out.statistics()
+    assert {k: stats[k] for k in ("registered", "points", "observations")} == \
+        {k: read[k] for k in ("registered", "points", "observations")}
+    for k in ("track_length", "obs_per_image", "reprojection_error"):
+        assert stats[k] == pytest.approx(read[k], rel=1e-6), k
+    assert section["phase_seconds"]["adjustment"] > 0 and section["phase_seconds"]["reading"] > 0
     assert not os.listdir(tmp_path / "out") == []
     assert not [n for n in os.listdir(tmp_path) if n.startswith(".refine_")]  # its work folder is gone
 
@@ -180,12 +187,19 @@ def test_a_time_budget_gives_what_the_adjustment_reached(tmp_path):
     m = known_pose_model(exact, given, np.random.default_rng(29), database=str(tmp_path / "database.db"))
     cm.write_model(m, str(tmp_path / "in"))
     full = refiner.refine(str(tmp_path / "in"), str(tmp_path / "full"), tool=tool, database=str(tmp_path / "database.db"))
-    # Half: below that the time left after the epipolar stage and the triangulation does not pay
-    # for one adjustment, and the model comes back as it came (refine_model's rule).
-    budget = 0.5 * full["adjustment_seconds"]
-    cut = refiner.refine(str(tmp_path / "in"), str(tmp_path / "out"), refiner.RefinementOptions(max_seconds=budget),
-                         tool=tool, database=str(tmp_path / "database.db"))
-    assert full["status"] == "converged" and cut["status"] == "out_of_time", cut["message"]
+    # The budget covers the whole refinement (the matches file and refine_model's reading too):
+    # too small a share of it leaves no time for one adjustment after the epipolar stage and the
+    # triangulation, and the model comes back as it came (refine_model's rule); how much that
+    # is depends on the machine's load, so a few shares are tried, from a third of the full
+    # run's time, until one is cut short with an adjustment made.
+    assert full["status"] == "converged"
+    for share in (0.35, 0.45, 0.55, 0.65, 0.75):
+        cut = refiner.refine(str(tmp_path / "in"), str(tmp_path / "out"),
+                             refiner.RefinementOptions(max_seconds=share * full["seconds"]),
+                             tool=tool, database=str(tmp_path / "database.db"))
+        if cut["refined"] and cut["status"] == "out_of_time":
+            break
+    assert cut["status"] == "out_of_time", cut["message"]
     assert cut["refined"] and "time budget" in cut["message"]
     assert cut["rounds"] < full["rounds"] and cut["adjustment_seconds"] < full["adjustment_seconds"]
     truth = [c for c, _ in exact]
@@ -241,7 +255,10 @@ def test_options_reach_the_tool(tmp_path):
                        fixed=["a.png"], tool=tool)
     text = args.read_text()
     assert "--loss huber" in text and "--max-correction-deg 7.5" in text and "--fixed" in text
-    assert "--max-seconds 4.5" in text
+    # What is left of the budget: the time since refine() began (no matches to write here) is
+    # taken off, a few milliseconds at most.
+    budget = float(text.split("--max-seconds ")[1].split()[0])
+    assert 4.0 < budget < 4.5
     assert fixed.read_text() == "a.png\n"
     json.dumps(refiner.RefinementOptions().to_json())  # goes into report.json
 
