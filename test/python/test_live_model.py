@@ -223,6 +223,27 @@ def test_the_final_update_tries_every_track_that_grew_since_it_gave_no_point():
     assert len(m.points) == n
 
 
+def test_the_final_update_leaves_a_long_track_that_grew_little_to_wait():
+    # A track of more than FINAL_RETRY_MAX_OBSERVATIONS that gave no point and grew by one is not
+    # tried again in the finish (its one-by-one triangulation costs the square of its length);
+    # grown by half, it is, as in a live update.
+    from view_selection.live import model as live_model
+    n, long = 10, live_model.FINAL_RETRY_MAX_OBSERVATIONS + 1
+    xs = [0.0005 * i for i in range(long)] + [0.8] + [0.8 + 0.0005 * i for i in range(long // 2 + 1)]
+    m, same = views_along_x(xs, n, seed=7)
+    for i in range(1, long):  # long views without parallax: no point
+        m.add_matches(i, i + 1, same)
+    m.update()
+    assert m.points == {} and all(len(t) == long for t in m.members.values())
+    m.add_matches(long, long + 1, same)  # one more view, with parallax
+    m.update(final=True)
+    assert m.points == {}  # long: waits until it grew by half
+    for i in range(long + 1, len(xs)):
+        m.add_matches(i, i + 1, same)
+    m.update(final=True)
+    assert len(m.points) == n
+
+
 def test_every_image_of_a_track_knows_it():
     """A moved pose re-triangulates every track the image is in, whichever side of the first
     match it was on (a track begun by a match of two lone observations included)."""
