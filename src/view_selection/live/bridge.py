@@ -644,6 +644,8 @@ def main(argv):
         sys.stdout.write(USAGE)
         return 0
     rospy.init_node("colmap_bridge")
+    from ..stack_sampler import start_from_environment
+    start_from_environment()  # development: where the time goes (VIEW_SELECTION_STACK_SAMPLES)
     import cv2
     cv2.setNumThreads(1)  # the budget: the node keeps the cores (docs/live.md)
     try:
