@@ -92,6 +92,34 @@ def test_the_cloud_follows_the_live_model(tmp_path):
     np.testing.assert_allclose(moved.centre, centre, atol=1e-12)
 
 
+def test_only_the_frusta_of_new_images_and_moved_poses_are_made_again(tmp_path):
+    # Each new keyframe made every frustum again: CPU that grew with the session. A frustum is
+    # made for an image that came or whose pose moved; the others are the same objects.
+    from view_selection.live.visualisation import frustum_of
+    points, poses, kps, m, view = first_pair(tmp_path, 4, 60)
+    view.live(m)
+    before = {f.id: f for f in view.frusta()}
+    version = view.cameras_version
+    add(m, kps, poses, 2)
+    view.live(m)
+    after = {f.id: f for f in view.frusta()}
+    assert sorted(after) == [1, 2, 3] and view.cameras_version > version
+    assert after[1] is before[1] and after[2] is before[2]
+    q, t = poses[0]
+    m.set_pose(1, q, np.asarray(t) + [0.0, 0.02, 0.0])
+    m.update()
+    view.live(m)
+    again = {f.id: f for f in view.frusta()}
+    assert again[1] is not after[1] and again[2] is after[2] and again[3] is after[3]
+    # The same frusta as made from scratch, in image order.
+    fresh = [frustum_of(i, im.name, geometry.quaternion_of(im.r), im.t, m.cameras[im.camera_id], view.frustum_depth)
+             for i, im in sorted(m.images.items())]
+    assert view.frusta() == fresh
+    version = view.cameras_version
+    view.live(m)
+    assert view.cameras_version == version  # nothing came, nothing moved
+
+
 def test_points_that_are_lost_leave_the_cloud(tmp_path):
     """Image 2 moved onto image 1's centre: no triangulation angle left, every point goes."""
     points, poses, kps, m, view = first_pair(tmp_path, 2, 60)

@@ -8,7 +8,10 @@
 What is shown comes from live/visualisation.py: the live model as it grows, the finished
 (refined) model after a finish. Updates are taken in the bridge's worker (under its `work` lock,
 so the live model does not change meanwhile) and sent by a thread of their own at most once per
-`period` (the newest state; a subscriber that joins late gets it latched).
+`period` (the newest state; a subscriber that joins late gets it latched), and no more often than
+keeps that thread within MAX_SEND_CPU of a core: a message's cost grows with the model (a
+30-minute walk's 5,636 frusta and 215,000 points sent twice a second took 479 s of CPU, a third
+of the bridge's).
 """
 import threading
 import time
@@ -20,6 +23,10 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from ..colmap import model as colmap_model
 from .visualisation import FIELDS, POINT_STEP, ModelView
+
+# [cores] The share of a core the sending thread may take on average: after a round that took c
+# seconds of its CPU the next waits at least c / MAX_SEND_CPU.
+MAX_SEND_CPU = 0.05
 
 
 class ModelTopics:
@@ -36,6 +43,7 @@ class ModelTopics:
         self.published = 0         # rounds sent: ~points, and ~cameras when they changed
         self.update_cpu = 0.0      # [s] CPU of the updates (the bridge's worker, under `lock`)
         self.send_cpu = 0.0        # [s] CPU of the sending thread: copies, messages, serialisation
+        self.markers = {}          # image id -> (its Frustum, its Marker): made once a pose
         self.thread = threading.Thread(target=self.loop, name="model_topics", daemon=True)
         self.thread.start()
 
@@ -76,7 +84,7 @@ class ModelTopics:
 
     # -- the sending thread ------------------------------------------------------------------------
     def loop(self):
-        last = 0.0
+        last, pause = 0.0, self.period
         while not rospy.is_shutdown():
             with self.lock:
                 while not self.stopping and (self.sent == (self.view.cloud_version, self.view.cameras_version)
@@ -86,14 +94,15 @@ class ModelTopics:
                         return
                 if self.stopping:
                     return
-            wait = last + self.period - time.monotonic()
+            wait = last + pause - time.monotonic()
             if wait > 0:
                 time.sleep(wait)  # at most once a period: what changed meanwhile goes out together
             last = time.monotonic()
             try:
-                self.publish()
+                cost = self.publish()
             except rospy.ROSException:
                 return  # shutting down
+            pause = max(self.period, cost / MAX_SEND_CPU)
 
     def figures(self):
         """What publishing cost, for report.json: messages sent, CPU seconds of the updates and of
@@ -105,6 +114,7 @@ class ModelTopics:
                     "cameras": len(self.view.frusta()), "images_decoded": self.view.colours.decoded}
 
     def publish(self):
+        """One round: what changed since the last, sent; returns its CPU [s]."""
         start = time.thread_time()
         frame = self.frame()
         with self.lock:  # a consistent snapshot: the buffer's bytes and the frusta as they are now
@@ -116,11 +126,13 @@ class ModelTopics:
         if versions[0] != self.sent[0]:
             self.points.publish(cloud_message(payload, count, frame, stamp))
         if frusta is not None:
-            self.cameras.publish(camera_markers(frusta, frame, stamp, self.view.frustum_depth))
+            self.cameras.publish(camera_markers(frusta, frame, stamp, self.view.frustum_depth, self.markers))
         with self.lock:
             self.sent = versions
             self.published += 1
-            self.send_cpu += time.thread_time() - start
+            cost = time.thread_time() - start
+            self.send_cpu += cost
+        return cost
 
 
 def cloud_message(payload, count, frame, stamp):
@@ -135,15 +147,22 @@ def cloud_message(payload, count, frame, stamp):
     return msg
 
 
-def camera_markers(frusta, frame, stamp, depth):
+def camera_markers(frusta, frame, stamp, depth, cache=None):
     """DELETEALL, then one LINE_LIST a keyframe: its pose is the camera's in the world frame, its
-    points the frustum in the camera frame."""
+    points the frustum in the camera frame. cache: {image id: (Frustum, Marker)}, the markers of
+    frusta sent before, taken again while their frustum is the same object (and updated)."""
     out = MarkerArray()
     clear = Marker()
     clear.header.frame_id, clear.header.stamp = frame, stamp
     clear.ns, clear.action = "cameras", Marker.DELETEALL
     out.markers.append(clear)
     for f in frusta:
+        known = cache.get(f.id) if cache is not None else None
+        if known is not None and known[0] is f:
+            m = known[1]
+            m.header.frame_id, m.header.stamp = frame, stamp
+            out.markers.append(m)
+            continue
         m = Marker()
         m.header.frame_id, m.header.stamp = frame, stamp
         m.ns, m.id, m.type, m.action = "cameras", f.id, Marker.LINE_LIST, Marker.ADD
@@ -153,4 +172,6 @@ def camera_markers(frusta, frame, stamp, depth):
         m.color.r, m.color.g, m.color.b, m.color.a = 0.2, 0.9, 0.4, 1.0
         m.points = [Point(x=x, y=y, z=z) for x, y, z in f.lines]
         out.markers.append(m)
+        if cache is not None:
+            cache[f.id] = (f, m)
     return out
