@@ -189,16 +189,16 @@ def test_a_time_budget_gives_what_the_adjustment_reached(tmp_path):
     full = refiner.refine(str(tmp_path / "in"), str(tmp_path / "full"), tool=tool, database=str(tmp_path / "database.db"))
     # The budget covers the whole refinement (the matches file and refine_model's reading too):
     # too small a share of it leaves no time for one adjustment after the epipolar stage and the
-    # triangulation, and the model comes back as it came (refine_model's rule); how much that
-    # is depends on the machine's load, so a few shares are tried, from a third of the full
-    # run's time, until one is cut short with an adjustment made.
+    # triangulation (the model as it came, or the epipolar stage's poses with their points);
+    # how much that is depends on the machine's load, so a few shares are tried, from a third
+    # of the full run's time, until one is cut short with an adjustment made.
     assert full["status"] == "converged"
     for share in (0.35, 0.45, 0.55, 0.65, 0.75):
         cut = refiner.refine(str(tmp_path / "in"), str(tmp_path / "out"),
                              refiner.RefinementOptions(max_seconds=share * full["seconds"]),
                              tool=tool, database=str(tmp_path / "database.db"))
-        if cut["refined"] and cut["status"] == "out_of_time":
-            break
+        if cut["refined"] and cut["status"] == "out_of_time" and cut["rounds"] > 0:
+            break  # an adjustment began (with none, the epipolar stage's poses may stand alone)
     assert cut["status"] == "out_of_time", cut["message"]
     assert cut["refined"] and "time budget" in cut["message"]
     assert cut["rounds"] < full["rounds"] and cut["adjustment_seconds"] < full["adjustment_seconds"]
