@@ -87,7 +87,7 @@ PARAMETERS = """Parameters (private, ~name):
   refine_max_correction_deg  ... or turn further than this [deg] (15)
   refine_max_seconds  [s] the refinement's time budget in a finish, reading the matches and the
                      model included: once spent, the model is what the adjustment reached by
-                     then, or the model as it came when none began (report.json: status
+                     then, or the epipolar stage's, or the model as it came (report.json: status
                      out_of_time, refinement.phase_seconds), so that a long session's finish
                      stays bounded (5; 0: no limit)
   refine_tool        the refine_model executable ("": beside this node)
