@@ -174,6 +174,37 @@ def test_the_finished_model_replaces_the_live_one_until_the_model_changes(tmp_pa
     assert_cloud_is_the_model(view, m)
 
 
+def test_a_finished_model_older_than_the_live_one_is_not_shown(tmp_path):
+    """The bridge's sending thread reads the finished model after the finish: when the live model
+    changed meanwhile (the recording went on), the finished one is older and the live one stays."""
+    points, poses, kps = scene(n_images=4, n_points=80)
+    write_images(tmp_path, 4)
+    from view_selection.live.model import LiveModel
+    m = LiveModel()
+    view = ModelView(str(tmp_path))
+    for i in range(3):
+        add(m, kps, poses, i)
+    match(m, kps, len(points), 0, 1)
+    match(m, kps, len(points), 1, 2)
+    m.update()
+    view.live(m)
+    at_finish = view.cloud_version
+    folder = tmp_path / "sparse"
+    folder.mkdir()
+    cm.write_model(m.to_model(), str(folder))
+    finished = cm.read_model(str(folder))
+    add(m, kps, poses, 3)  # a keyframe came before the finished model was read
+    match(m, kps, len(points), 2, 3)
+    m.update()
+    view.live(m)
+    assert view.cloud_version != at_finish
+    assert not view.finished(finished, at_finish)
+    assert not view.showing_finished
+    assert len(view.frusta()) == 4  # the live model's, with the new keyframe
+    assert_cloud_is_the_model(view, m)
+    assert view.finished(finished, view.cloud_version)  # nothing changed since: it is shown
+    assert view.showing_finished and len(view.frusta()) == 3
+
 def test_the_frustum_reaches_the_image_corners():
     fx, fy, cx, cy = PARAMS
     lines = np.array(frustum_lines(fx, fy, cx, cy, 640, 480, 0.5))

@@ -409,12 +409,15 @@ class Bridge:
                     with self.lock:  # shutdown() may have given this finish its deadline meanwhile
                         if not self.stopping:
                             self.project.deadline = None
+                shown = None
                 if self.model_topics and not shutting_down:
-                    self.model_topics.finished(self.work_state.model, report)
+                    shown = self.model_topics.live(self.work_state.model)  # its last update, under `work`
             self.complete_report(report, why, source, last_keyframe,
                                  timing={"start": start, "synced": synced, "asked": asked, "cpu_start": cpu_start})
             write_json_atomically(os.path.join(self.project.root, "report.json"), report)
             self.last_report = report
+            if shown is not None:
+                self.model_topics.finished(report, shown)  # read and shown by its own thread
             self.publish_corrections(keyframes, report)
             with self.lock:
                 self.finished_at_change = change

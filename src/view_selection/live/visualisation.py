@@ -264,9 +264,14 @@ class ModelView:
         return changed
 
     # -- the finished model --------------------------------------------------------------------
-    def finished(self, model):
+    def finished(self, model, version=None):
         """A colmap/model.py Model (the finish's sparse/0) becomes what is shown: every point
-        with its colour from its first observation's keypoint, every image a frustum."""
+        with its colour from its first observation's keypoint, every image a frustum. version:
+        the view's cloud_version when the finish took the live model; when the view changed
+        since (the recording went on), the finished model is older than the live one and is not
+        shown. Returns whether it is."""
+        if version is not None and version != self.cloud_version:
+            return False
         ids = sorted(model.points)
         cloud = CloudBuffer(len(ids))
         by_id = model.images
@@ -290,3 +295,4 @@ class ModelView:
             for c in (model.cameras[im.camera_id],)]
         self.cloud_version += 1
         self.cameras_version += 1
+        return True
