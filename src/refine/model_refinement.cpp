@@ -919,6 +919,15 @@ std::map<int, std::string> implausibleCorrections(const State& s, const std::set
   return found;
 }
 
+/// The epipolar stage's figures, in every report of a pass.
+void reportEpipolar(RefinementReport& rep, const PassResult& result) {
+  rep.epipolar_correspondences = result.epipolar_correspondences;
+  rep.epipolar_iterations = result.epipolar_iterations;
+  rep.epipolar_median_input = result.epipolar_median_input;
+  rep.epipolar_median_refined = result.epipolar_median_refined;
+  rep.epipolar_undone = result.epipolar_undone;
+}
+
 /// The report of a refinement that diverged: every movable image keeps its input pose.
 void reportDiverged(RefinementReport& rep, const PassResult& result) {
   rep.status = "diverged";
@@ -930,11 +939,7 @@ void reportDiverged(RefinementReport& rep, const PassResult& result) {
   rep.iterations = result.iterations;
   rep.initial_cost = result.initial_cost;
   rep.final_cost = result.final_cost;
-  rep.epipolar_correspondences = result.epipolar_correspondences;
-  rep.epipolar_iterations = result.epipolar_iterations;
-  rep.epipolar_median_input = result.epipolar_median_input;
-  rep.epipolar_median_refined = result.epipolar_median_refined;
-  rep.epipolar_undone = result.epipolar_undone;
+  reportEpipolar(rep, result);
 }
 
 /// The report of a refinement that ran: its figures, which images moved and which kept their
@@ -952,11 +957,7 @@ void reportRefined(RefinementReport& rep, const PassResult& result, const std::m
   rep.aligned = result.aligned;
   rep.retriangulations = result.retriangulations;
   rep.alignment_scale = result.scale;
-  rep.epipolar_correspondences = result.epipolar_correspondences;
-  rep.epipolar_iterations = result.epipolar_iterations;
-  rep.epipolar_median_input = result.epipolar_median_input;
-  rep.epipolar_median_refined = result.epipolar_median_refined;
-  rep.epipolar_undone = result.epipolar_undone;
+  reportEpipolar(rep, result);
   for (auto& c : rep.images) {
     if (!c.movable) continue;
     const auto k = kept.find(c.image_id);
@@ -978,11 +979,7 @@ void reportRefined(RefinementReport& rep, const PassResult& result, const std::m
 void reportUntouched(RefinementReport& rep, const PassResult& result, const RefinementConfig& config) {
   rep.status = "out_of_time";
   rep.refined = false;
-  rep.epipolar_correspondences = result.epipolar_correspondences;
-  rep.epipolar_iterations = result.epipolar_iterations;
-  rep.epipolar_median_input = result.epipolar_median_input;
-  rep.epipolar_median_refined = result.epipolar_median_refined;
-  rep.epipolar_undone = result.epipolar_undone;
+  reportEpipolar(rep, result);
   for (auto& c : rep.images)
     if (c.movable) c.kept = "the time budget was spent before it was refined";
   std::ostringstream msg;
