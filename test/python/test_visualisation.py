@@ -63,6 +63,23 @@ def first_pair(tmp_path, n_images, n_points):
     return points, poses, kps, m, view
 
 
+def first_three(tmp_path, n_images, n_points):
+    """A scene's images written, a live model with its first three images matched in a chain
+    (0-1, 1-2) and updated, and a view that took it: (points, poses, keypoints, model, view)."""
+    from view_selection.live.model import LiveModel
+    points, poses, kps = scene(n_images=n_images, n_points=n_points)
+    write_images(tmp_path, n_images)
+    m = LiveModel()
+    view = ModelView(str(tmp_path))
+    for i in range(3):
+        add(m, kps, poses, i)
+    match(m, kps, len(points), 0, 1)
+    match(m, kps, len(points), 1, 2)
+    m.update()
+    view.live(m)
+    return points, poses, kps, m, view
+
+
 def test_the_cloud_follows_the_live_model(tmp_path):
     points, poses, kps, m, view = first_pair(tmp_path, 4, 120)
     assert view.live(m) == 120  # the first call takes every point the model has
@@ -134,17 +151,7 @@ def test_points_that_are_lost_leave_the_cloud(tmp_path):
 
 
 def test_the_finished_model_replaces_the_live_one_until_the_model_changes(tmp_path):
-    points, poses, kps = scene(n_images=3, n_points=80)
-    write_images(tmp_path, 3)
-    from view_selection.live.model import LiveModel
-    m = LiveModel()
-    view = ModelView(str(tmp_path))
-    for i in range(3):
-        add(m, kps, poses, i)
-    match(m, kps, len(points), 0, 1)
-    match(m, kps, len(points), 1, 2)
-    m.update()
-    view.live(m)
+    points, poses, kps, m, view = first_three(tmp_path, 3, 80)
     folder = tmp_path / "sparse"
     folder.mkdir()
     written = m.to_model()
@@ -177,17 +184,7 @@ def test_the_finished_model_replaces_the_live_one_until_the_model_changes(tmp_pa
 def test_a_finished_model_older_than_the_live_one_is_not_shown(tmp_path):
     """The bridge's sending thread reads the finished model after the finish: when the live model
     changed meanwhile (the recording went on), the finished one is older and the live one stays."""
-    points, poses, kps = scene(n_images=4, n_points=80)
-    write_images(tmp_path, 4)
-    from view_selection.live.model import LiveModel
-    m = LiveModel()
-    view = ModelView(str(tmp_path))
-    for i in range(3):
-        add(m, kps, poses, i)
-    match(m, kps, len(points), 0, 1)
-    match(m, kps, len(points), 1, 2)
-    m.update()
-    view.live(m)
+    points, poses, kps, m, view = first_three(tmp_path, 4, 80)
     at_finish = view.cloud_version
     folder = tmp_path / "sparse"
     folder.mkdir()
