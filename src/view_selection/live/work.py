@@ -364,6 +364,7 @@ class LiveWork:
         import time
         phases, t0 = {}, time.monotonic()
         made = None  # the live model written, when it is
+        statistics = None  # the model's (Model.statistics), when known without reading it back
         # Out of time (the shutdown's budget, project.deadline): what is done so far is the
         # model, written as it stands, unrefined, and report.json says so (complete: false).
         incomplete = None
@@ -454,12 +455,12 @@ class LiveWork:
             # them, else read from sparse/0 (unless the refinement failed: then it is `made`).
             stats = out["refinement"].pop("statistics", None)
             if out["refinement"].get("status") != "error":
-                made = stats
+                made, statistics = None, stats
             phases["refinement"], t0 = time.monotonic() - t0, time.monotonic()
         out["model_path"] = path
-        if not isinstance(made, dict):
-            made = (made if made is not None else colmap_model.read_model(path)).statistics()
-        out.update(made)
+        if statistics is None:
+            statistics = (made if made is not None else colmap_model.read_model(path)).statistics()
+        out.update(statistics)
         phases["statistics"] = time.monotonic() - t0
         out["finish_phases"] = {k: round(v, 3) for k, v in phases.items()}
         out["waste_ratio"] = out["pairs_wasted"] / out["pairs_matched"] if out["pairs_matched"] else 0.0
