@@ -140,3 +140,28 @@ def test_not_a_database_is_a_clear_error(tmp_path):
     sqlite3.connect(str(other)).execute("CREATE TABLE x (a INTEGER)")
     with pytest.raises(db.DatabaseError, match="no table"):
         db.Database(str(other))
+
+
+def test_verified_matches_are_every_pairs_inliers_in_one_read(path):
+    """verified_matches() is what matches(a, b, "two_view_geometries") gives pair by pair, in
+    COLMAP's direction, without the pairs whose geometry has no inliers; the matches file the
+    finish writes from it is the one written pair by pair (a cropped refinement's path)."""
+    from view_selection.refinement import refiner
+    rng = np.random.default_rng(3)
+    with db.Database(path, create=True) as d:
+        cam = d.camera_id(64, 48, (50, 50, 32, 24))
+        ids = [d.add_image("im%d" % i, cam) for i in range(5)]
+        written = {}
+        for a, b, n in ((ids[3], ids[0], 7), (ids[1], ids[2], 4), (ids[4], ids[1], 0), (ids[0], ids[4], 2)):
+            m = rng.integers(0, 1000, (n, 2))
+            d.write_two_view_geometry(a, b, m)
+            written[(min(a, b), max(a, b))] = m if a < b else m[:, ::-1]
+    with db.Database(path) as d:
+        pairs, matches = d.verified_matches()
+    assert [tuple(p) for p in pairs] == [(a, b, len(m)) for (a, b), m in sorted(written.items()) if len(m)]
+    assert np.array_equal(matches, np.concatenate([m for _, m in sorted(written.items())]))
+    one_read, by_pair = path + ".all.bin", path + ".pairs.bin"
+    assert refiner.write_matches(path, one_read) == 13
+    assert refiner.write_matches(path, by_pair, pairs=list(written)) == 13
+    with open(one_read, "rb") as f, open(by_pair, "rb") as g:
+        assert f.read() == g.read()

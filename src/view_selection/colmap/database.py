@@ -225,6 +225,21 @@ class Database:
         m = _array(row[1], row[0], 2, np.uint32) if row else np.zeros((0, 2), np.uint32)
         return m[:, ::-1] if id1 > id2 else m
 
+    def verified_matches(self):
+        """Every two-view geometry's inlier matches in one read: (pairs, matches), `pairs` an
+        N x 3 int64 array of (image_id1, image_id2, count), image_id1 < image_id2, in pair id
+        order, pairs without inliers left out; `matches` the sum of the counts x 2 uint32
+        indices into image_id1's and image_id2's keypoints, the pairs' lists one after another."""
+        rows = self.con.execute("SELECT pair_id, rows, data FROM two_view_geometries WHERE rows > 0 "
+                                "ORDER BY pair_id").fetchall()
+        ids = np.array([r[0] for r in rows], np.int64)
+        pairs = np.stack([ids // MAX_IMAGE_ID, ids % MAX_IMAGE_ID,
+                          np.array([r[1] for r in rows], np.int64)], axis=1) if rows else np.zeros((0, 3), np.int64)
+        matches = np.frombuffer(b"".join(r[2] for r in rows), np.uint32).reshape(-1, 2)
+        if len(matches) != pairs[:, 2].sum():
+            raise DatabaseError("two_view_geometries: the inlier lists do not hold the rows they say")
+        return pairs, matches
+
     def two_view_geometry(self, id1, id2):
         """{'rows', 'config', 'qvec', 'tvec'} of a pair in COLMAP's order, or None."""
         row = self.con.execute("SELECT rows, config, qvec, tvec FROM two_view_geometries WHERE pair_id = ?",

@@ -209,20 +209,30 @@ def write_matches(database_path, path, pairs=None, per_pair=0):
     Returns how many."""
     import struct
     from ..colmap import database as cdb
-    rows = []
     with cdb.open_database(database_path) as d:
-        wanted = sorted(d.inlier_counts().items()) if pairs is None else [(p, 1) for p in sorted(pairs)]
-        for (a, b), n in wanted:
-            if n <= 0:
-                continue
-            m = np.asarray(d.matches(a, b, "two_view_geometries"), np.int64).reshape(-1, 2)
-            if per_pair and len(m) > per_pair:
-                m = m[np.linspace(0, len(m) - 1, per_pair).astype(np.int64)]
-            if len(m):
-                rows.append(np.stack([np.full(len(m), a), m[:, 0], np.full(len(m), b), m[:, 1]], axis=1))
-    data = np.concatenate(rows).astype("<i4") if rows else np.zeros((0, 4), "<i4")
+        if pairs is None and not per_pair:
+            # Every pair's, in one read (the finish's: 3.65 million matches at 30 minutes).
+            counts, m = d.verified_matches()
+            data = np.empty((len(m), 4), "<i4")
+            data[:, 0] = np.repeat(counts[:, 0], counts[:, 2])
+            data[:, 1] = m[:, 0]
+            data[:, 2] = np.repeat(counts[:, 1], counts[:, 2])
+            data[:, 3] = m[:, 1]
+        else:
+            rows = []
+            wanted = sorted(d.inlier_counts().items()) if pairs is None else [(p, 1) for p in sorted(pairs)]
+            for (a, b), n in wanted:
+                if n <= 0:
+                    continue
+                m = np.asarray(d.matches(a, b, "two_view_geometries"), np.int64).reshape(-1, 2)
+                if per_pair and len(m) > per_pair:
+                    m = m[np.linspace(0, len(m) - 1, per_pair).astype(np.int64)]
+                if len(m):
+                    rows.append(np.stack([np.full(len(m), a), m[:, 0], np.full(len(m), b), m[:, 1]], axis=1))
+            data = np.concatenate(rows).astype("<i4") if rows else np.zeros((0, 4), "<i4")
     with open(path, "wb") as f:
-        f.write(b"VSMATCH1" + struct.pack("<Q", len(data)) + data.tobytes())
+        f.write(b"VSMATCH1" + struct.pack("<Q", len(data)))
+        f.write(memoryview(np.ascontiguousarray(data)).cast("B"))
     return len(data)
 
 
