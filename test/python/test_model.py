@@ -78,3 +78,31 @@ def test_truncated_file_is_a_clear_error(tmp_path):
 def test_empty_folder_is_a_clear_error(tmp_path):
     with pytest.raises(cm.ModelError, match="no COLMAP model"):
         cm.read_model(str(tmp_path))
+
+
+def as_table(m):
+    """sample_model's points as a PointTable (what LiveModel.to_model hands the writer)."""
+    points = [m.points[k] for k in sorted(m.points)]
+    t = cm.Model(m.cameras, m.images)
+    t.points = cm.PointTable([p.id for p in points], [p.xyz for p in points], [p.rgb for p in points],
+                             [p.error for p in points],
+                             np.concatenate([[0], np.cumsum([len(p.image_ids) for p in points])]),
+                             np.concatenate([p.image_ids for p in points]),
+                             np.concatenate([p.point2D_idxs for p in points]))
+    return t
+
+
+@pytest.mark.parametrize("binary", [True, False])
+def test_a_point_table_is_its_points(tmp_path, binary):
+    """A model whose points are a PointTable reads as its Point3Ds, has their statistics and is
+    written byte for byte as the model with the Point3Ds."""
+    m, t = sample_model(), as_table(sample_model())
+    same(m, t)
+    assert dict(t.points.items()).keys() == m.points.keys() and len(list(t.points.values())) == 2
+    assert t.statistics() == m.statistics()
+    cm.write_model(m, str(tmp_path / "points"), binary=binary)
+    cm.write_model(t, str(tmp_path / "table"), binary=binary)
+    for name in os.listdir(str(tmp_path / "points")):
+        assert (tmp_path / "points" / name).read_bytes() == (tmp_path / "table" / name).read_bytes()
+    with pytest.raises(cm.ModelError):
+        cm.PointTable([1], [[0, 0, 1]], (0, 0, 0), [0.5], [0, 3], [1, 2], [0, 0])  # 3 said, 2 held
