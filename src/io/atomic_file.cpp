@@ -118,6 +118,8 @@ void writeFileStreaming(const std::string& path, const std::function<void(std::o
   if (error) throw core::IoError("cannot write '" + path + "': " + std::strerror(error));
 }
 
+bool syncFolder(const std::string& folder) { return syncPath(folder, O_RDONLY | O_DIRECTORY); }
+
 void writeAtomically(const std::string& path,
                      const std::function<void(const std::string&)>& write) {
   const fs::path target(path);

@@ -182,6 +182,24 @@ ColmapModel readColmapModel(const std::string& folder) {
   return model;
 }
 
+bool linkColmapModel(const std::string& from, const std::string& folder) {
+  std::error_code ec;
+  fs::create_directories(folder, ec);
+  if (ec) return false;
+  std::vector<fs::path> made;
+  for (const char* name : {"cameras.bin", "images.bin", "points3D.bin"}) {
+    const fs::path to = fs::path(folder) / name;
+    fs::create_hard_link(fs::path(from) / name, to, ec);
+    if (ec) {
+      for (const fs::path& p : made) fs::remove(p, ec);
+      return false;
+    }
+    made.push_back(to);
+  }
+  syncFolder(folder);
+  return true;
+}
+
 void writeColmapModel(const ColmapModel& model, const std::string& folder) {
   fs::create_directories(folder);
   {

@@ -260,6 +260,19 @@ struct Deadline {
 /// may overrun the budget, BudgetGuard stops the solve before a second one would.
 constexpr double kSolveSecondsPerObservation = 3e-6;
 
+size_t observationsOf(const Tracks& tracks) {
+  size_t n = 0;
+  for (const auto& t : tracks.tracks) n += t.size();
+  return n;
+}
+
+/// Whether `share` of the time left, halved (a triangulation's part), pays for triangulating
+/// `tracks` at config.triangulation_seconds_per_observation (always, without a deadline).
+bool triangulationPaidFor(const Deadline& deadline, double share, const Tracks& tracks, const RefinementConfig& config) {
+  return !deadline.set || deadline.left() * share / 2.0 >= config.triangulation_seconds_per_observation *
+                                                               static_cast<double>(observationsOf(tracks));
+}
+
 /// Adds the wall time of its scope to `seconds[name]` (the report's phase_seconds).
 class PhaseTimer {
  public:
@@ -598,6 +611,7 @@ struct PassResult {
   int epipolar_iterations = 0;
   double epipolar_median_input = 0.0, epipolar_median_refined = 0.0;
   bool epipolar_undone = false;
+  std::vector<std::string> not_begun;  ///< RefinementReport::not_begun
   std::map<std::string, double> seconds;  ///< by step (RefinementReport::phase_seconds)
 };
 
@@ -712,6 +726,11 @@ void epipolarStage(PassResult& r, const Gauge& gauge, const std::vector<Epipolar
 void triangulationStage(PassResult& r, const Tracks& tracks, const std::set<int>& kept, const RefinementConfig& config,
                         int stage, const Deadline& deadline, const std::string& where, io::Progress* progress) {
   const int later = config.retriangulations - stage;
+  if (!triangulationPaidFor(deadline, 1.0, tracks, config)) {  // as one given up, without the time spent on it
+    r.not_begun.push_back("triangulation");
+    r.out_of_time = stage > 0;
+    return;
+  }
   const PhaseTimer timer(r.seconds, "triangulation");
   if (retriangulate(r.state, tracks, kept, config,
                     config.triangulation_max_error * std::pow(config.triangulation_growth, std::max(0, later)),
@@ -737,6 +756,7 @@ bool adjustmentRounds(PassResult& r, const Gauge& gauge, const std::set<int>& ke
     if (deadline.passed() || deadline.left() + 0.1 * config.max_seconds <
                                  kSolveSecondsPerObservation * static_cast<double>(before)) {
       r.out_of_time = true;
+      if (!deadline.passed()) r.not_begun.push_back("adjustment");
       break;
     }
     const std::function<void(int)> on_iteration = [&](int iteration) {
@@ -831,9 +851,13 @@ PassResult pass(const State& input, const std::map<int, State::Pose>& reference,
   const Gauge gauge = gaugeOf(s, reference, movable, kept, config);
   const int stages = tracks ? 1 + config.retriangulations : 1;
   const std::map<int, State::Pose> before_epipolar = s.poses;
-  if (tracks && config.triangulate_first && config.epipolar_first && epipolar)
-    epipolarStage(r, gauge, *epipolar, kept, config, deadline.share(config.epipolar_time_share),
-                  "(pass " + std::to_string(pass_number) + ")", progress);
+  if (tracks && config.triangulate_first && config.epipolar_first && epipolar && !epipolar->empty()) {
+    if (triangulationPaidFor(deadline, 1.0 - config.epipolar_time_share, *tracks, config))
+      epipolarStage(r, gauge, *epipolar, kept, config, deadline.share(config.epipolar_time_share),
+                    "(pass " + std::to_string(pass_number) + ")", progress);
+    else
+      r.not_begun.push_back("epipolar");
+  }
   for (int stage = 0; stage < stages && !r.out_of_time; ++stage) {
     if (stage > 0 && deadline.passed()) {
       r.out_of_time = true;
@@ -926,6 +950,8 @@ void reportEpipolar(RefinementReport& rep, const PassResult& result) {
   rep.epipolar_median_input = result.epipolar_median_input;
   rep.epipolar_median_refined = result.epipolar_median_refined;
   rep.epipolar_undone = result.epipolar_undone;
+  for (const std::string& step : result.not_begun)
+    if (std::find(rep.not_begun.begin(), rep.not_begun.end(), step) == rep.not_begun.end()) rep.not_begun.push_back(step);
 }
 
 /// The report of a refinement that diverged: every movable image keeps its input pose.
@@ -983,9 +1009,15 @@ void reportUntouched(RefinementReport& rep, const PassResult& result, const Refi
   for (auto& c : rep.images)
     if (c.movable) c.kept = "the time budget was spent before it was refined";
   std::ostringstream msg;
-  msg << "the time budget of " << config.max_seconds
-      << " s was spent before an adjustment began: every image keeps its input pose";
-  if (result.epipolar_undone) msg << " (the epipolar stage's poses were undone)";
+  if (result.rounds == 0 && result.epipolar_iterations == 0 && result.retriangulations == 0 && !rep.not_begun.empty()) {
+    msg << "the time budget of " << config.max_seconds << " s would not pay for refining a model of this size (";
+    for (size_t k = 0; k < rep.not_begun.size(); ++k) msg << (k ? ", " : "") << rep.not_begun[k];
+    msg << " not begun): every image keeps its input pose";
+  } else {
+    msg << "the time budget of " << config.max_seconds
+        << " s was spent before an adjustment began: every image keeps its input pose";
+    if (result.epipolar_undone) msg << " (the epipolar stage's poses were undone)";
+  }
   rep.message = msg.str();
 }
 
@@ -1021,6 +1053,8 @@ void RefinementConfig::validate() const {
   if (!(epipolar_loss_scale > 0.0)) throw core::InvalidArgument("epipolar_loss_scale must be positive [px]");
   if (!(epipolar_time_share > 0.0 && epipolar_time_share <= 1.0))
     throw core::InvalidArgument("epipolar_time_share must be in (0, 1]");
+  if (!(triangulation_seconds_per_observation >= 0.0))
+    throw core::InvalidArgument("triangulation_seconds_per_observation must be >= 0");
 }
 
 std::set<int> allImages(const io::ColmapModel& model) {
@@ -1086,6 +1120,7 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
   const std::map<int, double> depth = medianDepths(initial);
   setup_timer.reset();
   const auto finish = [&](const io::ColmapModel& model, const State& s) {
+    rep.unchanged = &model == &input;
     rep.points_refined = s.points.size();
     rep.observations_refined = s.observations();
     rep.reprojection_error_refined = s.meanError();

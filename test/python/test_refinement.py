@@ -206,6 +206,28 @@ def test_a_time_budget_gives_what_the_adjustment_reached(tmp_path):
     assert ate_rmse(centres(cm.read_model(str(tmp_path / "out"))), truth) < ate_rmse(centres(m), truth)
 
 
+def test_a_model_returned_as_it_came_is_linked_not_written_again(tmp_path):
+    """A refinement that returns its input (a budget spent on reading: a 30-minute session's
+    finish) gives the input's files as the output, hard-linked, not written again; one that
+    refined writes its own."""
+    tool = refine_tool()
+    exact = arc_poses()
+    m = known_pose_model(exact, drift.add_drift(exact, 0.02, 0.3, seed=3), np.random.default_rng(5))
+    cm.write_model(m, str(tmp_path / "in"))
+    spent = refiner.run_refine_model(tool, str(tmp_path / "in"), str(tmp_path / "spent"), str(tmp_path / "spent.json"),
+                                     refiner.RefinementOptions(max_seconds=1e-6))
+    assert spent["unchanged"] and not spent["refined"], spent["message"]
+    refined = refiner.run_refine_model(tool, str(tmp_path / "in"), str(tmp_path / "refined"),
+                                       str(tmp_path / "refined.json"), refiner.RefinementOptions())
+    assert refined["refined"] and not refined["unchanged"], refined["message"]
+    for name in ("cameras.bin", "images.bin", "points3D.bin"):
+        given = os.stat(str(tmp_path / "in" / name))
+        assert os.stat(str(tmp_path / "spent" / name)).st_ino == given.st_ino, name
+        assert os.stat(str(tmp_path / "refined" / name)).st_ino != given.st_ino, name
+    same_model = cm.read_model(str(tmp_path / "spent"))
+    assert sorted(same_model.images) == sorted(m.images) and len(same_model.points) == len(m.points)
+
+
 def fake_tool(path, body):
     path.write_text("#!/bin/sh\n" + body + "\n")
     path.chmod(path.stat().st_mode | stat.S_IEXEC)

@@ -675,12 +675,16 @@ TEST_F(Refinement, WithNoTimeToTriangulateAfterTheEpipolarStageItsPosesAreUndone
   // 30-minute walk's finish adjusted them from the moved poses: every observation an outlier,
   // "diverged", nothing refined). The budget is set from the phases of a run without one, from
   // a moment before the call, between the setup's end and the epipolar stage's; a loaded
-  // machine may miss that window, so it is tried at a few points of it.
+  // machine may miss that window, so it is tried at a few points of it. The window exists where
+  // the triangulation's estimate (triangulation_seconds_per_observation) is below what it
+  // costs, as on a loaded machine; with the estimate the stage would not begin here (its share
+  // is all of the budget), so it is 0.
   std::vector<refine::Match> matches;
   const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.0, 4.0, &matches);
   refine::RefinementConfig config;
   config.threads = 1;
   config.epipolar_time_share = 1.0;
+  config.triangulation_seconds_per_observation = 0.0;
   refine::RefinementReport free_run;
   refine::refineModel(input, refine::allImages(input), config, &free_run, nullptr, &matches);
   ASSERT_GT(free_run.epipolar_iterations, 0) << free_run.message;
@@ -718,14 +722,48 @@ TEST_F(Refinement, ABudgetSpentBeforeItBeginsGivesTheModelAsItCameAtOnce) {
   EXPECT_EQ(0, report.epipolar_iterations);
   EXPECT_EQ(0, report.rounds);
   EXPECT_NE(std::string::npos, report.message.find("before the refinement began")) << report.message;
+  EXPECT_TRUE(report.unchanged);  // refine_model links the input's files instead of writing them
   EXPECT_EQ(input.points.size(), out.points.size());
   for (const auto& [id, im] : out.images) EXPECT_TRUE(im.translation.isApprox(input.images.at(id).translation, 1e-12));
   // The same budget counted from now refines it, and says where its time went.
   config.budget_start = {};
   refine::refineModel(input, refine::allImages(input), config, &report, nullptr, &matches);
   EXPECT_TRUE(report.refined) << report.message;
+  EXPECT_FALSE(report.unchanged);
+  EXPECT_TRUE(report.not_begun.empty());
   for (const char* phase : {"setup", "epipolar", "triangulation", "adjustment", "filter"})
     EXPECT_GT(report.phase_seconds[phase], 0.0) << phase;
+}
+
+TEST_F(Refinement, StepsTheTimeLeftCannotPayForAreNotBegun) {
+  // A 30-minute session's finish spent its 5 s on two epipolar iterations and a triangulation
+  // given up half-way, then returned the model as it came. With a triangulation estimated at
+  // more than the budget holds, neither begins: the adjustment runs at once on the model's own
+  // points, and the report names what was left out. The estimate is raised here (to 1 s an
+  // observation) because the shipped 1 us pays for this small model's triangulation.
+  std::vector<refine::Match> matches;
+  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.0, 4.0, &matches);
+  refine::RefinementConfig config;
+  config.threads = 1;
+  config.max_seconds = 30.0;
+  config.triangulation_seconds_per_observation = 1.0;
+  refine::RefinementReport report;
+  const io::ColmapModel out = refine::refineModel(input, refine::allImages(input), config, &report, nullptr, &matches);
+  EXPECT_EQ((std::vector<std::string>{"epipolar", "triangulation"}), report.not_begun) << report.message;
+  EXPECT_EQ(0, report.epipolar_iterations);
+  EXPECT_EQ(0u, report.epipolar_correspondences);
+  EXPECT_EQ(0, report.retriangulations);
+  EXPECT_GT(report.rounds, 0) << report.message;  // the adjustment on the model's own points
+  EXPECT_TRUE(report.refined) << report.message;
+  EXPECT_FALSE(report.unchanged);
+  EXPECT_LT(report.phase_seconds["triangulation"], 1e-3);  // none begun (the timer of the kept images' runs)
+  EXPECT_LT(ate(out, exact), ate(input, exact)) << report.message;
+  // At the shipped estimate the same budget pays for both.
+  config.triangulation_seconds_per_observation = refine::RefinementConfig{}.triangulation_seconds_per_observation;
+  refine::refineModel(input, refine::allImages(input), config, &report, nullptr, &matches);
+  EXPECT_TRUE(report.not_begun.empty()) << report.message;
+  EXPECT_GT(report.epipolar_iterations, 0) << report.message;
+  EXPECT_GT(report.retriangulations, 0) << report.message;
 }
 
 TEST_F(Refinement, WithoutPriorsTheEpipolarStageDoesNotRun) {

@@ -14,6 +14,9 @@ namespace view_selection::io {
 /// is untouched, and core::IoError says why (the writer's own exception is rethrown as is).
 void writeAtomically(const std::string& path, const std::function<void(const std::string&)>& write);
 
+/// fsync of a folder, so that the names made in it are on disk; false where that failed.
+bool syncFolder(const std::string& folder);
+
 /// Creates (or truncates) `path` and writes `size` bytes into it; throws core::IoError with the
 /// system's reason ("No space left on device", ...). For writers inside writeAtomically.
 void writeFileContents(const std::string& path, const void* data, size_t size);

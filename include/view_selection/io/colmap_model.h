@@ -73,4 +73,9 @@ ColmapModel readColmapModel(const std::string& folder);
 /// Writes the three binary files into `folder` (created), each atomically.
 void writeColmapModel(const ColmapModel& model, const std::string& folder);
 
+/// The binary model in `from` hard-linked into `folder` (created): the same model without
+/// writing it again. False where a link cannot be made (another file system, a name already
+/// there, a file system without links), with none of it left in `folder`: the caller writes.
+bool linkColmapModel(const std::string& from, const std::string& folder);
+
 }  // namespace view_selection::io
