@@ -20,7 +20,7 @@ from view_selection.srv import (GetPairs, GetPairsRequest, GetSelection, WriteKe
                                 WriteKeyframeImagesRequest)
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
-from vs_robust import (FramePublisher, NodeProcess, Statistics, call, find_tool,  # noqa: E402
+from vs_robust import (FramePublisher, NodeProcess, Statistics, call, feed, find_tool,  # noqa: E402
                        shut_down, synthetic_frames, wait_until)
 from faults_tester import small_file_system, umount  # noqa: E402
 from view_selection.colmap.model import read_model  # noqa: E402
@@ -48,12 +48,11 @@ class LiveFaults(unittest.TestCase):
 
     @classmethod
     def publish(cls, count):
-        """The next `count` frames, each waited for."""
-        for f in cls.frames[cls.published:cls.published + count]:
-            cls.pub.publish(f)
-            cls.published += 1
-            cls.stats.wait(lambda s: s.frames_offered + s.frames_dropped >= cls.published, 20,
-                           'frame %d' % cls.published)
+        """The next `count` frames, each waited for (offered or dropped), a few in flight
+        (vs_robust.feed)."""
+        before = cls.published
+        feed(cls.pub.publish, cls.frames[before:before + count], lambda: cls.stats.handled() - before, 20, NODE)
+        cls.published += count
 
     @classmethod
     def tearDownClass(cls):

@@ -60,6 +60,27 @@ def wait_until(predicate, timeout, what, period=0.02):
         time.sleep(period)
 
 
+# Frames a feeder lets run ahead of what the node's ~statistics show handled (feed). They come
+# once per ~publish_period (0.5 s at the defaults), so waiting for each frame alone costs about
+# that per frame; with this many in flight, about that per this many. They stay far below every
+# queue they pass (the publishers' 50; the node's subscriber_queue_size 100, queue_size 90,
+# max_pending_frames 30), so none is lost to a queue, and each topic delivers them in order.
+FEED_WINDOW = 8
+
+
+def feed(publish, frames, handled, timeout, what, window=FEED_WINDOW):
+    """Publishes `frames` with publish(frame), never more than `window` ahead of handled() (how
+    many of these frames the node has handled so far, from its ~statistics), then waits until
+    it has handled them all. Each wait is for a frame handled, within `timeout` seconds."""
+    frames = list(frames)
+    for n, frame in enumerate(frames, 1):
+        if n > window:
+            wait_until(lambda: handled() >= n - window, timeout, '%s: frame %d handled' % (what, n - window))
+        publish(frame)
+    if frames:
+        wait_until(lambda: handled() >= len(frames), timeout, '%s: frame %d handled' % (what, len(frames)))
+
+
 class CallTimeout(AssertionError):
     pass
 
