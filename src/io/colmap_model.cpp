@@ -2,7 +2,9 @@
 
 #include "view_selection/core/exceptions.h"
 #include "view_selection/io/atomic_file.h"
+#include "view_selection/io/file_ops.h"
 
+#include <algorithm>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -45,9 +47,11 @@ namespace {
 class Reader {
  public:
   explicit Reader(const fs::path& path) : path_(path.string()) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw core::IoError(path_ + ": cannot open (a COLMAP binary model needs it)");
-    data_.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    try {
+      data_ = readFileBytes(path_);  // in 64 KB reads, not a character at a time through a stream
+    } catch (const core::IoError& e) {
+      throw core::IoError(std::string(e.what()) + " (a COLMAP binary model needs it)");
+    }
   }
 
   template <typename T>
@@ -61,10 +65,10 @@ class Reader {
   }
 
   std::string name() {
-    const size_t end = data_.find('\0', at_);
-    if (end == std::string::npos) throw core::IoError(path_ + ": an image name without its end");
-    std::string s = data_.substr(at_, end - at_);
-    at_ = end + 1;
+    const auto end = std::find(data_.begin() + static_cast<std::ptrdiff_t>(at_), data_.end(), uint8_t{0});
+    if (end == data_.end()) throw core::IoError(path_ + ": an image name without its end");
+    std::string s(data_.begin() + static_cast<std::ptrdiff_t>(at_), end);
+    at_ = static_cast<size_t>(end - data_.begin()) + 1;
     return s;
   }
 
@@ -82,7 +86,7 @@ class Reader {
 
  private:
   std::string path_;
-  std::string data_;
+  std::vector<uint8_t> data_;
   size_t at_ = 0;
 };
 

@@ -1,11 +1,13 @@
 #include "view_selection/refine/tracks.h"
 
 #include "view_selection/core/exceptions.h"
+#include "view_selection/io/file_ops.h"
 
 #include <algorithm>
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <string_view>
 #include <unordered_map>
 
 namespace view_selection::refine {
@@ -118,9 +120,8 @@ Tracks buildTracks(const std::vector<Match>& matches) {
 }
 
 std::vector<Match> readMatches(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw core::IoError(path + ": cannot open the matches file");
-  const std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::vector<uint8_t> bytes = io::readFileBytes(path);  // 58 MB at 30 minutes: not a character at a time
+  const std::string_view data(reinterpret_cast<const char*>(bytes.data()), bytes.size());
   if (data.size() < 16 || std::memcmp(data.data(), kMagic, 8) != 0)
     throw core::IoError(path + ": not a matches file (VSMATCH1)");
   uint64_t count = 0;
