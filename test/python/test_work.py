@@ -53,6 +53,9 @@ class FailingProject:
     def ledger(self, what, items):
         self.ledgered += [(what, i) for i in items]
 
+    def ledger_items(self, what):
+        return [i for w, i in self.ledgered if w == what]
+
 
 def keyframes(n):
     return [Keyframe(i, "%03d.png" % i, i, (i, 0, 0), (1, 0, 0, 0), (500, 500, 320, 240), 640, 480) for i in range(n)]
@@ -101,6 +104,30 @@ def test_a_pair_that_keeps_failing_is_given_up_and_ledgered():
     assert sum(1 for kind, items in project.runs if items == [pairs[0]]) == 3  # then never again
     assert work.skipped()["pairs"][0]["item"] == "%s %s" % pairs[0]
     assert "exit 3" in work.skipped()["pairs"][0]["error"]
+
+
+def test_what_an_earlier_run_gave_up_gets_one_more_try_after_a_restart():
+    """A bridge killed and started again on its project reads what it gave up from the ledger:
+    an image or a pair that fails COLMAP costs one more run (for a hang, one more timeout), not
+    ~max_attempts; a pair that works now (a fault mended) is matched."""
+    kfs = keyframes(7)
+    pairs = chain(kfs)[:5]  # the last keyframe's image is bad: no pair of it
+    project = FailingProject(hanging_pairs=[pairs[1]], bad_images=[kfs[6].name])
+    project.features = {k.name for k in kfs[:6]}
+    project.ledgered = [("skipped-pair", "%s %s" % pairs[1]), ("skipped-pair", "%s %s" % pairs[3]),
+                        ("skipped-image", kfs[6].name), ("matched", "%s %s" % pairs[0])]
+    work = LiveWork(project, continuity=False, max_attempts=3)
+    assert not work.pairs.given_up(pairs[1]) and work.pairs.suspect(pairs[1])
+    assert not work.images.given_up(kfs[6].name)
+    work.extract(kfs)
+    work.match_all(kfs, pairs)
+    assert sum(1 for kind, items in project.runs if items == [pairs[1]]) == 1  # one more, alone
+    assert sum(1 for kind, items in project.runs if kind == "extract" and kfs[6].name in items) == 1
+    assert work.pairs.given_up(pairs[1]) and work.images.given_up(kfs[6].name)
+    assert pairs[3] in project.geometries and not work.pairs.given_up(pairs[3])  # mended since
+    skipped = {s["item"]: s for s in work.skipped()["pairs"]}
+    assert set(skipped) == {"%s %s" % pairs[1]}
+    assert skipped["%s %s" % pairs[1]]["attempts"] == 3 and "240 s" in skipped["%s %s" % pairs[1]]["error"]
 
 
 def test_an_unreadable_image_is_retried_with_a_wait_not_every_batch():

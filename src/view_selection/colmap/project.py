@@ -170,6 +170,23 @@ class ColmapProject:
         durable.append_durably(os.path.join(self.root, "ledger.txt"),
                                "".join("%s %s %s\n" % (stamp, what, item) for item in items))
 
+    def ledger_items(self, what):
+        """The items DIR/ledger.txt has under `what` (e.g. "skipped-image": names;
+        "skipped-pair": "name name"), in order, each once; a last line a crash cut short is
+        left out."""
+        path = os.path.join(self.root, "ledger.txt")
+        if not os.path.exists(path):
+            return []
+        with open(path) as f:
+            lines = f.read().split("\n")[:-1]  # the text after the last newline may be torn
+        seen, out = set(), []
+        for line in lines:
+            parts = line.split(" ", 2)
+            if len(parts) == 3 and parts[1] == what and parts[2] not in seen:
+                seen.add(parts[2])
+                out.append(parts[2])
+        return out
+
     def image_ids(self):
         return dict(self.catalogue().ids)
 

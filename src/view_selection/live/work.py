@@ -60,6 +60,17 @@ class LiveWork:
         self.pose_of = lambda k, iid: geometry.world_to_camera(k.position, k.orientation)
         if hasattr(refinement, "attach"):
             refinement.attach(self)
+        # What an earlier run on this project gave up (DIR/ledger.txt) gets one more try, not
+        # ~max_attempts: a COLMAP call that hangs on it costs its timeout once more, not three
+        # times (a restarted bridge spent 57 s so in live_colmap_faults), and a fault mended
+        # since is found.
+        why = "given up before the bridge started again (ledger.txt)"
+        for name in project.ledger_items("skipped-image"):
+            self.images.given_up_before(name, why)
+        for pair in project.ledger_items("skipped-pair"):
+            names = pair.split(" ")
+            if len(names) == 2:
+                self.pairs.given_up_before(tuple(names), why)
 
     def error(self, text):
         self.log("error", text)
