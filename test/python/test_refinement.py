@@ -256,6 +256,25 @@ def test_a_failing_refinement_leaves_the_unrefined_model(tmp_path):
     assert sorted(os.listdir(tmp_path / "sparse" / "unrefined")) == sorted(before)
 
 
+def test_a_model_its_budget_cannot_refine_is_said_once_and_kept_as_written(tmp_path):
+    """The bridge's finish on a session too long for ~refine_max_seconds (30 minutes): one
+    warning that says the model is not refined and what would refine it (not a keyframe's
+    "kept"), and sparse/0 stays the files written, linked back, not written again."""
+    model = tmp_path / "sparse" / "0"
+    exact = arc_poses()
+    cm.write_model(known_pose_model(exact, drift.add_drift(exact, 0.02, 0.3, seed=3), np.random.default_rng(2)),
+                   str(model))
+    inodes = {n: os.stat(str(model / n)).st_ino for n in os.listdir(str(model))}
+    logged = []
+    section = refiner.ModelRefinement(refiner.RefinementOptions(max_seconds=1e-6), tool=refine_tool(),
+                                      log=lambda level, text: logged.append((level, text))).apply(
+        FakeProject(str(tmp_path)), str(model))
+    assert section["status"] == "out_of_time" and not section["refined"], section["message"]
+    warnings = [text for level, text in logged if level == "warn"]
+    assert len(warnings) == 1 and "not refined" in warnings[0] and "~refine_max_seconds" in warnings[0], logged
+    assert {n: os.stat(str(model / n)).st_ino for n in os.listdir(str(model))} == inodes
+
+
 def test_a_hung_refinement_is_killed_at_its_timeout(tmp_path):
     m = known_pose_model(arc_poses(5), arc_poses(5), np.random.default_rng(1))
     cm.write_model(m, str(tmp_path / "in"))

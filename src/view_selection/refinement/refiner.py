@@ -371,7 +371,14 @@ class ModelRefinement:
             return {"refined": False, "status": "error", "error": message, "unrefined_path": unrefined,
                     "seconds": time.monotonic() - start, "options": self.options.to_json()}
         section["unrefined_path"] = unrefined
-        if section["keyframes_kept"]:
+        if section["status"] == "out_of_time" and not section["refined"]:
+            # Every keyframe kept its pose for want of time (a long session's finish): said once,
+            # with what would refine it, instead of a keyframe's "kept" below.
+            self.log("warn", "refinement: not refined within its budget of %g s (%s); the model is at the given "
+                             "poses. A longer budget refines it (colmap_bridge's ~refine_max_seconds, "
+                             "colmap_from_selection's --refine-max-seconds)" % (self.options.max_seconds,
+                                                                                 section["message"]))
+        elif section["keyframes_kept"]:
             self.log("warn", "refinement: %d keyframes kept their input pose (%s: %s)" % (
                 len(section["keyframes_kept"]), section["keyframes_kept"][0]["name"],
                 section["keyframes_kept"][0]["why"]))
