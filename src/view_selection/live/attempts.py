@@ -29,11 +29,9 @@ class Attempts:
     def given_up_before(self, item, error):
         """The item was given up in an earlier run (a bridge killed and started again on its
         project): one more try, not ~max_attempts; a failure gives it up again at once."""
-        if self.failures.get(item, 0) < self.max_attempts - 1:
+        if self.failures.get(item, 0) < self.max_attempts - 1:  # (with max_attempts 1: a try as any)
             self.failures[item] = self.max_attempts - 1
             self.errors[item] = str(error)
-            if self.failures[item] >= self.max_attempts:  # max_attempts 1: given up as it was
-                self._given_up += 1
 
     def suspected(self, item):
         """The item was in a run of several that timed out: it is tried alone next, and only a
