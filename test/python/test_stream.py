@@ -85,6 +85,23 @@ def test_new_keyframes_are_timed_by_the_clock():
     assert s.last_keyframe_time == 10.0 and s.last_change_time == 12.0
 
 
+def test_the_time_until_the_keyframes_have_paused_long_enough():
+    # colmap_bridge looks again whether its finish is due when ~finish_after_idle has passed
+    # since the last keyframe, not a batch period after the node's flushed message woke it.
+    now = [10.0]
+    s = PairStream(clock=lambda: now[0])
+    assert s.until_idle(1.0) is None  # no keyframe yet: nothing to wait for
+    s.receive(msg(1, keyframes=[0]))
+    now[0] = 10.5
+    assert s.until_idle(1.0) == 0.5
+    s.receive(msg(2, keyframes=[0], total=1))  # a pose update is not a new keyframe
+    assert s.until_idle(1.0) == 0.5
+    s.receive(msg(3, keyframes=[0, 1], total=2))
+    assert s.until_idle(1.0) == 1.0
+    now[0] = 12.0
+    assert s.until_idle(1.0) == 0.0
+
+
 def test_the_node_s_pauses_are_told_apart_from_pauses_of_keyframes():
     # colmap_bridge finishes once the node says its frames stopped (a flushed message), not
     # whenever keyframes pause: walking where the camera has been makes none.

@@ -320,6 +320,11 @@ class Bridge:
                     stopped = s.pending_pairs == 0 or idle >= 3 * self.finish_after_idle
                 due = (self.finish_after_idle > 0 and s.keyframes and idle >= self.finish_after_idle and stopped
                        and self.finished_at_change != s.last_change_time)
+                # Stopped but not idle long enough yet: look again when it has been, not a whole
+                # batch period later (the node's `flushed` message at its 0.5 s woke the loop,
+                # which then slept 1 s: the finish began 1.6 s after the last keyframe, not 1).
+                until = s.until_idle(self.finish_after_idle) if self.finish_after_idle > 0 and stopped else None
+                wait = min(self.batch_period, until + 0.01) if until else self.batch_period
             more = False
             if due:
                 self.finish("no keyframe for %.1f s" % idle)
@@ -327,7 +332,7 @@ class Bridge:
                 more = self.batch()
             with self.lock:
                 if not self.stopping and not more:
-                    self.wake.wait(self.batch_period)
+                    self.wake.wait(wait)
 
     def batch(self):
         """Features of new keyframes, then matches of announced pairs not matched yet; True when

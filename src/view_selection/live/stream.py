@@ -79,6 +79,14 @@ class PairStream:
         return self.last_pause_time is not None and (self.last_keyframe_time is None
                                                      or self.last_pause_time >= self.last_keyframe_time)
 
+    def until_idle(self, seconds):
+        """How long until no keyframe new to us has come for `seconds` (0 once it has; None
+        without keyframes): the bridge waits no longer than that to see whether its finish is
+        due, so that it begins when it is, not up to a batch period later."""
+        if self.last_keyframe_time is None:
+            return None
+        return max(0.0, self.last_keyframe_time + seconds - self.clock())
+
     def receive(self, msg):
         """A message from ~pairs: applied when it is the next one (or full); True if applied.
         A gap or an earlier sequence sets need_sync instead."""
