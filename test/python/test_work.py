@@ -294,3 +294,117 @@ def test_items_that_fail_alone_one_after_another_stop_the_runs_alone():
     now[0] += 1000.0  # past the backoff
     work.match(kfs, chain(kfs))  # each is a suspect now, tried alone: four in a row fail, the rest wait
     assert len(project.runs) - runs == LiveWork.ALONE_FAILURES_IN_A_ROW
+
+
+class GuidedProject(FailingProject):
+    """A backend that matches by the poses (as matching.backend.PoseGuidedBackend): the pairs in
+    `falls_back` cannot be matched so and go to COLMAP's matcher (match_fallback), which fails or
+    hangs as FailingProject's runs do."""
+
+    def __init__(self, falls_back=(), **kwargs):
+        super().__init__(**kwargs)
+        self.falls_back = set(falls_back)
+        self.guided = []  # the pairs matched by the poses, each time one was tried
+
+    def match(self, pairs, defer_fallback=None):
+        fallback = [p for p in pairs if p in self.falls_back]
+        self.guided += [p for p in pairs if p not in self.falls_back]
+        self.geometries |= set(pairs) - self.falls_back
+        if fallback and defer_fallback is not None:
+            defer_fallback(fallback)
+        elif fallback:
+            self.match_fallback(fallback)
+
+    def match_fallback(self, pairs):
+        FailingProject.match(self, pairs)
+
+
+def fallback_runs(project):
+    return [items for kind, items in project.runs if kind == "match"]
+
+
+def test_fallbacks_of_several_batches_go_to_colmap_in_one_run():
+    # Every other pair falls back; batches of 4 pairs: 2 fallbacks a batch. Until
+    # FALLBACK_RUN_PAIRS of them wait, no run of COLMAP's matcher (each run costs ~0.06 s CPU
+    # beside its pairs), and a waiting pair is neither tried again by the poses nor charged.
+    from view_selection.live import work as work_module
+    n = 2 * work_module.FALLBACK_RUN_PAIRS + 6
+    kfs = keyframes(n + 1)
+    pairs = chain(kfs)
+    project = GuidedProject(falls_back=pairs[1::2])
+    project.features = {k.name for k in kfs}
+    work = LiveWork(project, continuity=False, max_batch_pairs=4)
+    clock = [0.0]
+    work.now = lambda: clock[0]
+    batches = 0
+    while not fallback_runs(project):
+        work.match(kfs, pairs)
+        batches += 1
+        assert batches <= n
+    (run,) = fallback_runs(project)
+    assert len(run) == work_module.FALLBACK_RUN_PAIRS and set(run) <= set(pairs[1::2])
+    assert batches == work_module.FALLBACK_RUN_PAIRS // 2
+    assert len(project.guided) == len(set(project.guided))  # nothing guided twice
+    assert not work.pairs.failures and work.status["fallback_waiting"] == 0
+    # The rest of the guided pairs: their fallbacks wait (fewer than a run's worth, not long yet).
+    while work.match(kfs, pairs):
+        pass
+    work.match(kfs, pairs)
+    assert len(fallback_runs(project)) == 1 and work.status["fallback_waiting"] > 0
+    assert set(project.guided) == set(pairs[0::2])
+    # Waiting FALLBACK_MAX_WAIT: they run, though fewer than a run's worth.
+    clock[0] += work_module.FALLBACK_MAX_WAIT
+    work.match(kfs, pairs)
+    assert len(fallback_runs(project)) == 2 and project.matched() == set(pairs)
+    assert work.status["fallback_waiting"] == 0 and work.status["backlog_pairs"] == 0
+
+
+def test_waiting_fallbacks_run_when_the_camera_pauses_and_at_the_finish():
+    kfs = keyframes(7)
+    pairs = chain(kfs)
+    project = GuidedProject(falls_back=pairs[:2])
+    project.features = {k.name for k in kfs}
+    work = LiveWork(project, continuity=False, max_batch_pairs=3)
+    work.match(kfs, pairs)
+    assert not fallback_runs(project) and project.matched() == {pairs[2]}
+    work.match(kfs, pairs, paused=True)  # the node said its frames stopped: the finish may be near
+    assert fallback_runs(project) == [pairs[:2]] and project.matched() == set(pairs)
+
+    # The finish takes what waits, whatever the count and the wait.
+    project = GuidedProject(falls_back=pairs[:2])
+    project.features = {k.name for k in kfs}
+    work = LiveWork(project, continuity=False, max_batch_pairs=3)
+    work.match(kfs, pairs)
+    work.match_all(kfs, pairs)
+    assert fallback_runs(project) == [pairs[:2]] and project.matched() == set(pairs)
+    assert work.lost_pairs(set(pairs), project.matched(), project.extracted(), []) == []
+
+
+def test_a_bad_pair_in_a_run_of_waiting_fallbacks_costs_its_neighbours_nothing():
+    from view_selection.live import work as work_module
+    kfs = keyframes(work_module.FALLBACK_RUN_PAIRS + 1)
+    pairs = chain(kfs)
+    bad = pairs[5]
+    project = GuidedProject(falls_back=pairs, bad_pairs=[bad])
+    project.features = {k.name for k in kfs}
+    work = LiveWork(project, continuity=False, max_batch_pairs=len(pairs))
+    work.match(kfs, pairs)  # all fall back: one run of them, halved where it fails
+    assert project.matched() == set(pairs) - {bad}
+    assert work.pairs.failures == {bad: 1} and not project.guided
+    assert len(fallback_runs(project)) <= 2 * (len(pairs) - 1).bit_length() + 2
+    # Tried again (alone: it failed before) once its wait is over, as any failed pair.
+    work.pairs.not_before.clear()
+    work.match(kfs, pairs, paused=True)
+    assert fallback_runs(project)[-1] == [bad] and work.pairs.failures == {bad: 2}
+
+
+def test_a_waiting_fallback_no_longer_wanted_is_not_matched():
+    kfs = keyframes(5)
+    pairs = chain(kfs)
+    project = GuidedProject(falls_back=[pairs[0]])
+    project.features = {k.name for k in kfs}
+    work = LiveWork(project, continuity=False, max_batch_pairs=4)
+    work.match(kfs, pairs)
+    assert work.fallback_waiting.keys() == {pairs[0]}
+    work.match(kfs, pairs[1:], paused=True)  # the node took the pair back
+    assert not fallback_runs(project) and not work.fallback_waiting

@@ -340,6 +340,7 @@ class Bridge:
         with self.lock:
             keyframes = self.stream.ordered_keyframes()
             pairs = self.stream.announced_names()
+            paused = self.stream.frames_paused()  # the finish may be near: fallbacks wait no longer
         if not keyframes:
             return False
         with self.work:
@@ -347,7 +348,7 @@ class Bridge:
                 return False
             try:
                 self.work_state.extract(keyframes)
-                more = self.work_state.match(keyframes, pairs)
+                more = self.work_state.match(keyframes, pairs, paused=paused)
                 if self.work_state.model is not None:
                     with self.work_state.clock.measure("triangulation", 1):
                         self.work_state.feed_model(keyframes)
@@ -539,7 +540,8 @@ class Bridge:
         if self.backend:
             stages.update(self.backend.clock.summary())
             totals = self.backend.path_totals()
-            values.update({"pairs guided": totals["guided"], "pairs fallback": totals["fallback"]})
+            values.update({"pairs guided": totals["guided"], "pairs fallback": totals["fallback"],
+                           "fallback runs": totals["fallback_runs"]})
         for stage, figures in stages.items():
             values["%s cpu [s]" % stage] = figures["cpu_seconds"]
         report = self.last_report

@@ -19,6 +19,13 @@ from .attempts import Attempts
 # progress is reported as it goes.
 FINISH_BATCH_PAIRS = 256
 
+# The pairs that fall back to COLMAP's matcher (matches_importer) while the recording goes on wait
+# for a run of at least this many, or FALLBACK_MAX_WAIT seconds, or the camera's pause: a run
+# costs ~0.06 s CPU beside its ~0.04 s a pair, and a batch of 24 pairs had 3.75 fallbacks (a
+# 10-minute walk: 557 runs for 2,092 pairs).
+FALLBACK_RUN_PAIRS = 16
+FALLBACK_MAX_WAIT = 10.0
+
 
 class LiveWork:
     def __init__(self, project: ColmapProject, continuity=True, max_backlog=2000, max_batch_pairs=24,
@@ -54,6 +61,11 @@ class LiveWork:
         self.backlog_before = 0
         self.status = {}  # the last batch's figures: keyframes, images extracted and waiting, pairs
         self.deferred = 0  # pairs beyond ~max_backlog at some point, left for the finish
+        # pair -> when it fell back: waiting for a run of COLMAP's matcher with others (backends
+        # that match by the poses and can hand their fallbacks over: match_fallback)
+        self.fallback_waiting = {}
+        self.fallback_batched = hasattr(self.backend, "match_fallback")
+        self.now = time.monotonic  # the fallbacks' clock
         self.errors = []   # the last few, for the report
         # The pose the live model takes for a keyframe (its node pose), unless a refinement that
         # runs beside the matching (refinement/local.py) attaches its own: refined poses.
@@ -152,7 +164,8 @@ class LiveWork:
         for i in items:
             if i in now:
                 attempts.succeeded(i)
-        return [i for i in items if i not in now], error, timed_out
+        # A pair handed over to wait for a run of COLMAP's matcher has neither failed nor succeeded.
+        return [i for i in items if i not in now and i not in self.fallback_waiting], error, timed_out
 
     def _charge(self, failed, error, attempts, kind, ledger_kind):
         """A failure for each item (its own reason where the backend knows it); an item that
@@ -201,18 +214,25 @@ class LiveWork:
             wanted |= self.loops.pairs
         return wanted
 
-    def match(self, keyframes, pairs, limit=None):
+    def match(self, keyframes, pairs, limit=None, paused=False):
         """Matches at most `limit` (~max_batch_pairs) of the wanted pairs not matched yet whose
         images have features and that are due; True when more are waiting.
 
         While the recording goes on, at most ~max_backlog of the waiting pairs are considered
         (the oldest by name; the rest are counted in `deferred`); the finish (match_all) takes
-        every one of them: ~max_backlog bounds what a batch looks at, never what the model gets."""
-        return self._match(keyframes, pairs, self.max_batch_pairs if limit is None else limit, self.max_backlog)
+        every one of them: ~max_backlog bounds what a batch looks at, never what the model gets.
+        The pairs the poses cannot match wait for a run of COLMAP's matcher with others
+        (FALLBACK_RUN_PAIRS, FALLBACK_MAX_WAIT), or for `paused` (the camera stopped: the
+        finish may be near) or the finish."""
+        return self._match(keyframes, pairs, self.max_batch_pairs if limit is None else limit, self.max_backlog,
+                           flush=paused)
 
-    def _match(self, keyframes, pairs, limit, max_backlog=None):
+    def _match(self, keyframes, pairs, limit, max_backlog=None, flush=True):
         matched = self.backend.matched()
-        backlog = sorted(self.wanted_pairs(keyframes, pairs) - matched)
+        wanted = self.wanted_pairs(keyframes, pairs)
+        for p in [p for p in self.fallback_waiting if p not in wanted or p in matched]:
+            del self.fallback_waiting[p]  # no longer wanted (or matched meanwhile): not matched for nothing
+        backlog = sorted(wanted - matched)
         have = self.backend.extracted()
         backlog = [p for p in backlog if p[0] in have and p[1] in have and not self.pairs.given_up(p)]
         self.backlog_max = max(self.backlog_max, len(backlog))
@@ -223,15 +243,38 @@ class LiveWork:
             self.log("warn", "more pairs wait than ~max_backlog (%d): the rest are matched at the finish "
                      "(/diagnostics: backlog pairs)" % max_backlog)  # one text: throttled as one
             backlog = backlog[:max_backlog]
-        due = [p for p in backlog if self.pairs.due(p)]
-        if not due:
-            return False
+        due = [p for p in backlog if self.pairs.due(p) and p not in self.fallback_waiting]
         batch = due[:limit]
-        failed = self._attempt(batch, self.backend.match, lambda: self.backend.matched(refresh=batch), self.pairs,
-                               "pair", "skipped-pair")
-        self.status.update(backlog_pairs=len(backlog) - len(batch) + len(failed),
-                           pairs_matched=len(matched) + len(batch) - len(failed))
+        failed = []
+        if batch:
+            run = self.backend.match
+            if self.fallback_batched:
+                run = lambda items: self.backend.match(items, defer_fallback=self._fallback_waits)  # noqa: E731
+            failed = self._attempt(batch, run, lambda: self.backend.matched(refresh=batch), self.pairs,
+                                   "pair", "skipped-pair")
+        fallback_run = self._fallback_due(flush)
+        if fallback_run:
+            failed += self._attempt(fallback_run, self.backend.match_fallback,
+                                    lambda: self.backend.matched(refresh=fallback_run), self.pairs, "pair", "skipped-pair")
+        done = len(batch) + len(fallback_run) - len(failed) - sum(1 for p in batch if p in self.fallback_waiting)
+        self.status.update(backlog_pairs=len(backlog) - done, pairs_matched=len(matched) + done,
+                           fallback_waiting=len(self.fallback_waiting))
         return len(due) > limit
+
+    def _fallback_waits(self, pairs):
+        now = self.now()
+        for p in pairs:
+            self.fallback_waiting.setdefault(p, now)
+
+    def _fallback_due(self, flush):
+        """The waiting fallbacks, when their run is due (and no longer waiting then), else []."""
+        waiting = self.fallback_waiting
+        if not waiting or not (flush or len(waiting) >= FALLBACK_RUN_PAIRS or
+                               self.now() - min(waiting.values()) >= FALLBACK_MAX_WAIT):
+            return []
+        run = sorted(waiting)
+        waiting.clear()
+        return run
 
     def match_all(self, keyframes, pairs, batch=FINISH_BATCH_PAIRS, progress=None):
         """Every wanted pair that is due and whose images have features, in runs of `batch` pairs

@@ -68,6 +68,7 @@ class PoseGuidedBackend:
         self.warnings = []            # what the last run did that a user should know
         self.paths = {}               # pair -> PairResult.summary()
         self._path_totals = collections.Counter()  # path -> pairs: the diagnostics' figures, kept as they change
+        self.fallback_runs = 0        # runs of COLMAP's matcher (each costs ~0.06 s CPU beside its pairs)
         self.clock = StageClock()
         self.progress = progress or (lambda stage, done, total, unit: None)
 
@@ -141,10 +142,12 @@ class PoseGuidedBackend:
         return f
 
     # -- matches -----------------------------------------------------------------------------
-    def match(self, pairs):
+    def match(self, pairs, defer_fallback=None):
         """Each pair (name, name) guided by the poses; the ones that fall back are matched by
-        COLMAP's matches_importer afterwards. Every pair gets its raw matches and its two-view
-        geometry (verified, or empty) in the database."""
+        COLMAP's matches_importer afterwards (match_fallback), or, with defer_fallback, handed
+        to it (a callable taking the list) for a later run of several batches' fallbacks. Every
+        pair matched gets its raw matches and its two-view geometry (verified, or empty) in the
+        database."""
         pairs = [pair_of(*p) for p in pairs]
         self.errors = {}
         fallback, written = [], []
@@ -181,12 +184,20 @@ class PoseGuidedBackend:
         self.project.ledger("matched", ["%s %s" % p for p, _ in written])
         if stop is not None:
             raise stop
-        if fallback:
-            with self.clock.measure("fallback_matching", len(fallback)):
-                self.progress("matching by COLMAP's matcher", 0, len(fallback), "pairs")  # one run: no count between
-                self.project.match(fallback)  # COLMAP's own; it writes the ledger
-                self.progress("matching by COLMAP's matcher", len(fallback), len(fallback), "pairs")
+        if fallback and defer_fallback is not None:
+            defer_fallback(fallback)
+        elif fallback:
+            self.match_fallback(fallback)
         return len(pairs)
+
+    def match_fallback(self, pairs):
+        """The pairs (name, name) matched by COLMAP's matches_importer, in one run: the path of
+        the pairs whose poses cannot be trusted."""
+        with self.clock.measure("fallback_matching", len(pairs)):
+            self.progress("matching by COLMAP's matcher", 0, len(pairs), "pairs")  # one run: no count between
+            self.project.match(pairs)  # COLMAP's own; it writes the ledger
+            self.progress("matching by COLMAP's matcher", len(pairs), len(pairs), "pairs")
+        self.fallback_runs += 1
 
     def _count_path(self, pair, summary):
         old = self.paths.get(pair)
@@ -196,10 +207,12 @@ class PoseGuidedBackend:
         self._path_totals[summary["path"]] += 1
 
     def path_totals(self):
-        """{'guided': n, 'fallback': n} of the pairs matched so far, without looking at each pair
+        """{'guided': n, 'fallback': n, 'fallback_runs': n} of the pairs matched so far (and the runs of
+        COLMAP's matcher), without looking at each pair
         (the diagnostics ask once a second; path_counts() formats every pair)."""
         totals = dict(self._path_totals)
-        return {"guided": totals.get(guided.GUIDED, 0), "fallback": totals.get(guided.FALLBACK, 0)}
+        return {"guided": totals.get(guided.GUIDED, 0), "fallback": totals.get(guided.FALLBACK, 0),
+                "fallback_runs": self.fallback_runs}
 
     def path_counts(self):
         """Which path the pairs matched so far took: {'guided': n, 'fallback': n}, the fallbacks'
@@ -209,6 +222,7 @@ class PoseGuidedBackend:
         counts = collections.Counter(s["path"] for s in paths.values())
         bands = [s["band_px"] for s in paths.values() if s["path"] == guided.GUIDED]
         return {"guided": counts.get(guided.GUIDED, 0), "fallback": counts.get(guided.FALLBACK, 0),
+                "fallback_runs": self.fallback_runs,
                 "fallback_pairs": {"%s %s" % p: s.get("why", "") for p, s in sorted(paths.items())
                                    if s["path"] == guided.FALLBACK},
                 "band_px": {"median": float(np.median(bands)), "p90": float(np.percentile(bands, 90)),
