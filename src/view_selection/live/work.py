@@ -245,18 +245,16 @@ class LiveWork:
             backlog = backlog[:max_backlog]
         due = [p for p in backlog if self.pairs.due(p) and p not in self.fallback_waiting]
         batch = due[:limit]
-        failed = []
         if batch:
             run = self.backend.match
             if self.fallback_batched:
                 run = lambda items: self.backend.match(items, defer_fallback=self._fallback_waits)  # noqa: E731
-            failed = self._attempt(batch, run, lambda: self.backend.matched(refresh=batch), self.pairs,
-                                   "pair", "skipped-pair")
+            self._attempt(batch, run, lambda: self.backend.matched(refresh=batch), self.pairs, "pair", "skipped-pair")
         fallback_run = self._fallback_due(flush)
         if fallback_run:
-            failed += self._attempt(fallback_run, self.backend.match_fallback,
-                                    lambda: self.backend.matched(refresh=fallback_run), self.pairs, "pair", "skipped-pair")
-        done = len(batch) + len(fallback_run) - len(failed) - sum(1 for p in batch if p in self.fallback_waiting)
+            self._attempt(fallback_run, self.backend.match_fallback, lambda: self.backend.matched(refresh=fallback_run),
+                          self.pairs, "pair", "skipped-pair")
+        done = len((set(batch) | set(fallback_run)) & self.backend.matched()) if batch or fallback_run else 0
         self.status.update(backlog_pairs=len(backlog) - done, pairs_matched=len(matched) + done,
                            fallback_waiting=len(self.fallback_waiting))
         return len(due) > limit
