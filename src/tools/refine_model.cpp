@@ -15,6 +15,7 @@
 #include <chrono>
 #include <fstream>
 #include <iostream>
+#include <optional>
 #include <set>
 #include <string>
 
@@ -228,14 +229,16 @@ int run(int argc, char** argv) {
   const double reading = since(started);
   io::Progress progress =
       io::Progress::toStderr(!cli.flag("no-progress"), cli.real("progress-interval", io::Progress::kLogInterval, 0.1, 1e6));
-  const io::ColmapModel out = refine::refineModel(input, movable, config, &report,
-                                                  cli.has("reference") ? &reference : nullptr,
-                                                  cli.has("matches") ? &matches : nullptr, &progress);
+  const std::optional<io::ColmapModel> out = refine::refineModelIfChanged(
+      input, movable, config, &report, cli.has("reference") ? &reference : nullptr,
+      cli.has("matches") ? &matches : nullptr, &progress);
   const auto writing = std::chrono::steady_clock::now();
   // The input as it came (out of time at a 30-minute session's size, a diverged solve): its
-  // files linked, not written again (0.5 s there).
-  if (!report.unchanged || !io::linkColmapModel(*cli.text("input"), *cli.text("output")))
-    io::writeColmapModel(out, *cli.text("output"));
+  // files linked, not written again (0.5 s there), nor copied.
+  if (out)
+    io::writeColmapModel(*out, *cli.text("output"));
+  else if (!io::linkColmapModel(*cli.text("input"), *cli.text("output")))
+    io::writeColmapModel(input, *cli.text("output"));
   report.phase_seconds["reading"] = reading;
   report.phase_seconds["writing"] = since(writing);
   if (cli.has("report"))

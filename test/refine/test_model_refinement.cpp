@@ -725,9 +725,21 @@ TEST_F(Refinement, ABudgetSpentBeforeItBeginsGivesTheModelAsItCameAtOnce) {
   EXPECT_TRUE(report.unchanged);  // refine_model links the input's files instead of writing them
   EXPECT_EQ(input.points.size(), out.points.size());
   for (const auto& [id, im] : out.images) EXPECT_TRUE(im.translation.isApprox(input.images.at(id).translation, 1e-12));
+  // Without a copy of it (refine_model's way): nothing, and the input's figures as the result's.
+  refine::RefinementReport again;
+  EXPECT_FALSE(refine::refineModelIfChanged(input, refine::allImages(input), config, &again, nullptr, &matches));
+  EXPECT_TRUE(again.unchanged);
+  EXPECT_EQ(again.observations_input, again.observations_refined);
+  EXPECT_GT(again.observations_refined, 0u);
+  EXPECT_DOUBLE_EQ(again.reprojection_error_input, again.reprojection_error_refined);
+  EXPECT_GT(again.reprojection_error_refined, 0.0);
+  for (const auto& c : again.images) EXPECT_EQ(c.observations_input, c.observations_refined) << c.name;
   // The same budget counted from now refines it, and says where its time went.
   config.budget_start = {};
-  refine::refineModel(input, refine::allImages(input), config, &report, nullptr, &matches);
+  const std::optional<io::ColmapModel> refined =
+      refine::refineModelIfChanged(input, refine::allImages(input), config, &report, nullptr, &matches);
+  ASSERT_TRUE(refined);
+  EXPECT_LT(ate(*refined, exact), ate(input, exact)) << report.message;
   EXPECT_TRUE(report.refined) << report.message;
   EXPECT_FALSE(report.unchanged);
   EXPECT_TRUE(report.not_begun.empty());

@@ -20,6 +20,7 @@
 
 #include <chrono>
 #include <map>
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
@@ -210,6 +211,14 @@ io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& m
                             const RefinementConfig& config, RefinementReport* report,
                             const io::ColmapModel* reference = nullptr,
                             const std::vector<Match>* matches = nullptr, io::Progress* progress = nullptr);
+
+/// refineModel without a copy of a model returned as it came: std::nullopt then
+/// (report->unchanged), else the refined model.
+std::optional<io::ColmapModel> refineModelIfChanged(const io::ColmapModel& input, const std::set<int>& movable,
+                                                    const RefinementConfig& config, RefinementReport* report,
+                                                    const io::ColmapModel* reference = nullptr,
+                                                    const std::vector<Match>* matches = nullptr,
+                                                    io::Progress* progress = nullptr);
 
 /// Every image id of `model`.
 std::set<int> allImages(const io::ColmapModel& model);
