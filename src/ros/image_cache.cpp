@@ -7,6 +7,8 @@
 
 #include <boost/make_shared.hpp>
 
+#include <fcntl.h>
+#include <sys/file.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -37,7 +39,47 @@ std::string makeUniqueFolder(const fs::path& parent, const std::string& prefix,
   return std::string(buffer.data());
 }
 
+constexpr const char* kTempPrefix = "view_selection_images_";
+constexpr const char* kOwnerFile = ".owner";  // flock()ed for as long as the folder's owner lives
+
+/// Locks `folder`/.owner for as long as the returned descriptor stays open (-1 when it cannot:
+/// the folder then works, but is never taken for abandoned). The lock is taken on a file of
+/// another name, renamed once locked: a sweep never sees an .owner not locked yet.
+int lockAsOwner(const fs::path& folder) {
+  const std::string tmp = (folder / ".owner.new").string();
+  const int fd = ::open(tmp.c_str(), O_CREAT | O_WRONLY | O_CLOEXEC | O_NOFOLLOW, 0600);
+  if (fd < 0) return -1;
+  const std::string pid = std::to_string(::getpid()) + "\n";  // for a reader; the lock is what counts
+  if (::flock(fd, LOCK_EX | LOCK_NB) != 0 || ::write(fd, pid.data(), pid.size()) < 0 ||
+      ::rename(tmp.c_str(), (folder / kOwnerFile).c_str()) != 0) {
+    ::close(fd);
+    ::unlink(tmp.c_str());
+    return -1;
+  }
+  return fd;
+}
+
 }  // namespace
+
+size_t removeAbandonedImageFolders(const std::string& parent) {
+  size_t removed = 0;
+  std::error_code ec;
+  for (fs::directory_iterator it(parent, ec), end; !ec && it != end; it.increment(ec)) {
+    const fs::path folder = it->path();
+    if (folder.filename().string().rfind(kTempPrefix, 0) != 0 || !it->is_directory(ec) || it->is_symlink(ec))
+      continue;
+    // A folder without .owner (made by an older version, or its lock could not be taken) is
+    // left alone: nothing says its owner is gone.
+    const int fd = ::open((folder / kOwnerFile).c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
+    if (fd < 0) continue;
+    if (::flock(fd, LOCK_EX | LOCK_NB) == 0) {  // nobody holds it: its node was killed
+      std::error_code rm;
+      if (fs::remove_all(folder, rm) > 0 && !rm) ++removed;
+    }
+    ::close(fd);
+  }
+  return removed;
+}
 
 ImageFolder::ImageFolder(const std::string& dir) {
   if (dir.empty()) {
@@ -47,8 +89,14 @@ ImageFolder::ImageFolder(const std::string& dir) {
       error_ = "no temporary folder: " + ec.message();
       return;
     }
-    path_ = makeUniqueFolder(tmp, "view_selection_images_", error_);
+    // What killed nodes left (a SIGKILL runs no destructor): their spilled images, up to the
+    // whole session's, would stay in the temp folder until a reboot.
+    if (const size_t n = removeAbandonedImageFolders(tmp.string()))
+      ROS_INFO_STREAM("view_selection: removed " << n << " image folder(s) in " << tmp.string()
+                                                 << " left by nodes that were killed");
+    path_ = makeUniqueFolder(tmp, kTempPrefix, error_);
     created_ = !path_.empty();
+    if (created_) lock_fd_ = lockAsOwner(path_);
     return;
   }
   path_ = dir;
@@ -71,6 +119,7 @@ ImageFolder::~ImageFolder() {
   if (!created_) return;
   std::error_code ec;
   fs::remove_all(path_, ec);
+  if (lock_fd_ >= 0) ::close(lock_fd_);
   if (ec)
     ROS_WARN_STREAM("view_selection: could not remove the image folder '" << path_
                                                                          << "': " << ec.message());

@@ -10,6 +10,7 @@
 #include <boost/make_shared.hpp>
 #include <gtest/gtest.h>
 
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -155,6 +156,45 @@ TEST(ImageCache, FoldersItMadeAreRemovedAndAGivenOneIsKept) {
   }
   EXPECT_FALSE(fs::exists(made));
   fs::remove_all(made.parent_path());
+}
+
+TEST(ImageCache, AFolderLeftByAKilledNodeIsRemovedWhenTheNextIsMade) {
+  // A node killed (SIGKILL: no destructor runs) left its temporary folder with its spilled
+  // images; the next folder made removes it, and leaves a living owner's and an unmarked one.
+  auto alive = std::make_shared<ImageFolder>("");
+  ASSERT_TRUE(alive->created()) << alive->error();
+  int fds[2];
+  ASSERT_EQ(0, ::pipe(fds));
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {  // the node that is killed: its folder made, one image spilled, then gone
+    auto* folder = new ImageFolder("");
+    auto* cache = new KeyframeImageCache(0, std::shared_ptr<ImageFolder>(folder, [](ImageFolder*) {}));
+    cache->push(makeImage(1));
+    const bool spilled = cache->waitSpilled(30.0);
+    const std::string path = spilled ? folder->path() : "";
+    if (::write(fds[1], path.data(), path.size()) < 0) ::_exit(2);
+    ::_exit(0);
+  }
+  ::close(fds[1]);
+  std::string killed;
+  char buffer[512];
+  for (ssize_t n; (n = ::read(fds[0], buffer, sizeof buffer)) > 0;) killed.append(buffer, static_cast<size_t>(n));
+  ::close(fds[0]);
+  int status = 0;
+  ASSERT_EQ(child, ::waitpid(child, &status, 0));
+  ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+  ASSERT_FALSE(killed.empty()) << "the child spilled nothing";
+  ASSERT_TRUE(fs::is_directory(killed));
+  const fs::path unmarked = fs::temp_directory_path() / ("view_selection_images_unmarked_" + std::to_string(::getpid()));
+  fs::create_directories(unmarked);
+
+  auto next = std::make_shared<ImageFolder>("");
+  EXPECT_TRUE(next->created()) << next->error();
+  EXPECT_FALSE(fs::exists(killed)) << killed << " (its owner killed) was not removed";
+  EXPECT_TRUE(fs::is_directory(alive->path())) << "a living owner's folder was removed";
+  EXPECT_TRUE(fs::is_directory(unmarked)) << "a folder without .owner was removed";
+  fs::remove_all(unmarked);
 }
 
 TEST(ImageCache, AnUnwritableFolderLosesImagesWithTheReasonAndNeverThrows) {

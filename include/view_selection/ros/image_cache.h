@@ -24,7 +24,9 @@ namespace view_selection::ros_node {
 /// The folder images are spilled into: `dir`, created when missing, or "" = a new temporary
 /// folder (view_selection_images_XXXXXX in the system's temp folder). A folder made here is
 /// removed, with everything in it, when the last cache using it is gone. When it cannot be made
-/// (or is not a folder), error() says why and every spill fails with that reason.
+/// (or is not a folder), error() says why and every spill fails with that reason. A temporary
+/// folder is locked as its owner's (flock on .owner) while it lives; making one removes those
+/// of nodes that were killed (removeAbandonedImageFolders).
 class ImageFolder {
  public:
   explicit ImageFolder(const std::string& dir);
@@ -40,7 +42,13 @@ class ImageFolder {
  private:
   std::string path_, error_;
   bool created_ = false;
+  int lock_fd_ = -1;  ///< holds the lock on .owner (a temporary folder made here)
 };
+
+/// Removes the view_selection_images_* folders in `parent` whose owner is gone (their .owner not
+/// locked: a node killed before it could remove its folder); returns how many. Folders without
+/// .owner are left alone.
+size_t removeAbandonedImageFolders(const std::string& parent);
 
 class KeyframeImageCache {
  public:
