@@ -359,7 +359,7 @@ def test_fallbacks_of_several_batches_go_to_colmap_in_one_run():
     assert work.status["fallback_waiting"] == 0 and work.status["backlog_pairs"] == 0
 
 
-def test_waiting_fallbacks_run_when_the_camera_pauses_and_at_the_finish():
+def test_waiting_fallbacks_run_when_no_keyframe_came_for_a_while_and_at_the_finish():
     kfs = keyframes(7)
     pairs = chain(kfs)
     project = GuidedProject(falls_back=pairs[:2])
@@ -367,7 +367,7 @@ def test_waiting_fallbacks_run_when_the_camera_pauses_and_at_the_finish():
     work = LiveWork(project, continuity=False, max_batch_pairs=3)
     work.match(kfs, pairs)
     assert not fallback_runs(project) and project.matched() == {pairs[2]}
-    work.match(kfs, pairs, paused=True)  # the node said its frames stopped: the finish may be near
+    work.match(kfs, pairs, quiet=True)  # no keyframe for a while: the finish may be near
     assert fallback_runs(project) == [pairs[:2]] and project.matched() == set(pairs)
 
     # The finish takes what waits, whatever the count and the wait.
@@ -394,7 +394,7 @@ def test_a_bad_pair_in_a_run_of_waiting_fallbacks_costs_its_neighbours_nothing()
     assert len(fallback_runs(project)) <= 2 * (len(pairs) - 1).bit_length() + 2
     # Tried again (alone: it failed before) once its wait is over, as any failed pair.
     work.pairs.not_before.clear()
-    work.match(kfs, pairs, paused=True)
+    work.match(kfs, pairs, quiet=True)
     assert fallback_runs(project)[-1] == [bad] and work.pairs.failures == {bad: 2}
 
 
@@ -406,5 +406,5 @@ def test_a_waiting_fallback_no_longer_wanted_is_not_matched():
     work = LiveWork(project, continuity=False, max_batch_pairs=4)
     work.match(kfs, pairs)
     assert work.fallback_waiting.keys() == {pairs[0]}
-    work.match(kfs, pairs[1:], paused=True)  # the node took the pair back
+    work.match(kfs, pairs[1:], quiet=True)  # the node took the pair back
     assert not fallback_runs(project) and not work.fallback_waiting

@@ -214,7 +214,7 @@ class LiveWork:
             wanted |= self.loops.pairs
         return wanted
 
-    def match(self, keyframes, pairs, limit=None, paused=False):
+    def match(self, keyframes, pairs, limit=None, quiet=False):
         """Matches at most `limit` (~max_batch_pairs) of the wanted pairs not matched yet whose
         images have features and that are due; True when more are waiting.
 
@@ -222,10 +222,10 @@ class LiveWork:
         (the oldest by name; the rest are counted in `deferred`); the finish (match_all) takes
         every one of them: ~max_backlog bounds what a batch looks at, never what the model gets.
         The pairs the poses cannot match wait for a run of COLMAP's matcher with others
-        (FALLBACK_RUN_PAIRS, FALLBACK_MAX_WAIT), or for `paused` (the camera stopped: the
-        finish may be near) or the finish."""
+        (FALLBACK_RUN_PAIRS, FALLBACK_MAX_WAIT), for `quiet` (no keyframe for a while: the
+        finish may be near) or for the finish."""
         return self._match(keyframes, pairs, self.max_batch_pairs if limit is None else limit, self.max_backlog,
-                           flush=paused)
+                           flush=quiet)
 
     def _match(self, keyframes, pairs, limit, max_backlog=None, flush=True):
         matched = self.backend.matched()
