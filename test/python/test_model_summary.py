@@ -47,7 +47,7 @@ def a_project(folder, points=True, report=True):
             "model": "known_poses", "keyframes": 4, "pairs_wasted": 0,
             "skipped": {"images": [{"item": "rgb/4.png", "attempts": 1, "error": "cannot read rgb/4.png"}],
                         "pairs": [{"item": "rgb/1.png rgb/3.png", "attempts": 1, "error": "matches_importer exit 3"}]},
-            "matching": {"guided": 2, "fallback": 1}}))
+            "matching": {"guided": 2, "images": 3, "fallback": 1}}))
     return folder
 
 
@@ -91,7 +91,7 @@ def test_a_project_is_summarised_from_its_model_and_report(tmp_path, capsys):
     # The model's own figures: 3 images, 8 points, the mean of the points' errors.
     mean = np.mean([0.25 * (pid % 3) for pid in range(1, 9)])
     assert "keyframes   3 of 4 in the model (2 see its points), 8 3D points, mean reprojection error %.2f px" % mean in out
-    assert "2 guided by the poses, 1 by COLMAP's matcher" in out
+    assert "2 guided by the poses, 3 by the images' geometry, 1 by COLMAP's matcher" in out
     assert "1 image: rgb/4.png (cannot read rgb/4.png)" in out
     assert "1 pair: rgb/1.png rgb/3.png (matches_importer exit 3)" in out
     assert "refinement  off" in out

@@ -3,16 +3,15 @@ with an image that cannot be read and a pair COLMAP's matcher fails on every tim
 names both, with why, and draws model.png; the figures are the model's. The bad inputs (not a
 project, a model without points, no report.json) are in test/python/test_model_summary.py."""
 import json
-import math
 import os
 import shutil
 import stat
 import sys
 
+import cv2
 import numpy as np
 
 from conftest import REPO, colmap_from_selection, run, walk_selection
-from view_selection import geometry
 from view_selection.colmap.model import read_model
 
 # A COLMAP that fails matches_importer whenever its list holds the first pair it was asked for
@@ -43,12 +42,12 @@ def test_the_summary_names_a_skipped_image_and_a_skipped_pair(tmp_path):
     shutil.copytree(str(sequence / doc["params"].get("image_path", "rgb")), str(images))
     unreadable, turned = keyframes[3]["image"], keyframes[7]
     (images / unreadable).write_bytes(b"\x89PNG\r\n\x1a\n but not an image")
-    # keyframe 7 turned by 8 degrees about its x axis: its pairs fall back to COLMAP's matcher
-    x, y, z, w = turned["orientation_xyzw"]
-    r = geometry.rotation_of((w, x, y, z)) @ geometry.rotation_of((math.cos(0.07), math.sin(0.07), 0, 0))
-    qw, qx, qy, qz = geometry.quaternion_of(r)
-    turned["orientation_xyzw"] = [qx, qy, qz, qw]
-    json.dump(doc, open(str(selection / "selection.json"), "w"))
+    # keyframe 7 blank: no features, so its pairs fall back to COLMAP's matcher (neither its pose
+    # nor its image can guide them: a turned pose alone is matched by the images' geometry now)
+    blank = cv2.imread(str(images / turned["image"]))
+    assert blank is not None
+    blank[:] = 128
+    assert cv2.imwrite(str(images / turned["image"]), blank)
     stand_in = tmp_path / "colmap_stand_in" / "colmap"
     stand_in.parent.mkdir()
     stand_in.write_text(STAND_IN % sys.executable)
@@ -79,7 +78,8 @@ def test_the_summary_names_a_skipped_image_and_a_skipped_pair(tmp_path):
             % (stats["registered"], seeing, stats["points"], stats["reprojection_error"])) in out, out
     m = report["matching"]
     assert m["fallback"] >= 1
-    assert "%d guided by the poses, %d by COLMAP's matcher" % (m["guided"], m["fallback"]) in out
+    assert "%d guided by the poses, %d by the images' geometry, %d by COLMAP's matcher" % (
+        m["guided"], m["images"], m["fallback"]) in out
     assert any(l.startswith("refinement  %s: %d keyframes moved" % (report["refinement"]["status"],
                                                                     report["refinement"]["keyframes_refined"]))
                for l in lines), out

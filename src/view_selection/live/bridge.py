@@ -545,7 +545,8 @@ class Bridge:
         if self.backend:
             stages.update(self.backend.clock.summary())
             totals = self.backend.path_totals()
-            values.update({"pairs guided": totals["guided"], "pairs fallback": totals["fallback"],
+            values.update({"pairs guided": totals["guided"], "pairs guided by images": totals["images"],
+                           "pairs fallback": totals["fallback"],
                            "fallback runs": totals["fallback_runs"]})
         for stage, figures in stages.items():
             values["%s cpu [s]" % stage] = figures["cpu_seconds"]

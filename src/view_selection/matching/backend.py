@@ -207,22 +207,24 @@ class PoseGuidedBackend:
         self._path_totals[summary["path"]] += 1
 
     def path_totals(self):
-        """{'guided': n, 'fallback': n, 'fallback_runs': n} of the pairs matched so far (and the runs of
-        COLMAP's matcher), without looking at each pair
+        """{'guided': n, 'images': n, 'fallback': n, 'fallback_runs': n} of the pairs matched so far
+        (by the poses, by the images' geometry, by COLMAP's matcher, and its runs), without looking
+        at each pair
         (the diagnostics ask once a second; path_counts() formats every pair)."""
         totals = dict(self._path_totals)
-        return {"guided": totals.get(guided.GUIDED, 0), "fallback": totals.get(guided.FALLBACK, 0),
-                "fallback_runs": self.fallback_runs}
+        return {"guided": totals.get(guided.GUIDED, 0), "images": totals.get(guided.IMAGES, 0),
+                "fallback": totals.get(guided.FALLBACK, 0), "fallback_runs": self.fallback_runs}
 
     def path_counts(self):
-        """Which path the pairs matched so far took: {'guided': n, 'fallback': n}, the fallbacks'
+        """Which path the pairs matched so far took: {'guided': n, 'images': n, 'fallback': n} (by the
+        poses, by the images' geometry where the poses disagreed, by COLMAP's matcher), the fallbacks'
         reasons, the bands of the guided ones (median, 90th percentile, max [px]), and each
         pair's summary."""
         paths = dict(self.paths)  # a copy taken at once: the diagnostics timer reads it beside the work
         counts = collections.Counter(s["path"] for s in paths.values())
         bands = [s["band_px"] for s in paths.values() if s["path"] == guided.GUIDED]
-        return {"guided": counts.get(guided.GUIDED, 0), "fallback": counts.get(guided.FALLBACK, 0),
-                "fallback_runs": self.fallback_runs,
+        return {"guided": counts.get(guided.GUIDED, 0), "images": counts.get(guided.IMAGES, 0),
+                "fallback": counts.get(guided.FALLBACK, 0), "fallback_runs": self.fallback_runs,
                 "fallback_pairs": {"%s %s" % p: s.get("why", "") for p, s in sorted(paths.items())
                                    if s["path"] == guided.FALLBACK},
                 "band_px": {"median": float(np.median(bands)), "p90": float(np.percentile(bands, 90)),

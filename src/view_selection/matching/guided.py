@@ -10,7 +10,15 @@ epipolar line F x_a.
      poses can be off by and still guide, drift between keyframes close in time; 15 px at VGA),
      with a strict ratio test (`strict_ratio`) and a mutual check: matches that are very likely
      right. Fewer than `min_inliers` of them: the poses disagree with the images (drift before a
-     loop closes, a wrong pose), and the pair falls back to COLMAP's unguided matching.
+     loop closes, a wrong pose).
+  1'. Then the images guide instead (path 'images'): the same strongest features matched without
+     the poses (strict ratio, mutual), and the geometry those give (two_view.estimate, at least
+     `min_inliers` inliers) is the epipolar geometry of steps 2-4, as COLMAP's guided matching
+     uses the geometry its matches gave. On a 10-minute walk on odometry, 2,045 of 7,992 pairs
+     had fewer than 15 matches within 7 px of the poses' lines (median 4, most of them across a
+     revisit 5-30 s apart); COLMAP's matcher then verified 1,925 of them, with a median of 166
+     inliers, at 0.049 s of CPU a pair against 0.009 here. When the images give no geometry
+     either, the pair falls back to COLMAP's unguided matching (matches_importer).
   2. The band: how far those matches lie from the poses' epipolar lines (their 90th percentile,
      plus a pixel), at least `band_px` (COLMAP 3.8's two-view verification allows 4 px) and at
      most the window. Good poses give a narrow band, drifting ones a wider one.
@@ -35,7 +43,7 @@ import numpy as np
 from .. import geometry
 from . import two_view
 
-GUIDED, FALLBACK = "guided", "fallback"
+GUIDED, IMAGES, FALLBACK = "guided", "images", "fallback"
 
 
 class GuidedOptions:
@@ -52,15 +60,16 @@ class PairResult:
     the matches do not verify). matches: the putative matches of step 3 (M x 2 indices into a's
     and b's features); inliers: the verified ones; geometry: what they verify against
     (two_view.TwoViewGeometry: E, F in COLMAP's pixel convention, R, t), the one the database
-    gets; pose_F: the poses' fundamental matrix in the features' (OpenCV's) pixel convention, the
+    gets; guide_F: the fundamental matrix that guided the search (the poses', or on the path
+    'images' the one the strongest features gave) in the features' (OpenCV's) pixel convention, the
     band's reference; band_px: the band used; searched: the matches of step 1."""
 
-    def __init__(self, path, why="", matches=None, geometry=None, pose_F=None, band_px=None, searched=0):
+    def __init__(self, path, why="", matches=None, geometry=None, guide_F=None, band_px=None, searched=0):
         self.path, self.why = path, why
         self.matches = np.zeros((0, 2), np.int64) if matches is None else matches
         self.geometry = geometry
         self.inliers = np.zeros((0, 2), np.int64) if geometry is None else geometry.inliers
-        self.pose_F = pose_F
+        self.guide_F = guide_F
         self.band_px, self.searched = band_px, searched
 
     def summary(self):
@@ -157,9 +166,19 @@ def match_pair(fa, fb, ka, kb, options=None):
     strong = fa.descriptors[:na1] @ fb.descriptors[:nb1].T
     searched = mutual_ratio_matches(np.where(distances <= window, strong, np.float32(-1.0)), o.strict_ratio,
                                     o.max_distance)
+    path, why = GUIDED, ""
     if len(searched) < o.min_inliers:
-        return PairResult(FALLBACK, "%d matches within %.0f px of the poses' epipolar lines" % (len(searched), window),
-                          searched=len(searched))
+        # 1'. The poses disagree with the images (drift across a revisit): the strongest features
+        # matched without them, and the geometry those give guides instead, as COLMAP's guided
+        # matching does, when it holds min_inliers; else COLMAP's matcher (5 times the CPU).
+        why = "%d matches within %.0f px of the poses' epipolar lines" % (len(searched), window)
+        unguided = mutual_ratio_matches(strong, o.strict_ratio, o.max_distance)
+        coarse = two_view.estimate(unguided, fa, fb, ka, kb) if len(unguided) >= o.min_inliers else None
+        if coarse is None or len(coarse.inliers) < o.min_inliers:
+            return PairResult(FALLBACK, why, searched=len(searched))
+        path, searched = IMAGES, coarse.inliers
+        f = fundamental(skew(coarse.t / max(np.linalg.norm(coarse.t), 1e-12)) @ coarse.R, kma, kmb)
+        distances = epipolar_distances(f, fa.xy[:na1], fb.xy[:nb1])
     # 2. the band those matches need
     band = float(min(window, max(o.band_px, np.percentile(distances[searched[:, 0], searched[:, 1]], 90) + 1.0)))
     # 3. every feature within the band, COLMAP's tests; the ratio test against every candidate
@@ -174,7 +193,8 @@ def match_pair(fa, fb, ka, kb, options=None):
     verified = two_view.estimate(matches, fa, fb, ka, kb)
     count = 0 if verified is None else len(verified.inliers)
     if count < o.min_inliers:
-        return PairResult(FALLBACK, "%d inliers of %d matches within %.1f px (within %.0f px of the geometry they give)"
-                          % (count, len(matches), band, two_view.COLMAP_MAX_ERROR_PX), matches=matches, pose_F=f,
+        return PairResult(FALLBACK, (why + "; " if why else "") +
+                          "%d inliers of %d matches within %.1f px (within %.0f px of the geometry they give)"
+                          % (count, len(matches), band, two_view.COLMAP_MAX_ERROR_PX), matches=matches, guide_F=f,
                           band_px=band, searched=len(searched))
-    return PairResult(GUIDED, matches=matches, geometry=verified, pose_F=f, band_px=band, searched=len(searched))
+    return PairResult(path, why, matches=matches, geometry=verified, guide_F=f, band_px=band, searched=len(searched))
