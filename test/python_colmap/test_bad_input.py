@@ -42,11 +42,16 @@ def test_bad_images_and_a_wrong_pose_are_reported_and_the_rest_is_built(tmp_path
     skipped = {s["item"]: s["error"] for s in report["skipped"]["images"]}
     assert unreadable in skipped and "cannot read" in skipped[unreadable]
     assert blank in report["images_with_no_features"]
-    turned_pairs = {key: why for key, why in report["matching"]["fallback_pairs"].items() if moved["image"] in key.split()}
-    assert turned_pairs, "the pairs of the keyframe with the wrong pose did not fall back"
-    assert all(why for why in turned_pairs.values())
+    # The wrong pose's pairs: not guided by the poses, and said why; the images' geometry guides
+    # them instead (or COLMAP's matcher matches them), and they are matched.
+    paths = report["matching"]["pairs"]
+    turned_pairs = {key: s for key, s in paths.items() if moved["image"] in key.split() and blank not in key.split()}
+    assert turned_pairs and all(s["path"] != "guided" for s in turned_pairs.values()), turned_pairs
+    assert all("poses' epipolar lines" in s.get("why", "") for s in turned_pairs.values()), turned_pairs
+    by_images = [key for key, s in turned_pairs.items() if s["path"] == "images"]
+    assert by_images, turned_pairs
     ledger = open(str(tmp_path / "model" / "ledger.txt")).read()
-    assert "matched %s" % next(iter(turned_pairs)) in ledger or report["skipped"]["pairs"]  # matched by COLMAP, or reported
+    assert all("matched %s" % key in ledger for key in by_images), ledger
     # Every keyframe is in the model at the pose it was given; the good ones have points.
     model = read_model(str(tmp_path / "model" / "sparse" / "0"))
     by_name = model.image_by_name()

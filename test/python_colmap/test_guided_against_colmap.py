@@ -144,7 +144,7 @@ def test_what_the_guided_matcher_stores_is_what_colmap_would_verify(kitchen):
     report = json.load(open(str(project / "report.json")))
     paths = report["matching"]["pairs"]
     geometries = stored_geometries(str(project / "database.db"))
-    guided_pairs = {tuple(sorted(k.split())) for k, s in paths.items() if s["path"] == guided.GUIDED}
+    guided_pairs = {tuple(sorted(k.split())) for k, s in paths.items() if s["path"] in (guided.GUIDED, guided.IMAGES)}
     assert len(guided_pairs) > 0.8 * report["pairs_matched"]
     checked = 0
     for pair, geometry in sorted(geometries.items()):

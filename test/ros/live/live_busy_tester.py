@@ -9,7 +9,7 @@ SLAM system keeps a core busy. After the bag:
   - the bridge wrote the model on its own (~finish_after_idle), every keyframe in it at its node
     pose (from the model files, read with the package's reader);
   - every final pair of the node is in the database as a verified two-view geometry (at least
-    COLMAP's 15 inliers), and every pair took the guided path or the fallback, as reported;
+    COLMAP's 15 inliers), and every pair took a path (the poses, the images, COLMAP's matcher), as reported;
   - COLMAP's own commands read the project: model_analyzer agrees with the report, and mapper
     rebuilds a model from the database alone.
 """
@@ -128,7 +128,7 @@ class LiveBusy(unittest.TestCase):
             n = inliers.get(tuple(sorted((ids[a], ids[b]))), 0)
             self.assertGreaterEqual(n, 15, '%s %s: %d inliers' % (a, b, n))
         m = self.report['matching']
-        self.assertEqual(self.report['pairs_matched'], m['guided'] + m['fallback'])
+        self.assertEqual(self.report['pairs_matched'], m['guided'] + m['images'] + m['fallback'])
         self.assertEqual(m['fallback'], len(m['fallback_pairs']))
 
     def test_colmaps_own_commands_read_the_project(self):
