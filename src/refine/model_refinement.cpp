@@ -1108,16 +1108,29 @@ std::optional<io::ColmapModel> refineModelIfChanged(const io::ColmapModel& input
   Tracks tracks;
   if (matches && !spent) tracks = buildTracks(*matches);
   std::vector<EpipolarPair> epipolar;
-  if (matches && config.epipolar_first && !spent)
+  if (matches && config.epipolar_first && !spent) {
+    // The images by id in a table where the ids are small (the database's: 1, 2, ...): two
+    // lookups a match, 7 million at 30 minutes, were a map's.
+    const int max_id = initial.images.empty() ? 0 : initial.images.rbegin()->first;
+    const bool dense = !initial.images.empty() && initial.images.begin()->first >= 0 && max_id < (1 << 24);
+    std::vector<const io::ColmapImage*> by_id(dense ? static_cast<size_t>(max_id) + 1 : 0, nullptr);
+    if (dense)
+      for (const auto& [id, im] : initial.images) by_id[static_cast<size_t>(id)] = im;
+    const auto imageOf = [&](int id) -> const io::ColmapImage* {
+      if (dense) return id >= 0 && id <= max_id ? by_id[static_cast<size_t>(id)] : nullptr;
+      const auto it = initial.images.find(id);
+      return it == initial.images.end() ? nullptr : it->second;
+    };
     epipolar = epipolarPairs(
         *matches, config.epipolar_matches_per_pair, config.epipolar_min_matches,
-        [&](int id) { return initial.images.count(id) > 0; },
+        [&](int id) { return imageOf(id) != nullptr; },
         [&](int id, int index) -> Eigen::Vector2d {
-          const auto& points = initial.images.at(id)->points2D;
+          const auto& points = imageOf(id)->points2D;
           return index >= 0 && static_cast<size_t>(index) < points.size() ? points[static_cast<size_t>(index)].xy
                                                                            : Eigen::Vector2d(NAN, NAN);
         },
         [&](int id) { return initial.intrinsics.at(id); });
+  }
   const Tracks* with_tracks = matches ? &tracks : nullptr;
   rep.tracks = tracks.tracks.size();
   rep.track_conflicts = tracks.conflicts;

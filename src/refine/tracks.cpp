@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <numeric>
 #include <fstream>
 #include <string_view>
 #include <unordered_map>
@@ -56,35 +57,37 @@ Tracks buildTracks(const std::vector<Match>& matches) {
     }
     return q;
   };
+  // Observations are numbered (in the order they first appear) before the union-find, so that
+  // its arrays are made once at their size: grown a match at a time, they were moved again and
+  // again (a 30-minute session's 3.7 million matches: a third of refine_model's setup was
+  // memmove, malloc and page faults).
+  std::vector<std::pair<uint32_t, uint32_t>> ends(matches.size());
+  for (size_t q = 0; q < matches.size(); ++q) ends[q] = {indexOf(matches[q].a), indexOf(matches[q].b)};
+  const size_t n = observations.size();
   // Union-find; each root keeps its members as a list (next), from its head to its tail, and
-  // (once it has two) its images' blocks, sorted: whether two tracks share an image is then a
-  // search of the smaller's images in the larger's, not a walk of every pair of members (a
-  // point seen from hundreds of keyframes made that quadratic).
-  std::vector<uint32_t> parent, size, next, head, tail;
+  // (once it has two) its images' blocks, sorted, in a list of its own (images[list[root]]):
+  // whether two tracks share an image is then a search of the smaller's images in the larger's,
+  // not a walk of every pair of members (a point seen from hundreds of keyframes made that
+  // quadratic). Lists of roots merged away are used again.
+  std::vector<uint32_t> parent(n), size(n, 1), next(n, kNone), head(n), tail(n), list(n, kNone);
+  std::iota(parent.begin(), parent.end(), 0u);
+  std::iota(head.begin(), head.end(), 0u);
+  std::iota(tail.begin(), tail.end(), 0u);
   std::vector<std::vector<uint32_t>> images;
+  std::vector<uint32_t> free_lists;
   const auto find = [&](uint32_t x) {
     while (parent[x] != x) x = parent[x] = parent[parent[x]];
     return x;
   };
   std::vector<uint32_t> one_a(1), one_b(1), merged;
   const auto imagesOf = [&](uint32_t root, std::vector<uint32_t>& one) -> const std::vector<uint32_t>& {
-    if (size[root] > 1) return images[root];
+    if (size[root] > 1) return images[list[root]];
     one[0] = image_block[root];
     return one;
   };
   Tracks out;
-  for (const Match& m : matches) {
-    const uint32_t a = indexOf(m.a), b = indexOf(m.b);
+  for (const auto& [a, b] : ends) {
     if (a == kNone || b == kNone) continue;
-    while (parent.size() < observations.size()) {
-      const auto q = static_cast<uint32_t>(parent.size());
-      parent.push_back(q);
-      size.push_back(1);
-      next.push_back(kNone);
-      head.push_back(q);
-      tail.push_back(q);
-      images.emplace_back();
-    }
     uint32_t ra = find(a), rb = find(b);
     if (ra == rb) continue;
     if (size[ra] < size[rb]) std::swap(ra, rb);
@@ -98,8 +101,21 @@ Tracks buildTracks(const std::vector<Match>& matches) {
     }
     merged.clear();
     std::merge(larger.begin(), larger.end(), smaller.begin(), smaller.end(), std::back_inserter(merged));
-    images[ra].swap(merged);
-    std::vector<uint32_t>().swap(images[rb]);
+    if (list[ra] == kNone) {
+      if (free_lists.empty()) {
+        list[ra] = static_cast<uint32_t>(images.size());
+        images.emplace_back();
+      } else {
+        list[ra] = free_lists.back();
+        free_lists.pop_back();
+      }
+    }
+    images[list[ra]].swap(merged);
+    if (list[rb] != kNone) {
+      images[list[rb]].clear();  // its buffer kept for the list's next root
+      free_lists.push_back(list[rb]);
+      list[rb] = kNone;
+    }
     parent[rb] = ra;
     size[ra] += size[rb];
     next[tail[ra]] = head[rb];
