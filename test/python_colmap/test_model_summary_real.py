@@ -85,6 +85,5 @@ def test_the_summary_names_a_skipped_image_and_a_skipped_pair(tmp_path):
                for l in lines), out
     picture = tmp_path / "model" / "model.png"
     assert picture.stat().st_size > 1000
-    import cv2
     drawn = cv2.imread(str(picture))
     assert drawn is not None and np.ptp(drawn) > 100  # a picture, not a blank
