@@ -344,8 +344,7 @@ class Bridge:
             # waiting are matched now, before it is due, not in it. (Waiting for the node's
             # `flushed` message, as the finish does, put that run in the way: a 10-minute walk's
             # finish began 3.5 s after its last keyframe, not 1.3 s.)
-            last = self.stream.last_keyframe_time
-            quiet = last is not None and time.monotonic() - last >= 0.5 * self.finish_after_idle
+            quiet = self.stream.until_idle(0.5 * self.finish_after_idle) == 0
         if not keyframes:
             return False
         with self.work:

@@ -20,7 +20,7 @@ from .attempts import Attempts
 FINISH_BATCH_PAIRS = 256
 
 # The pairs that fall back to COLMAP's matcher (matches_importer) while the recording goes on wait
-# for a run of at least this many, or FALLBACK_MAX_WAIT seconds, or the camera's pause: a run
+# for a run of at least this many, or FALLBACK_MAX_WAIT seconds, or a while without keyframes: a run
 # costs ~0.06 s CPU beside its ~0.04 s a pair, and a batch of 24 pairs had 3.75 fallbacks (a
 # 10-minute walk: 557 runs for 2,092 pairs).
 FALLBACK_RUN_PAIRS = 16

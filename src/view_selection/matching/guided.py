@@ -103,6 +103,11 @@ def fundamental(e, ka, kb):
     return np.linalg.inv(kb).T @ e @ np.linalg.inv(ka)
 
 
+def fundamental_of_motion(r, t, ka, kb):
+    """F of the relative pose x_b = R x_a + t (t of any non-zero length) and the intrinsic matrices."""
+    return fundamental(skew(t / np.linalg.norm(t)) @ r, ka, kb)
+
+
 def epipolar_distances(f, xa, xb):
     """|distance| of each feature of b (columns) to the epipolar line of each feature of a (rows)
     [px], float32."""
@@ -155,11 +160,9 @@ def match_pair(fa, fb, ka, kb, options=None):
     baseline = float(np.linalg.norm(t))
     if not baseline > 1e-9:
         return PairResult(FALLBACK, "no baseline between the poses")
-    t_unit = t / baseline
     kma, kmb = intrinsic_matrix(ka), intrinsic_matrix(kb)
     window = max(o.band_px, math.sqrt(kmb[0, 0] * kmb[1, 1]) * math.tan(math.radians(o.window_deg)))
-    e = skew(t_unit) @ r
-    f = fundamental(e, kma, kmb)
+    f = fundamental_of_motion(r, t, kma, kmb)
     # 1. the poses' search window, strict tests, the strongest features
     na1, nb1 = min(len(fa), o.search_features), min(len(fb), o.search_features)
     distances = epipolar_distances(f, fa.xy[:na1], fb.xy[:nb1])
@@ -174,10 +177,10 @@ def match_pair(fa, fb, ka, kb, options=None):
         why = "%d matches within %.0f px of the poses' epipolar lines" % (len(searched), window)
         unguided = mutual_ratio_matches(strong, o.strict_ratio, o.max_distance)
         coarse = two_view.estimate(unguided, fa, fb, ka, kb) if len(unguided) >= o.min_inliers else None
-        if coarse is None or len(coarse.inliers) < o.min_inliers:
+        if coarse is None or len(coarse.inliers) < o.min_inliers or not np.linalg.norm(coarse.t) > 1e-12:
             return PairResult(FALLBACK, why, searched=len(searched))
         path, searched = IMAGES, coarse.inliers
-        f = fundamental(skew(coarse.t / max(np.linalg.norm(coarse.t), 1e-12)) @ coarse.R, kma, kmb)
+        f = fundamental_of_motion(coarse.R, coarse.t, kma, kmb)
         distances = epipolar_distances(f, fa.xy[:na1], fb.xy[:nb1])
     # 2. the band those matches need
     band = float(min(window, max(o.band_px, np.percentile(distances[searched[:, 0], searched[:, 1]], 90) + 1.0)))
