@@ -16,53 +16,87 @@ namespace {
 
 constexpr char kMagic[8] = {'V', 'S', 'M', 'A', 'T', 'C', 'H', '1'};
 
-}  // namespace
-
-Tracks buildTracks(const std::vector<Match>& matches) {
-  // Observations are numbered in the order they first appear, through a dense table of every
-  // image's 2D point indices (each image's block as long as its largest index seen): a
-  // 30-minute session's 3.7 million matches took 1 s through a hash map of observations and a
-  // vector per observation, and longer through a sorted array's binary searches.
-  std::unordered_map<int, size_t> block_of;  // image id -> its block's number
-  std::vector<int> block_image;              // block -> image id
-  std::vector<uint32_t> block_length;
-  // The matches come pair by pair: each side's image is looked up in the map once a run, not
-  // once a match (7.3 million lookups at 30 minutes, each of which allocated a node to find
-  // the image there already: emplace, not try_emplace).
+/// Every image's 2D point indices as one dense table: each image a block as long as its largest
+/// index seen, looked up once a run of a pair's matches (the matches come pair by pair; 7.3
+/// million lookups at 30 minutes, each of which allocated a map node to find the image there
+/// already: emplace, not try_emplace). slot() gives an observation's place in the table.
+class DenseObservations {
+ public:
+  /// Where the last lookup of one side of the matches went.
   struct Last {
     int image = 0;
     size_t block = 0;
     bool set = false;
   };
-  const auto blockOf = [&](int image, Last& last) {
+
+  explicit DenseObservations(const std::vector<Match>& matches) {
+    Last side[2];
+    for (const Match& m : matches)
+      for (int k = 0; k < 2; ++k) {
+        const Observation& o = k == 0 ? m.a : m.b;
+        if (o.point2D_idx < 0) continue;
+        uint32_t& length = block_length_[blockOf(o.image_id, side[k])];
+        length = std::max(length, static_cast<uint32_t>(o.point2D_idx) + 1);
+      }
+    block_start_.assign(block_length_.size() + 1, 0);
+    for (size_t b = 0; b < block_length_.size(); ++b) block_start_[b + 1] = block_start_[b] + block_length_[b];
+  }
+
+  size_t size() const { return block_start_.back(); }
+
+  /// The block of an image seen in the matches.
+  size_t blockOf(int image, Last& last) {
     if (last.set && last.image == image) return last.block;
-    const auto [it, added] = block_of.try_emplace(image, block_image.size());
-    if (added) {
-      block_image.push_back(image);
-      block_length.push_back(0);
-    }
+    const auto [it, added] = block_of_.try_emplace(image, block_length_.size());
+    if (added) block_length_.push_back(0);
     last = {image, it->second, true};
     return it->second;
-  };
-  Last side[2];
+  }
+
+  /// The table's slot of an observation (point2D_idx >= 0) of an image seen in the matches.
+  size_t slot(const Observation& o, size_t block) const {
+    return block_start_[block] + static_cast<size_t>(o.point2D_idx);
+  }
+
+ private:
+  std::unordered_map<int, size_t> block_of_;  // image id -> its block's number
+  std::vector<uint32_t> block_length_;
+  std::vector<size_t> block_start_;
+};
+
+}  // namespace
+
+size_t countObservations(const std::vector<Match>& matches) {
+  DenseObservations table(matches);
+  std::vector<uint8_t> seen(table.size(), 0);
+  size_t n = 0;
+  DenseObservations::Last last[2];
   for (const Match& m : matches)
     for (int k = 0; k < 2; ++k) {
       const Observation& o = k == 0 ? m.a : m.b;
       if (o.point2D_idx < 0) continue;
-      uint32_t& length = block_length[blockOf(o.image_id, side[k])];
-      length = std::max(length, static_cast<uint32_t>(o.point2D_idx) + 1);
+      uint8_t& s = seen[table.slot(o, table.blockOf(o.image_id, last[k]))];
+      n += s == 0;
+      s = 1;
     }
-  std::vector<size_t> block_start(block_length.size() + 1, 0);
-  for (size_t b = 0; b < block_length.size(); ++b) block_start[b + 1] = block_start[b] + block_length[b];
+  return n;
+}
+
+Tracks buildTracks(const std::vector<Match>& matches) {
+  // Observations are numbered in the order they first appear, through a dense table of every
+  // image's 2D point indices: a 30-minute session's 3.7 million matches took 1 s through a hash
+  // map of observations and a vector per observation, and longer through a sorted array's
+  // binary searches.
+  DenseObservations table(matches);
   constexpr uint32_t kNone = static_cast<uint32_t>(-1);
-  std::vector<uint32_t> number(block_start.back(), kNone);  // dense slot -> observation number
+  std::vector<uint32_t> number(table.size(), kNone);  // dense slot -> observation number
   std::vector<Observation> observations;
   std::vector<uint32_t> image_block;  // by observation: its image's block
-  Last seen[2];  // every image has its block now: blockOf only finds them
-  const auto indexOf = [&](const Observation& o, Last& last) -> uint32_t {
+  DenseObservations::Last seen[2];  // every image has its block now: blockOf only finds them
+  const auto indexOf = [&](const Observation& o, DenseObservations::Last& last) -> uint32_t {
     if (o.point2D_idx < 0) return kNone;
-    const size_t block = blockOf(o.image_id, last);
-    uint32_t& q = number[block_start[block] + static_cast<size_t>(o.point2D_idx)];
+    const size_t block = table.blockOf(o.image_id, last);
+    uint32_t& q = number[table.slot(o, block)];
     if (q == kNone) {
       q = static_cast<uint32_t>(observations.size());
       observations.push_back(o);

@@ -549,6 +549,31 @@ TEST(Tracks, TheTracksAreThoseOfTheRuleTakenMatchByMatch) {
   }
 }
 
+TEST(Tracks, TheObservationsCountedAreTheDistinctOnesOfTheMatches) {
+  // refine_model weighs a triangulation by this count before it builds the tracks: every
+  // observation once, however many matches it is in; a negative index is none; the tracks hold
+  // no more than it.
+  std::mt19937 rng(23);
+  const std::vector<int> image_ids = {2, 5, 77, 40000, 1};
+  for (int round = 0; round < 20; ++round) {
+    std::uniform_int_distribution<size_t> image(0, image_ids.size() - 1);
+    std::uniform_int_distribution<int> keypoint(-1, 3 + 5 * round);
+    std::vector<refine::Match> matches;
+    std::set<std::pair<int, int>> distinct;
+    for (int q = 0; q < 20 + 15 * round; ++q) {
+      const refine::Match m{{image_ids[image(rng)], keypoint(rng)}, {image_ids[image(rng)], keypoint(rng)}};
+      matches.push_back(m);
+      for (const refine::Observation& o : {m.a, m.b})
+        if (o.point2D_idx >= 0) distinct.emplace(o.image_id, o.point2D_idx);
+    }
+    EXPECT_EQ(distinct.size(), refine::countObservations(matches)) << "round " << round;
+    size_t in_tracks = 0;
+    for (const auto& track : refine::buildTracks(matches).tracks) in_tracks += track.size();
+    EXPECT_LE(in_tracks, distinct.size()) << "round " << round;
+  }
+  EXPECT_EQ(0u, refine::countObservations({}));
+}
+
 TEST(ColmapModelFiles, WrittenModelReadsBackTheSame) {
   std::mt19937 rng(3);
   const Scene exact = makeScene(rng);
@@ -765,6 +790,7 @@ TEST_F(Refinement, StepsTheTimeLeftCannotPayForAreNotBegun) {
   EXPECT_EQ(0, report.epipolar_iterations);
   EXPECT_EQ(0u, report.epipolar_correspondences);
   EXPECT_EQ(0, report.retriangulations);
+  EXPECT_EQ(0u, report.tracks);  // not built: the estimate is made from the matches first
   EXPECT_GT(report.rounds, 0) << report.message;  // the adjustment on the model's own points
   EXPECT_TRUE(report.refined) << report.message;
   EXPECT_FALSE(report.unchanged);
@@ -776,6 +802,37 @@ TEST_F(Refinement, StepsTheTimeLeftCannotPayForAreNotBegun) {
   EXPECT_TRUE(report.not_begun.empty()) << report.message;
   EXPECT_GT(report.epipolar_iterations, 0) << report.message;
   EXPECT_GT(report.retriangulations, 0) << report.message;
+}
+
+TEST_F(Refinement, WithoutTheTriangulationAnAdjustmentTooShortToCountIsNotBegun) {
+  // A 30-minute session's finish: its matches' triangulation is not paid for, and an adjustment
+  // of the model's own points from the input poses would make a step or two (0.99x of a long
+  // walk's drift) for seconds more. With a budget below what its setup and ten iterations
+  // cost (here 10 x kSolveSecondsPerObservation, 3 us, an observation) nothing is built or
+  // begun, and the model comes back as it came; a budget that pays for them adjusts it.
+  std::vector<refine::Match> matches;
+  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.0, 4.0, &matches);
+  size_t observations = 0;
+  for (const auto& [id, p] : input.points) observations += p.track.size();
+  ASSERT_GT(observations, 3000u);  // a budget of tens of milliseconds, not spent by the call itself
+  refine::RefinementConfig config;
+  config.threads = 1;
+  config.triangulation_seconds_per_observation = 1.0;  // not paid for at this model's size either
+  config.max_seconds = 10.0 * 3e-6 * static_cast<double>(observations);
+  refine::RefinementReport report;
+  EXPECT_FALSE(refine::refineModelIfChanged(input, refine::allImages(input), config, &report, nullptr, &matches));
+  EXPECT_EQ((std::vector<std::string>{"epipolar", "triangulation", "adjustment"}), report.not_begun) << report.message;
+  EXPECT_EQ("out_of_time", report.status) << report.message;
+  EXPECT_TRUE(report.unchanged);
+  EXPECT_FALSE(report.refined);
+  EXPECT_EQ(0u, report.tracks);
+  EXPECT_EQ(0, report.rounds);
+  EXPECT_NE(std::string::npos, report.message.find("would not pay")) << report.message;
+  // Twelve times that pays for it: the adjustment alone runs.
+  config.max_seconds = 12.0 * 3e-6 * static_cast<double>(observations);
+  refine::refineModel(input, refine::allImages(input), config, &report, nullptr, &matches);
+  EXPECT_EQ((std::vector<std::string>{"epipolar", "triangulation"}), report.not_begun) << report.message;
+  EXPECT_GT(report.rounds, 0) << report.message;
 }
 
 TEST_F(Refinement, WithoutPriorsTheEpipolarStageDoesNotRun) {
