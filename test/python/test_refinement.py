@@ -201,7 +201,10 @@ def test_a_time_budget_gives_what_the_adjustment_reached(tmp_path):
             break  # an adjustment began (with none, the epipolar stage's poses may stand alone)
     assert cut["status"] == "out_of_time", cut["message"]
     assert cut["refined"] and "time budget" in cut["message"]
-    assert cut["rounds"] < full["rounds"] and cut["adjustment_seconds"] < full["adjustment_seconds"]
+    # Cut short: less adjustment time than the full run's. Its rounds may equal the full run's
+    # (a budget that runs out in the last round still counts that round: seen once under load,
+    # "2 < 2"), never more.
+    assert cut["rounds"] <= full["rounds"] and cut["adjustment_seconds"] < full["adjustment_seconds"]
     truth = [c for c, _ in exact]
     assert ate_rmse(centres(cm.read_model(str(tmp_path / "out"))), truth) < ate_rmse(centres(m), truth)
 
