@@ -30,6 +30,7 @@ from ..colmap import model as colmap_model
 from ..colmap.database import DatabaseError
 from ..colmap.project import ColmapProject, ProjectError, Timeouts, write_json_atomically
 from ..keyframes import Keyframe
+from ..refinement.afterwards import RefinementAfterwards
 from ..refinement.local import LocalRefinement
 from ..refinement.refiner import FINISH_MAX_SECONDS, ModelRefinement, RefinementOptions
 from ..features.sift import SiftExtractor
@@ -98,6 +99,11 @@ PARAMETERS = """Parameters (private, ~name):
                      1-minute walk's better than the finish alone, and with exact poses it moved
                      the keyframes further (median 5.8 mm against 3.3; docs/live.md)
   refine_live_cpu    [cores] the average CPU those runs may take over the session (0.25)
+  refine_afterwards  after a finish whose refinement stopped at refine_max_seconds (a long
+                     session's), go on refining while nothing comes: refine_model without a
+                     budget on sparse/unrefined with the strongest keypoints' matches (800,000 at
+                     most), one thread, niced; its model replaces sparse/0 when done unless a
+                     keyframe came first (report.json: refinement_afterwards) (true)
   publish_period     [s] ~points and ~cameras are sent at most once per this (0.5; 0: not published)
   camera_scale       frustum depth of ~cameras in RViz [m, scene units] (0.15: the node's ~markers'
                      frusta are 0.1 deep, so that both show where they coincide)
@@ -120,6 +126,9 @@ FINISH_WRITE_RESERVE = 2.0
 # ~refined_path is published when a keyframe moved more than this [m, deg]: half the node's
 # ~correction_min_translation and ~correction_min_rotation_deg defaults.
 PATH_MIN_TRANSLATION, PATH_MIN_ROTATION_DEG = 0.001, 0.05
+
+# How often the worker loop looks at the refinement after a finish while it runs [s].
+AFTERWARDS_POLL = 1.0
 
 # A node that tells its pauses but has sent no pause since its last keyframe: the bridge
 # finishes anyway after this long without keyframes [s] (the node gone mid-recording, or frames
@@ -185,6 +194,10 @@ class Bridge:
                                    max_batch_pairs=_param("max_batch_pairs", 24),
                                    max_attempts=_param("max_attempts", 3), log=self._log, backend=self.backend,
                                    triangulation=_param("triangulation", "live"), refinement=refinement)
+        self.afterwards = None  # the refinement after a finish (refinement/afterwards.py)
+        if refinement is not None and bool(_param("refine_afterwards", True)):
+            self.afterwards = RefinementAfterwards(refinement, log=self._log)
+        self.afterwards_shown = None  # (the finish's keyframes, report, what the model topics showed)
         self.world_frame = ""  # the node's, from its messages
         self.refined_path = rospy.Publisher("~refined_path", Path, queue_size=1, latch=True)
         self.model_topics = None  # ~points, ~cameras (live/model_topics.py)
@@ -298,6 +311,7 @@ class Bridge:
     def loop(self):
         last_poll = 0.0
         while not self.stopping and not rospy.is_shutdown():
+            self.poll_afterwards()
             with self.lock:
                 need_sync = self.stream.need_sync
             if need_sync or time.monotonic() - last_poll > self.poll_period:
@@ -325,6 +339,8 @@ class Bridge:
                 # which then slept 1 s: the finish began 1.6 s after the last keyframe, not 1).
                 until = s.until_idle(self.finish_after_idle) if self.finish_after_idle > 0 and stopped else None
                 wait = min(self.batch_period, until + 0.01) if until else self.batch_period
+                if self.afterwards is not None and self.afterwards.running is not None:
+                    wait = min(wait, AFTERWARDS_POLL)
             more = False
             if due:
                 self.finish("no keyframe for %.1f s" % idle)
@@ -410,6 +426,10 @@ class Bridge:
             rospy.loginfo("colmap_bridge: finishing (%s): %d keyframes, %d pairs from %s", why, len(keyframes),
                           len(pairs), source)
             with self.work:  # after the batch that may be running
+                if self.afterwards is not None:
+                    self.afterwards.stop("a finish began")
+                    with self.lock:
+                        self.afterwards_shown = None
                 self.project.cancelled = False
                 if shutting_down:
                     self.project.deadline = start + self.shutdown_budget - FINISH_WRITE_RESERVE
@@ -424,6 +444,10 @@ class Bridge:
                     shown = self.model_topics.live(self.work_state.model)  # its last update, under `work`
             self.complete_report(report, why, source, last_keyframe,
                                  timing={"start": start, "synced": synced, "asked": asked, "cpu_start": cpu_start})
+            afterwards = (not shutting_down and self.afterwards is not None and "model_path" in report
+                          and RefinementAfterwards.wanted(report.get("refinement")))
+            if afterwards:
+                report["refinement_afterwards"] = {"status": "running"}  # until it ends: then written again
             write_json_atomically(os.path.join(self.project.root, "report.json"), report)
             self.last_report = report
             if shown is not None:
@@ -431,6 +455,12 @@ class Bridge:
             self.publish_corrections(keyframes, report)
             with self.lock:
                 self.finished_at_change = change
+            if afterwards:
+                with self.work:
+                    with self.lock:
+                        self.afterwards_shown = (keyframes, report, shown)
+                    if not self.afterwards.start(self.project, report["model_path"], change):
+                        self._report_afterwards(None)
             msg = self.finish_message(report, len(keyframes))
             skipped = report["skipped"]
             (rospy.logwarn if skipped["images"] or skipped["pairs"] else rospy.loginfo)("colmap_bridge: %s", msg)
@@ -442,6 +472,57 @@ class Bridge:
             with self.lock:
                 self.finishing = False
                 self.wake.notify_all()
+
+    def poll_afterwards(self):
+        """The worker loop's look at the refinement after the finish: stopped once the stream
+        changed since that finish (a keyframe: the next finish will do it), taken when it ended:
+        its model is sparse/0 now, report.json has it as `refinement_afterwards`, and
+        ~refined_path and the model topics show it."""
+        a = self.afterwards
+        if a is None or a.running is None:
+            return
+        with self.lock:
+            changed = a.change != self.stream.last_change_time
+        with self.work:
+            if changed:
+                if a.stop("a keyframe came"):
+                    self._report_afterwards(None)
+                return
+            ended = a.poll()
+            if not ended and a.running is not None:
+                return  # still running
+            section = a.take() if ended else None  # else stopped at its timeout
+            shown = self._report_afterwards(section)
+        if section is None or shown is None:
+            return
+        keyframes, report, version = shown
+        rospy.loginfo("colmap_bridge: refined after the finish in %.0f s (%s): %d keyframes moved (median %.3g, "
+                      "max %.3g); %s replaced", section["seconds"], section["status"], section["keyframes_refined"],
+                      section["translation_median"], section["translation_max"], report["model_path"])
+        self.publish_corrections(keyframes, dict(report, refinement=section))
+        if self.model_topics and version is not None:
+            self.model_topics.finished(report, version)
+
+    def _report_afterwards(self, section):
+        """report.json written again with how the refinement after its finish ended: its section
+        (the model's figures then the refined model's), or why it gave nothing. Returns what the
+        finish left for it (keyframes, report, the model topics' version), or None."""
+        with self.lock:
+            shown, self.afterwards_shown = self.afterwards_shown, None
+        if shown is None:
+            return None
+        report = shown[1]
+        if section is not None:
+            report["refinement_afterwards"] = section
+            report.update(section["statistics"])
+            report["refined_afterwards_at"] = time.time()
+        else:
+            report["refinement_afterwards"] = dict(self.afterwards.last or {"status": "stopped"})
+        try:
+            write_json_atomically(os.path.join(self.project.root, "report.json"), report)
+        except OSError as e:
+            self.work_state.error("report.json after the refinement after the finish: %s" % e)
+        return shown
 
     def complete_report(self, report, why, source, last_keyframe, timing):
         """report.json: build_model's part, and the bridge's (the stream, the timing of the
@@ -553,6 +634,14 @@ class Bridge:
         if report:
             values["last model"] = "%s points, %.1f s after the last keyframe" % (
                 report.get("points"), report.get("seconds_from_last_keyframe") or 0.0)
+        if self.afterwards is not None:
+            a = self.afterwards.summary()  # read without the work lock: a glance, not a record
+            last = a["last"] or {}
+            values["refinement after the finish"] = "running" if a["running"] else (
+                "refined %s keyframes in %.0f s" % (last.get("keyframes_refined"), last.get("seconds", 0.0))
+                if "keyframes_refined" in last else
+                ("stopped: %s" % last["why"]) if last.get("status") == "stopped" else
+                ("failed: %s" % last["error"]) if last.get("status") == "failed" else "none")
         status.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
         return status
 
@@ -610,6 +699,8 @@ class Bridge:
         cancelled at once, and the model is finished within ~shutdown_budget from what the
         stream announced (the node may be gone already)."""
         start = time.monotonic()
+        if self.afterwards is not None and self.afterwards.stop("shutdown"):  # the finish's model stays
+            self._report_afterwards(None)
         with self.lock:
             self.stopping = True
             self.wake.notify_all()

@@ -201,11 +201,32 @@ def corrections(before, after):
     return out
 
 
-def write_matches(database_path, path, pairs=None, per_pair=0):
+def strongest_matches(data, max_matches):
+    """At most `max_matches` rows of `data` (image id, keypoint, image id, keypoint): those whose
+    two keypoints are both among the strongest L of their images (keypoints are stored strongest
+    first), L as large as keeps them within `max_matches`. A keypoint is kept or dropped in all
+    its matches alike, so that the tracks stay whole (an even share of each pair's matches breaks
+    them apart). Returns (rows, L); L is None when all are kept."""
+    if not max_matches or len(data) <= max_matches:
+        return data, None
+    weakest = np.maximum(data[:, 1], data[:, 3])
+    limit = int(np.partition(weakest, max_matches)[max_matches])  # below it: at most max_matches
+    return data[weakest < limit], limit
+
+
+def count_verified_matches(database_path):
+    """How many verified matches (two-view geometries' inliers) the database holds."""
+    from ..colmap import database as cdb
+    with cdb.open_database(database_path) as d:
+        return int(sum(n for n in d.inlier_counts().values() if n > 0))
+
+
+def write_matches(database_path, path, pairs=None, per_pair=0, max_matches=0):
     """The database's verified matches (two-view geometries' inliers) as refine_model's VSMATCH1
     file: image id and keypoint index of both sides, the ids the model's images have. `pairs`:
     only these (image id, image id) pairs (a cropped refinement, refinement/local.py), read one
     by one. `per_pair`: at most this many of each pair's, evenly spread over its list (0: all).
+    `max_matches`: at most this many in all, the strongest keypoints' (strongest_matches; 0: all).
     Returns how many."""
     import struct
     from ..colmap import database as cdb
@@ -230,6 +251,7 @@ def write_matches(database_path, path, pairs=None, per_pair=0):
                 if len(m):
                     rows.append(np.stack([np.full(len(m), a), m[:, 0], np.full(len(m), b), m[:, 1]], axis=1))
             data = np.concatenate(rows).astype("<i4") if rows else np.zeros((0, 4), "<i4")
+    data, _ = strongest_matches(data, max_matches)
     with open(path, "wb") as f:
         f.write(b"VSMATCH1" + struct.pack("<Q", len(data)))
         f.write(memoryview(np.ascontiguousarray(data)).cast("B"))
@@ -283,38 +305,44 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
         cpu = (after.ru_utime + after.ru_stime) - (children.ru_utime + children.ru_stime)
         log("refinement: %s" % report["message"])
         durable.replace_folder(made, os.path.abspath(output))
-        keyframes = []
-        for im in report["images"]:
-            keyframes.append({"name": im["name"], "refined": im["refined"], "kept": im["kept"] or None,
-                              "weak": im.get("weak", False),
-                              "translation": im["translation"], "rotation_deg": im["rotation_deg"],
-                              "observations": [im["observations_input"], im["observations_refined"]]})
-        moved = [k for k in keyframes if k["refined"]]
-        translations = sorted(k["translation"] for k in moved)
-        rotations = sorted(k["rotation_deg"] for k in moved)
-        return {
-            "status": report["status"], "refined": report["refined"], "message": report["message"],
-            "keyframes": keyframes, "keyframes_refined": len(moved),
-            "keyframes_kept": [{"name": k["name"], "why": k["kept"]} for k in keyframes if k["kept"]],
-            "translation_median": translations[len(translations) // 2] if translations else 0.0,
-            "translation_max": translations[-1] if translations else 0.0,
-            "rotation_median_deg": rotations[len(rotations) // 2] if rotations else 0.0,
-            "rotation_max_deg": rotations[-1] if rotations else 0.0,
-            "points": [report["points_input"], report["points_refined"]],
-            "observations": [report["observations_input"], report["observations_refined"]],
-            "observations_filtered": report["observations_filtered"],
-            "reprojection_error": [report["reprojection_error_input"], report["reprojection_error_refined"]],
-            "rounds": report["rounds"], "iterations": report["iterations"], "passes": report["passes"],
-            "retriangulations": report.get("retriangulations", 0), "epipolar": report.get("epipolar"),
-            "not_begun": report.get("not_begun", []), "matches": count,
-            "tracks": report.get("tracks", 0), "aligned": report["aligned"],
-            "alignment_scale": report["alignment_scale"], "adjustment_seconds": report["seconds"],
-            "phase_seconds": {k: round(v, 3) for k, v in report.get("phase_seconds", {}).items()},
-            "statistics": model_statistics(report),
-            "cpu_seconds": cpu,
-            "seconds": time.monotonic() - start, "options": options.to_json()}
+        return section_of(report, count, cpu, time.monotonic() - start, options)
     finally:
         shutil.rmtree(work, ignore_errors=True)
+
+
+def section_of(report, matches, cpu, seconds, options):
+    """The report's `refinement` section from refine_model's report: the per-keyframe
+    corrections, their spread, the figures before and after. matches: how many it was given."""
+    keyframes = []
+    for im in report["images"]:
+        keyframes.append({"name": im["name"], "refined": im["refined"], "kept": im["kept"] or None,
+                          "weak": im.get("weak", False),
+                          "translation": im["translation"], "rotation_deg": im["rotation_deg"],
+                          "observations": [im["observations_input"], im["observations_refined"]]})
+    moved = [k for k in keyframes if k["refined"]]
+    translations = sorted(k["translation"] for k in moved)
+    rotations = sorted(k["rotation_deg"] for k in moved)
+    return {
+        "status": report["status"], "refined": report["refined"], "message": report["message"],
+        "keyframes": keyframes, "keyframes_refined": len(moved),
+        "keyframes_kept": [{"name": k["name"], "why": k["kept"]} for k in keyframes if k["kept"]],
+        "translation_median": translations[len(translations) // 2] if translations else 0.0,
+        "translation_max": translations[-1] if translations else 0.0,
+        "rotation_median_deg": rotations[len(rotations) // 2] if rotations else 0.0,
+        "rotation_max_deg": rotations[-1] if rotations else 0.0,
+        "points": [report["points_input"], report["points_refined"]],
+        "observations": [report["observations_input"], report["observations_refined"]],
+        "observations_filtered": report["observations_filtered"],
+        "reprojection_error": [report["reprojection_error_input"], report["reprojection_error_refined"]],
+        "rounds": report["rounds"], "iterations": report["iterations"], "passes": report["passes"],
+        "retriangulations": report.get("retriangulations", 0), "epipolar": report.get("epipolar"),
+        "not_begun": report.get("not_begun", []), "matches": matches,
+        "tracks": report.get("tracks", 0), "aligned": report["aligned"],
+        "alignment_scale": report["alignment_scale"], "adjustment_seconds": report["seconds"],
+        "phase_seconds": {k: round(v, 3) for k, v in report.get("phase_seconds", {}).items()},
+        "statistics": model_statistics(report),
+        "cpu_seconds": cpu,
+        "seconds": seconds, "options": options.to_json()}
 
 
 def model_statistics(report):

@@ -46,7 +46,7 @@ from view_selection.msg import PairChanges
 from view_selection.srv import ExportRequest, Export, GetPairs, GetPairsRequest, GetSelection
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
-from vs_replay import run  # noqa: E402
+from vs_replay import bridge_report_after, run  # noqa: E402
 from vs_robust import NodeProcess, Statistics, call, find_tool, wait_until  # noqa: E402
 
 NODE = '/live_vs'
@@ -283,6 +283,9 @@ class LiveBridge(unittest.TestCase):
         cls.finish_a = cls.finish(cls.bridge_a.name)
         cls.finish_b = cls.finish(cls.bridge_b.name)
         cls.finish_c = cls.finish(cls.bridge_c.name)
+        for project in (cls.a, cls.b, cls.c):  # a finish its budget cut short (a loaded machine) is refined after
+            wait_until(bridge_report_after(project, 0.0), cls.timeout, 'the refinement after the finish in ' + project,
+                       period=0.2)
         # The finished model goes out after the finish (at most ~publish_period later): the last
         # message is sparse/0's points once one is.
         cls.sparse_b = read_model(os.path.join(cls.b, 'sparse', '0'))

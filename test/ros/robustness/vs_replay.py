@@ -226,7 +226,10 @@ def wait_for_statistics(node, predicate, timeout, what):
 
 def bridge_report_after(project, since):
     """A predicate for wait_until: colmap_bridge's report.json in `project` once it was written
-    after `since` (time.time()), else None (missing, half written or older)."""
+    after `since` (time.time()), else None (missing, half written or older). A finish whose
+    refinement its budget cut short is followed by a refinement in the background that replaces
+    sparse/0 (refinement_afterwards "running" meanwhile): the report once that ended, so that
+    sparse/0 and the report stay as the test reads them."""
     path = os.path.join(project, 'report.json')
 
     def report():
@@ -234,6 +237,8 @@ def bridge_report_after(project, since):
             with open(path) as f:
                 r = json.load(f)
         except (OSError, ValueError):
+            return None
+        if (r.get('refinement_afterwards') or {}).get('status') == 'running':
             return None
         return r if r.get('finished_at', 0) > since else None
     return report
