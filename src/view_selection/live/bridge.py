@@ -198,6 +198,10 @@ class Bridge:
         if refinement is not None and bool(_param("refine_afterwards", True)):
             self.afterwards = RefinementAfterwards(refinement, log=self._log)
         self.afterwards_shown = None  # (the finish's keyframes, report, what the model topics showed)
+        # (sparse/0, the stream's change time) of a finish to refine after: started by the worker
+        # loop, whose thread lives as long as the node (a child started from ~finish's thread was
+        # killed when that thread ended: setpriv's parent-death signal follows the thread).
+        self.afterwards_request = None
         self.world_frame = ""  # the node's, from its messages
         self.refined_path = rospy.Publisher("~refined_path", Path, queue_size=1, latch=True)
         self.model_topics = None  # ~points, ~cameras (live/model_topics.py)
@@ -339,7 +343,8 @@ class Bridge:
                 # which then slept 1 s: the finish began 1.6 s after the last keyframe, not 1).
                 until = s.until_idle(self.finish_after_idle) if self.finish_after_idle > 0 and stopped else None
                 wait = min(self.batch_period, until + 0.01) if until else self.batch_period
-                if self.afterwards is not None and self.afterwards.running is not None:
+                if self.afterwards is not None and (self.afterwards.running is not None or
+                                                    self.afterwards_request is not None):
                     wait = min(wait, AFTERWARDS_POLL)
             more = False
             if due:
@@ -429,7 +434,7 @@ class Bridge:
                 if self.afterwards is not None:
                     self.afterwards.stop("a finish began")
                     with self.lock:
-                        self.afterwards_shown = None
+                        self.afterwards_shown = self.afterwards_request = None
                 self.project.cancelled = False
                 if shutting_down:
                     self.project.deadline = start + self.shutdown_budget - FINISH_WRITE_RESERVE
@@ -456,11 +461,10 @@ class Bridge:
             with self.lock:
                 self.finished_at_change = change
             if afterwards:
-                with self.work:
-                    with self.lock:
-                        self.afterwards_shown = (keyframes, report, shown)
-                    if not self.afterwards.start(self.project, report["model_path"], change):
-                        self._report_afterwards(None)
+                with self.lock:
+                    self.afterwards_shown = (keyframes, report, shown)
+                    self.afterwards_request = (report["model_path"], change)
+                    self.wake.notify_all()
             msg = self.finish_message(report, len(keyframes))
             skipped = report["skipped"]
             (rospy.logwarn if skipped["images"] or skipped["pairs"] else rospy.loginfo)("colmap_bridge: %s", msg)
@@ -479,10 +483,23 @@ class Bridge:
         its model is sparse/0 now, report.json has it as `refinement_afterwards`, and
         ~refined_path and the model topics show it."""
         a = self.afterwards
-        if a is None or a.running is None:
+        if a is None:
             return
         with self.lock:
-            changed = a.change != self.stream.last_change_time
+            request, self.afterwards_request = self.afterwards_request, None
+            now = self.stream.last_change_time
+        if request is not None:
+            model_path, change = request
+            with self.work:
+                if change != now:
+                    a.last = {"status": "stopped", "why": "a keyframe came before it began"}
+                    self._report_afterwards(None)
+                elif not a.start(self.project, model_path, change):
+                    self._report_afterwards(None)
+            return
+        if a.running is None:
+            return
+        changed = a.change != now
         with self.work:
             if changed:
                 if a.stop("a keyframe came"):
@@ -699,8 +716,12 @@ class Bridge:
         cancelled at once, and the model is finished within ~shutdown_budget from what the
         stream announced (the node may be gone already)."""
         start = time.monotonic()
-        if self.afterwards is not None and self.afterwards.stop("shutdown"):  # the finish's model stays
-            self._report_afterwards(None)
+        if self.afterwards is not None:  # the finish's model stays
+            with self.lock:
+                pending, self.afterwards_request = self.afterwards_request, None
+            if self.afterwards.stop("shutdown") or pending:
+                self.afterwards.last = {"status": "stopped", "why": "shutdown"}
+                self._report_afterwards(None)
         with self.lock:
             self.stopping = True
             self.wake.notify_all()
