@@ -272,10 +272,11 @@ size_t observationsOf(const Tracks& tracks) {
 }
 
 /// Whether `share` of the time left, halved (a triangulation's part), pays for triangulating
-/// `tracks` at config.triangulation_seconds_per_observation (always, without a deadline).
-bool triangulationPaidFor(const Deadline& deadline, double share, const Tracks& tracks, const RefinementConfig& config) {
-  return !deadline.set || deadline.left() * share / 2.0 >= config.triangulation_seconds_per_observation *
-                                                               static_cast<double>(observationsOf(tracks));
+/// `observations` at config.triangulation_seconds_per_observation (always, without a deadline).
+bool triangulationPaidFor(const Deadline& deadline, double share, size_t observations,
+                          const RefinementConfig& config) {
+  return !deadline.set || deadline.left() * share / 2.0 >=
+                              config.triangulation_seconds_per_observation * static_cast<double>(observations);
 }
 
 /// Adds the wall time of its scope to `seconds[name]` (the report's phase_seconds).
@@ -731,7 +732,7 @@ void epipolarStage(PassResult& r, const Gauge& gauge, const std::vector<Epipolar
 void triangulationStage(PassResult& r, const Tracks& tracks, const std::set<int>& kept, const RefinementConfig& config,
                         int stage, const Deadline& deadline, const std::string& where, io::Progress* progress) {
   const int later = config.retriangulations - stage;
-  if (!triangulationPaidFor(deadline, 1.0, tracks, config)) {  // as one given up, without the time spent on it
+  if (!triangulationPaidFor(deadline, 1.0, observationsOf(tracks), config)) {  // as one given up, without the time spent on it
     r.not_begun.push_back("triangulation");
     r.out_of_time = stage > 0;
     return;
@@ -857,7 +858,7 @@ PassResult pass(const State& input, const std::map<int, State::Pose>& reference,
   const int stages = tracks ? 1 + config.retriangulations : 1;
   const std::map<int, State::Pose> before_epipolar = s.poses;
   if (tracks && config.triangulate_first && config.epipolar_first && epipolar && !epipolar->empty()) {
-    if (triangulationPaidFor(deadline, 1.0 - config.epipolar_time_share, *tracks, config))
+    if (triangulationPaidFor(deadline, 1.0 - config.epipolar_time_share, observationsOf(*tracks), config))
       epipolarStage(r, gauge, *epipolar, kept, config, deadline.share(config.epipolar_time_share),
                     "(pass " + std::to_string(pass_number) + ")", progress);
     else
@@ -1111,12 +1112,11 @@ std::optional<io::ColmapModel> refineModelIfChanged(const io::ColmapModel& input
   // more is done, not even the tracks (a second at a 30-minute session's size).
   const bool spent = deadline.passed();
   // Matches whose triangulation the time left would not pay for even now, before their tracks
-  // and epipolar pairs are built (triangulationPaidFor's rule, by the observations the matches
-  // hold: at most the tracks'). A 30-minute session's finish: 2.1 million observations at 1 us
-  // against 3.7 s left after reading, where building them took 2.4-3.8 s to end in nothing.
+  // and epipolar pairs are built (by the observations the matches hold: at most the tracks').
+  // A 30-minute session's finish: 2.1 million observations at 1 us against 3.7 s left after
+  // reading, where building them took 2.4-3.8 s to end in nothing.
   const bool unpaid = matches && !spent && config.triangulate_first && deadline.set &&
-                      deadline.left() / 2.0 < config.triangulation_seconds_per_observation *
-                                                  static_cast<double>(countObservations(*matches));
+                      !triangulationPaidFor(deadline, 1.0, countObservations(*matches), config);
   Tracks tracks;
   if (matches && !spent && !unpaid) tracks = buildTracks(*matches);
   std::vector<EpipolarPair> epipolar;
