@@ -17,7 +17,6 @@ converged one is all there is, and one that failed or ran away would do so again
 import copy
 import os
 import shutil
-import subprocess
 import tempfile
 import threading
 import time
@@ -41,13 +40,12 @@ class RefinementAfterwards:
     """One refine_model child after a finish: start(), then poll() from the worker loop until it
     says the run ended, then take(); stop() at any time, from any thread (the shutdown's)."""
 
-    def __init__(self, refinement, max_matches=MAX_MATCHES, timeout=TIMEOUT, log=None, clock=time.monotonic):
+    def __init__(self, refinement, max_matches=MAX_MATCHES, timeout=TIMEOUT, log=None):
         """refinement: the finish's (refiner.ModelRefinement, or a LocalRefinement holding one):
         its options and tool are this one's, without a budget."""
         self.finish_refinement = getattr(refinement, "finish_refinement", refinement)
         self.max_matches, self.timeout = int(max_matches), float(timeout)
         self.log = log or (lambda level, text: None)
-        self.clock = clock
         self.running = None     # _Run
         self.change = None      # what the finish it follows was made from (the stream's change time)
         self.model_path = None
@@ -79,7 +77,7 @@ class RefinementAfterwards:
                                                     os.path.join(folder, "output"),
                                                     os.path.join(folder, "report.json"), self._options(),
                                                     matches=matches)
-                proc = self._spawn(args, getattr(project, "log_path", None))
+                proc = refiner.start_refine_model(args, getattr(project, "log_path", None), nice=NICE)
             except (OSError, refiner.RefinementError, ValueError) as e:
                 if folder:
                     shutil.rmtree(folder, ignore_errors=True)
@@ -100,20 +98,6 @@ class RefinementAfterwards:
         options.max_seconds, options.threads, options.timeout = 0.0, 1, self.timeout
         return options
 
-    @staticmethod
-    def _spawn(args, log_path):
-        log = open(log_path, "a") if log_path else None
-        try:
-            if log:
-                log.write("$ nice -n %d %s\n" % (NICE, " ".join(args)))
-                log.flush()
-            return subprocess.Popen(refiner._death_signal_prefix() + ["nice", "-n", str(NICE)] + args,
-                                    stdout=log or subprocess.DEVNULL, stderr=log or subprocess.DEVNULL,
-                                    start_new_session=True)
-        finally:
-            if log:
-                log.close()
-
     def poll(self):
         """True once the run under way ended (take() then gives its result). A run past its
         timeout is stopped (running is None then). False while one runs, or when none does."""
@@ -123,7 +107,7 @@ class RefinementAfterwards:
                 return False
             if run.poll():
                 return True
-            if self.clock() - run.started > self.timeout:
+            if time.monotonic() - run.started > self.timeout:
                 self.stop("it ran longer than %.0f s" % self.timeout)
             return False
 
@@ -140,7 +124,7 @@ class RefinementAfterwards:
                     raise refiner.RefinementError("refine_model exited with %s" % run.status)
                 report = refiner.read_report(os.path.join(run.folder, "report.json"))
                 cpu = run.rusage.ru_utime + run.rusage.ru_stime if run.rusage is not None else 0.0
-                section = refiner.section_of(report, self.matches[0], cpu, self.clock() - run.started,
+                section = refiner.section_of(report, self.matches[0], cpu, time.monotonic() - run.started,
                                              self._options())
                 section["matches_of"] = self.matches[1]
                 if not report.get("refined"):
@@ -166,7 +150,7 @@ class RefinementAfterwards:
                 return False
             run.kill()
             self.counts["stopped"] += 1
-            self.last = {"status": "stopped", "why": why, "seconds": round(self.clock() - run.started, 3)}
+            self.last = {"status": "stopped", "why": why, "seconds": round(time.monotonic() - run.started, 3)}
         self.log("info", "the refinement after the finish stopped (%s)" % why)
         return True
 

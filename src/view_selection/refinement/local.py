@@ -43,7 +43,6 @@ the live model's points carried to them by each point's first keyframe (`at_node
 import bisect
 import os
 import shutil
-import subprocess
 import tempfile
 import time
 
@@ -411,16 +410,7 @@ class LocalRefinement:
                                                 os.path.join(folder, "report.json"), options,
                                                 [model.images[i].name for i in fixed], reference=reference,
                                                 matches=matches)
-            log = open(work.project.log_path, "a") if getattr(work.project, "log_path", None) else None
-            try:
-                if log:
-                    log.write("$ %s\n" % " ".join(args))
-                    log.flush()
-                proc = subprocess.Popen(refiner._death_signal_prefix() + args, stdout=log or subprocess.DEVNULL,
-                                        stderr=log or subprocess.DEVNULL, start_new_session=True)
-            finally:
-                if log:
-                    log.close()
+            proc = refiner.start_refine_model(args, getattr(work.project, "log_path", None))
         except (OSError, refiner.RefinementError, colmap_model.ModelError, KeyError, ValueError) as e:
             shutil.rmtree(folder, ignore_errors=True)
             self.failures += 1

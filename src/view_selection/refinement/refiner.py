@@ -115,6 +115,25 @@ def refine_model_command(tool, model, output, report, options, fixed=(), referen
     return args
 
 
+def start_refine_model(args, log_path=None, nice=0):
+    """refine_model (its command line, refine_model_command) started as a child that runs while
+    the caller goes on: its command and output appended to `log_path`, `nice` above the caller's
+    niceness, in a session of its own (Colmap._kill stops it whole), killed when the thread that
+    started it ends (setpriv's parent-death signal follows the thread: start it from one that
+    lives as long as the run). Returns the Popen."""
+    cmd = (["nice", "-n", str(nice)] if nice else []) + list(args)
+    log = open(log_path, "a") if log_path else None
+    try:
+        if log:
+            log.write("$ %s\n" % " ".join(cmd))
+            log.flush()
+        return subprocess.Popen(_death_signal_prefix() + cmd, stdout=log or subprocess.DEVNULL,
+                                stderr=log or subprocess.DEVNULL, start_new_session=True)
+    finally:
+        if log:
+            log.close()
+
+
 def read_report(report):
     try:
         with open(report) as f:
