@@ -36,7 +36,7 @@ from view_selection.srv import Export, ExportRequest, GetSelection
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
 from vs_replay import bridge_report_after, run  # noqa: E402
-from vs_robust import call, find_tool, wait_until  # noqa: E402
+from vs_robust import NodeProcess, call, find_tool, wait_until  # noqa: E402
 
 from view_selection import geometry  # noqa: E402
 from view_selection.colmap.model import read_model  # noqa: E402
@@ -303,32 +303,36 @@ class LiveOdometry(unittest.TestCase):
         project = os.path.join(self.tmp, 'project_afterwards')
         os.makedirs(project)
         os.symlink(os.path.join(self.project, 'images'), os.path.join(project, 'images'))  # the node's one folder
-        name = '/colmap_bridge_afterwards'
+        bridge = NodeProcess('/colmap_bridge_afterwards', {'project': project, 'node': NODE, 'refine_max_seconds': 0.2},
+                             binary=find_tool('colmap_bridge'))
         paths = []
-        sub = rospy.Subscriber(name + '/refined_path', Path, paths.append, queue_size=5)
-        log = open(os.path.join(self.tmp, 'bridge_afterwards.log'), 'w+')
-        bridge = subprocess.Popen([find_tool('colmap_bridge'), '__name:=' + name[1:], '_project:=' + project,
-                                   '_node:=' + NODE, '_refine_max_seconds:=0.2'],
-                                  stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+        sub = rospy.Subscriber(bridge.name + '/refined_path', Path, paths.append, queue_size=5)
+        bridge.start()
         try:
-            answer = call(name + '/finish', Trigger, None, 3 * self.timeout)
+            answer = call(bridge.name + '/finish', Trigger, None, 3 * self.timeout)
             self.assertTrue(answer.success, answer.message)
             report = wait_until(bridge_report_after(project, 0.0), 3 * self.timeout,
                                 'the refinement after the finish ended', period=0.2)
+            # The path of the model refined afterwards (published after report.json; the finish's
+            # own may come before it).
+            model = read_model(os.path.join(project, 'sparse', '0')).image_by_name()
+            by_stamp = {round(k.stamp.to_sec(), 6): k.image_name for k in self.selection.keyframes}
+
+            def path_of_the_model():
+                if not paths or len(paths[-1].poses) != len(model):
+                    return False
+                for p in paths[-1].poses:
+                    im = model[by_stamp[round(p.header.stamp.to_sec(), 6)]]
+                    centre, _ = geometry.camera_to_world(im.qvec, im.tvec)
+                    if math.dist(centre, (p.pose.position.x, p.pose.position.y, p.pose.position.z)) > 1e-9:
+                        return False
+                return True
+            wait_until(path_of_the_model, 30.0, "~refined_path of the model refined after the finish", period=0.2)
         except AssertionError as e:
-            log.flush()
-            log.seek(0)
-            raise AssertionError('%s; the bridge said:\n%s' % (e, log.read()[-4000:]))
+            raise AssertionError('%s; the bridge said:\n%s' % (e, bridge.output()[-4000:]))
         finally:
-            if bridge.poll() is None:
-                os.killpg(bridge.pid, signal.SIGINT)
-                try:
-                    bridge.wait(60)
-                except subprocess.TimeoutExpired:
-                    os.killpg(bridge.pid, signal.SIGKILL)
-                    bridge.wait(10)
             sub.unregister()
-            log.close()
+            bridge.stop(60.0)
         self.assertEqual('out_of_time', report['refinement']['status'], report['refinement'].get('message'))
         after = report['refinement_afterwards']
         self.assertEqual('converged', after['status'], after)
@@ -351,21 +355,7 @@ class LiveOdometry(unittest.TestCase):
                       on, off, odometry, after['seconds'])
         self.assertLess(on, 1.1 * off + 0.002, 'refined afterwards %.5f m, offline %.5f m' % (on, off))
         self.assertLess(on, odometry)
-        # The path of the model refined afterwards (published after report.json; the finish's
-        # own may come before it).
-        model = read_model(os.path.join(project, 'sparse', '0')).image_by_name()
-        by_stamp = {round(k.stamp.to_sec(), 6): k.image_name for k in self.selection.keyframes}
 
-        def path_of_the_model():
-            if not paths or len(paths[-1].poses) != len(model):
-                return False
-            for p in paths[-1].poses:
-                im = model[by_stamp[round(p.header.stamp.to_sec(), 6)]]
-                centre, _ = geometry.camera_to_world(im.qvec, im.tvec)
-                if math.dist(centre, (p.pose.position.x, p.pose.position.y, p.pose.position.z)) > 1e-9:
-                    return False
-            return True
-        wait_until(path_of_the_model, 30.0, "~refined_path of the model refined after the finish", period=0.2)
 
 if __name__ == '__main__':
     rospy.init_node('live_odometry_tester')
