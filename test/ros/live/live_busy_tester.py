@@ -25,11 +25,9 @@ import unittest
 import rospy
 import rostest
 
-from view_selection.srv import GetSelection
-
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
-from vs_replay import bridge_report_after, run  # noqa: E402
-from vs_robust import Statistics, call, find_tool, wait_until  # noqa: E402
+from vs_replay import final_report, run  # noqa: E402
+from vs_robust import Statistics, find_tool, wait_until  # noqa: E402
 
 NODE = '/view_selection'
 
@@ -73,10 +71,9 @@ class LiveBusy(unittest.TestCase):
             run(['rosbag', 'play', '--clock', '-q', '-d', '2', '--wait-for-subscribers', cls.bag, '--topics'] + topics,
                 cls.timeout + 4 * cls.frames / 30.0, 'rosbag play')
             cls.bag_end = time.time()
-            cls.report = wait_until(bridge_report_after(cls.project, cls.bag_end), cls.timeout,
-                                    'the bridge wrote the model after the bag',
-                                    period=0.2)
-            cls.selection = call(NODE + '/get_selection', GetSelection, None, 30.0).selection
+            cls.report, cls.selection = wait_until(final_report(cls.project, cls.bag_end, NODE), cls.timeout,
+                                                   'the bridge wrote the model of the final selection after the bag',
+                                                   period=0.2)
         finally:
             stop(cls.busy, 5)
 

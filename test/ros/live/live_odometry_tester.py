@@ -32,10 +32,10 @@ from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry, Path
 from std_srvs.srv import Trigger
 
-from view_selection.srv import Export, ExportRequest, GetSelection
+from view_selection.srv import Export, ExportRequest
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
-from vs_replay import bridge_report_after, run  # noqa: E402
+from vs_replay import bridge_report_after, final_report, run  # noqa: E402
 from vs_robust import NodeProcess, call, find_tool, wait_until  # noqa: E402
 
 from view_selection import geometry  # noqa: E402
@@ -118,11 +118,10 @@ class LiveOdometry(unittest.TestCase):
         run(['rosbag', 'play', '--clock', '-q', '-d', '1', cls.bag], 60 + 10 * cls.frames / 30.0, 'rosbag play')
         cls.bag_end = time.time()
         try:
-            cls.report = wait_until(bridge_report_after(cls.project, cls.bag_end), 3 * cls.timeout,
-                                    'the bridge wrote the model', period=0.5)
+            cls.report, cls.selection = wait_until(final_report(cls.project, cls.bag_end, NODE), 3 * cls.timeout,
+                                                   'the bridge wrote the model of the final selection', period=0.5)
         except AssertionError as e:
             raise AssertionError('%s; roslaunch said:\n%s' % (e, cls.output()[-4000:]))
-        cls.selection = call(NODE + '/get_selection', GetSelection, None, 30.0).selection
         # The path of this model (the bridge publishes it after writing report.json; a finish
         # during a pause of the recording may have published an earlier one).
         last_stamp = max(k.stamp.to_sec() for k in cls.selection.keyframes)

@@ -11,6 +11,7 @@ import time
 import rosgraph
 import rospy
 from std_srvs.srv import SetBool, SetBoolRequest
+from view_selection.srv import GetSelection
 from xmlrpc.client import ServerProxy
 
 from vs_robust import call
@@ -242,3 +243,21 @@ def bridge_report_after(project, since):
             return None
         return r if r.get('finished_at', 0) > since else None
     return report
+
+
+def final_report(project, since, node):
+    """A predicate for wait_until: (report.json, the node's selection) once colmap_bridge wrote a
+    report after `since` (as bridge_report_after) of as many keyframes as the node's selection
+    holds, else None. The bridge finishes after ~finish_after_idle without a keyframe, which a
+    loaded machine can give before the recording's last keyframe (the odometry or the node
+    behind): that finish's report comes after the bag's end too, and a later finish replaces it;
+    the report of the final selection is the one a test compares with the selection."""
+    report = bridge_report_after(project, since)
+
+    def final():
+        r = report()
+        if r is None:
+            return None
+        selection = call(node + '/get_selection', GetSelection, None, 30.0).selection
+        return (r, selection) if r.get('keyframes') == len(selection.keyframes) else None
+    return final
