@@ -39,12 +39,12 @@ def arc_poses(n=30):
     return poses
 
 
-def known_pose_model(exact, given, rng, k=(525.0, 525.0, 319.5, 239.5), database=None):
-    """Observations of 500 points at the exact poses (0.5 px noise), points triangulated at the
-    `given` poses, observations beyond 4 px of them dropped: point_triangulator's model. With
+def known_pose_model(exact, given, rng, k=(525.0, 525.0, 319.5, 239.5), database=None, points=500):
+    """Observations of `points` points at the exact poses (0.5 px noise), points triangulated at
+    the `given` poses, observations beyond 4 px of them dropped: point_triangulator's model. With
     `database` (a path), also the project's database: images, keypoints, and every pair of a
     point's observations as verified matches."""
-    points = rng.uniform(-1, 1, size=(500, 3))
+    points = rng.uniform(-1, 1, size=(points, 3))
     m = cm.Model({1: cm.Camera(1, "PINHOLE", 640, 480, k)})
     obs = {i: [] for i in range(len(exact))}
     w2c = [geometry.world_to_camera(c, q) for c, q in given]
@@ -276,6 +276,102 @@ def test_a_model_its_budget_cannot_refine_is_said_once_and_kept_as_written(tmp_p
     warnings = [text for level, text in logged if level == "warn"]
     assert len(warnings) == 1 and "not refined" in warnings[0] and "~refine_max_seconds" in warnings[0], logged
     assert {n: os.stat(str(model / n)).st_ino for n in os.listdir(str(model))} == inodes
+
+
+def matched_observations(database):
+    """The distinct (image id, keypoint) of the database's verified matches."""
+    from view_selection.colmap import database as cdb
+    with cdb.open_database(database) as d:
+        counts, m = d.verified_matches()
+    a = np.repeat(counts[:, 0], counts[:, 2]) * (1 << 32) + m[:, 0]
+    b = np.repeat(counts[:, 1], counts[:, 2]) * (1 << 32) + m[:, 1]
+    return len(np.unique(np.concatenate([a, b])))
+
+
+def skipped_below(model, matched):
+    """The budget under which the finish does not start refine_model (refiner.not_begun)."""
+    return min(2.0 * refiner.TRIANGULATION_SECONDS_PER_OBSERVATION * matched,
+               refiner.ADJUSTMENT_ALONE_SECONDS_PER_OBSERVATION * model.statistics()["observations"])
+
+
+def test_refine_model_begins_nothing_where_the_finish_does_not_start_it(tmp_path):
+    """refiner.not_begun's rule against refine_model itself: with a budget just under it,
+    refine_model given the matches begins nothing (no tracks, no round, every image kept); with
+    ten times it, it begins. A refine_model whose steps grew cheaper than the constants say (the
+    finish would skip what it could do) breaks the first; constants far above its rule, the
+    second."""
+    exact = arc_poses()
+    database = str(tmp_path / "database.db")
+    m = known_pose_model(exact, drift.add_drift(exact, 0.02, 0.3, seed=3), np.random.default_rng(5),
+                         database=database, points=3000)
+    cm.write_model(m, str(tmp_path / "in"))
+    matches = str(tmp_path / "matches.bin")
+    refiner.write_matches(database, matches)
+    matched = matched_observations(database)
+    assert matched >= m.statistics()["observations"]
+    bound = 0.99 * skipped_below(m, matched)
+    assert refiner.not_begun(m, matched, refiner.RefinementOptions(max_seconds=bound), bound) is not None
+    assert refiner.not_begun(m, matched, refiner.RefinementOptions(max_seconds=10 * bound), 10 * bound) is None
+    reports = {}
+    for factor in (1.0, 10.0):
+        options = refiner.RefinementOptions(max_seconds=factor * bound, threads=1)
+        reports[factor] = refiner.run_refine_model(refine_tool(), str(tmp_path / "in"), str(tmp_path / str(factor)),
+                                                   str(tmp_path / ("%s.json" % factor)), options, matches=matches)
+    r = reports[1.0]
+    assert r["status"] == "out_of_time" and not r["refined"], r["message"]
+    assert (r["tracks"], r["rounds"], r["iterations"], r["retriangulations"]) == (0, 0, 0, 0), r["message"]
+    assert all(im["kept"] for im in r["images"])
+    r = reports[10.0]
+    assert r["tracks"] > 0 and r["rounds"] > 0, r["message"]
+
+
+def test_a_finish_whose_budget_pays_for_nothing_does_not_start_refine_model(tmp_path):
+    """ModelRefinement.apply given the model it refines and its matches' observations (the live
+    finish): under not_begun's rule refine_model is not started, and the section is the one
+    refine_model gives for a budget that pays for nothing, with the same fields; sparse/0 stays
+    as written and sparse/unrefined is its copy. Over it, or without the model, it is started."""
+    exact = arc_poses()
+    database = str(tmp_path / "database.db")
+    m = known_pose_model(exact, drift.add_drift(exact, 0.02, 0.3, seed=3), np.random.default_rng(2),
+                         database=database)
+    model = tmp_path / "sparse" / "0"
+    cm.write_model(m, str(model))
+    before = {n: open(os.path.join(model, n), "rb").read() for n in os.listdir(model)}
+    project = FakeProject(str(tmp_path))
+    project.database = database
+    started = tmp_path / "started"
+    tool = fake_tool(tmp_path / "refine_model", "touch %s; exit 1" % started)
+    matched = matched_observations(database)
+    bound = skipped_below(m, matched)
+    logged = []
+    section = refiner.ModelRefinement(refiner.RefinementOptions(max_seconds=0.5 * bound), tool=tool,
+                                      log=lambda level, text: logged.append((level, text))).apply(
+        project, str(model), m, matched)
+    assert not started.exists()
+    assert section["status"] == "out_of_time" and not section["refined"], section
+    assert "not started" in section["message"] and section["not_begun"] == ["epipolar", "triangulation", "adjustment"]
+    assert [k["name"] for k in section["keyframes"]] == [im.name for _, im in sorted(m.images.items())]
+    assert all(k["kept"] and not k["refined"] for k in section["keyframes"])
+    assert [k["observations"][0] for k in section["keyframes"]] == \
+        [int(np.count_nonzero(np.asarray(im.point3D_ids) >= 0)) for _, im in sorted(m.images.items())]
+    assert section["statistics"] == m.statistics()
+    warnings = [text for level, text in logged if level == "warn"]
+    assert len(warnings) == 1 and "not refined" in warnings[0], logged
+    assert {n: open(os.path.join(model, n), "rb").read() for n in os.listdir(model)} == before
+    assert {n: open(os.path.join(tmp_path / "sparse" / "unrefined", n), "rb").read()
+            for n in os.listdir(tmp_path / "sparse" / "unrefined")} == before
+    # refine_model's own section for a budget that pays for nothing has the same fields.
+    real = refiner.ModelRefinement(refiner.RefinementOptions(max_seconds=1e-6), tool=refine_tool()).apply(
+        project, str(model))
+    assert real["status"] == "out_of_time" and not real["refined"]
+    assert sorted(section) == sorted(real)
+    # Well over the rule (what writing the matches takes comes out of it), or without the model or
+    # its matches, refine_model is started.
+    for budget, given, count in ((100 * bound, m, matched), (0.5 * bound, None, matched), (0.5 * bound, m, 0)):
+        started.unlink(missing_ok=True)
+        section = refiner.ModelRefinement(refiner.RefinementOptions(max_seconds=budget), tool=tool).apply(
+            project, str(model), given, count)
+        assert started.exists() and section["status"] == "error", (budget, given, count)
 
 
 def test_a_hung_refinement_is_killed_at_its_timeout(tmp_path):

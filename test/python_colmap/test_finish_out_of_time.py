@@ -51,3 +51,23 @@ def test_a_finish_out_of_time_writes_the_live_model_as_it_stands(tmp_path):
     wanted = {pair_of(*p) for p in export.pairs}
     assert not [x for x in out["pairs_lost"] if tuple(x["pair"].split()) in wanted]
     json.dumps(out, default=str)  # what the bridge writes as report.json
+
+    # A finish whose refinement budget pays for nothing (a 30-minute session's 5 s; here 1 ms):
+    # refine_model is not started (a stand-in that would say so), the model is the live model as
+    # written, and the section is refine_model's for such a budget, with the live model's
+    # matched observations (issue 34).
+    started = tmp_path / "started"
+    stand_in = tmp_path / "refine_model"
+    stand_in.write_text("#!/bin/sh\ntouch %s\nexit 1\n" % started)
+    stand_in.chmod(0o755)
+    work.refinement = ModelRefinement(RefinementOptions(max_seconds=1e-3), tool=str(stand_in))
+    out = work.build_model(export.keyframes, export.pairs)
+    assert not started.exists()
+    section = out["refinement"]
+    assert section["status"] == "out_of_time" and not section["refined"], section
+    assert "refine_model not started" in section["message"]
+    assert "%d in its matches" % len(work.model.parent) in section["message"]
+    assert out["registered"] == len(export.keyframes) and section["observations"] == [out["observations"]] * 2
+    unrefined = read_model(os.path.join(os.path.dirname(out["model_path"]), "unrefined"))
+    assert sorted(im.name for im in unrefined.images.values()) == sorted(k.name for k in export.keyframes)
+    assert len(read_model(out["model_path"]).points) == out["points"] == len(unrefined.points)

@@ -502,7 +502,9 @@ class LiveWork:
                                  "not refined" % incomplete)
             self.error(out["incomplete"])
         elif self.refinement is not None and model != "mapper" and "model_error" not in out:
-            out["refinement"] = self.refinement.apply(project, path)  # issue 29: sparse/0 refined
+            # issue 29: sparse/0 refined (the live model's union-find holds every matched observation)
+            matched = len(self.model.parent) if made is not None else 0
+            out["refinement"] = self.refinement.apply(project, path, made, matched)
             # The statistics are the refined model's: from refine_model's report when it has
             # them, else read from sparse/0 (unless the refinement failed: then it is `made`).
             stats = out["refinement"].pop("statistics", None)

@@ -505,9 +505,10 @@ class LocalRefinement:
                 "every": self.every, "last_runs": self.history[-5:]}
 
     # -- the finish ------------------------------------------------------------------------
-    def apply(self, project, model_path):
+    def apply(self, project, model_path, model=None, matched=0):
         """ModelRefinement.apply's seam for the finish: `model_path` holds the live model at
-        its poses now (refined where the runs refined it). The keyframes changed since they
+        its poses now (refined where the runs refined it; `model` and `matched` are not needed:
+        what changed since the runs is a window, not the whole model). The keyframes changed since they
         were last refined are refined (free), what they see held, then DIR/sparse/0 is the
         refined model and DIR/sparse/unrefined the model at the node's poses. Whatever fails,
         sparse/0 keeps the live model."""

@@ -35,6 +35,17 @@ from ..colmap.process import Colmap, _death_signal_prefix
 # 120 s (docs/live.md, "Measured").
 FINISH_MAX_SECONDS = 5.0
 
+# What refine_model's steps ask of the time left, in its own rules (src/refine/model_refinement.cpp):
+# the matches' triangulation (and the epipolar stage) begins when half the time left pays for 1 us
+# an observation of the matches (RefinementConfig::triangulation_seconds_per_observation); without
+# it, an adjustment of the model's own points alone begins when the time left pays for 11 x 3 us an
+# observation of the model (kAdjustmentAloneSolves x kSolveSecondsPerObservation). Where the
+# budget pays for neither, a finish does not start refine_model (not_begun): reading a 30-minute
+# session's model and counting its matches took 1.7-4.5 s of the finish to begin nothing.
+# test_refinement checks that refine_model begins nothing there.
+TRIANGULATION_SECONDS_PER_OBSERVATION = 1e-6
+ADJUSTMENT_ALONE_SECONDS_PER_OBSERVATION = 33e-6
+
 
 class RefinementError(Exception):
     """The refinement could not run (tool missing, failed, timed out); the unrefined model stays."""
@@ -278,7 +289,7 @@ def write_matches(database_path, path, pairs=None, per_pair=0, max_matches=0):
 
 
 def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, log_path=None, deadline=None,
-           log=None, pairs=None, reference=None, progress=None, budget_start=None):
+           log=None, pairs=None, reference=None, progress=None, budget_start=None, model=None, matched=0):
     """Refines the model in `model_dir` into `output` (replaced only at the end; on any error
     `output` is untouched and RefinementError says why). `fixed`: image names that must not
     move. `database`: the project's database, whose verified matches the points are
@@ -288,8 +299,12 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
     (refine_model --reference; default the input's). `progress`: called with each of
     refine_model's progress lines. `budget_start`: when options.max_seconds began to count
     (time.monotonic(); default now): the time spent since, writing the matches file included,
-    comes out of refine_model's budget, so that the whole refinement keeps to it. Returns the
-    report's `refinement` section (dict)."""
+    comes out of refine_model's budget, so that the whole refinement keeps to it. `model`,
+    `matched`: the model in `model_dir` (refined in place: `output` is `model_dir`) and the
+    distinct observations of the database's matches, when the caller holds them: where what is
+    left of the budget pays for nothing (not_begun), before the matches are written or after,
+    refine_model is not started and the model stays as it is. Returns the report's `refinement`
+    section (dict)."""
     options = options or RefinementOptions()
     log = log or (lambda text: None)
     tool = find_refine_tool(tool)
@@ -302,17 +317,32 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
         timeout = min(timeout, deadline - time.monotonic())
         if timeout <= 1.0:
             raise RefinementError("no time left for the refinement")
+    begun = start if budget_start is None else budget_start
+    in_place = model is not None and database and os.path.abspath(output) == os.path.abspath(model_dir)
+
+    def paid_for_nothing(count):
+        section = not_begun(model, matched, options, options.max_seconds - (time.monotonic() - begun)) \
+            if in_place else None
+        if section is not None:
+            section["matches"], section["seconds"] = count, time.monotonic() - start
+            log("refinement: %s" % section["message"])
+        return section
+
     try:
         matches, count = None, 0
-        if database and options.retriangulations > 0:
+        nothing = paid_for_nothing(0)
+        if nothing is None and database and options.retriangulations > 0:
             matches = os.path.join(work, "matches.bin")
             count = write_matches(database, matches, pairs)
+            nothing = paid_for_nothing(count)
+        if nothing is not None:
+            return nothing
         made = os.path.join(work, "refined")
         if options.max_seconds > 0:
             # What is left of the budget (at least a moment: refine_model then returns the model
             # as it came, with status out_of_time, and still reports its figures).
             import copy
-            spent = time.monotonic() - (start if budget_start is None else budget_start)
+            spent = time.monotonic() - begun
             options = copy.copy(options)
             options.max_seconds = max(1e-3, options.max_seconds - spent)
         import resource
@@ -364,6 +394,40 @@ def section_of(report, matches, cpu, seconds, options):
         "seconds": seconds, "options": options.to_json()}
 
 
+def not_begun(model, matched, options, left):
+    """The `refinement` section of a refinement that would begin nothing, or None. model: the
+    model as written (colmap.model.Model), to be refined with its matches; matched: how many
+    distinct observations (image, keypoint) those matches hold; left: what is left of
+    options.max_seconds [s]. Where `left` pays for neither the triangulation nor an adjustment
+    alone (the constants above; refine_model's reading comes out of the same budget, so it would
+    have less), the section is refine_model's own for a budget that pays for nothing (status
+    out_of_time, every image kept at its pose), made without running it."""
+    statistics = model.statistics()
+    observations = statistics["observations"]
+    if options.max_seconds <= 0 or options.retriangulations <= 0 or matched <= 0 or \
+            left >= 2.0 * TRIANGULATION_SECONDS_PER_OBSERVATION * matched or \
+            left >= ADJUSTMENT_ALONE_SECONDS_PER_OBSERVATION * observations:
+        return None
+    images = []
+    for _, im in sorted(model.images.items()):
+        seen = int(np.count_nonzero(np.asarray(im.point3D_ids) >= 0)) if im.point3D_ids is not None else 0
+        images.append({"name": im.name, "refined": False, "kept": "the time budget was spent before it was refined",
+                       "weak": False, "translation": 0.0, "rotation_deg": 0.0, "observations_input": seen,
+                       "observations_refined": seen})
+    error = statistics["reprojection_error"]
+    report = {
+        "status": "out_of_time", "refined": False,
+        "message": "the time budget of %g s (%.3g s left) would not pay for refining a model of this size (%d "
+                   "observations, %d in its matches; epipolar, triangulation, adjustment not begun): refine_model "
+                   "not started, every image keeps its input pose" % (options.max_seconds, left, observations, matched),
+        "images": images, "points_input": statistics["points"], "points_refined": statistics["points"],
+        "observations_input": observations, "observations_refined": observations, "observations_filtered": 0,
+        "reprojection_error_input": error, "reprojection_error_refined": error, "rounds": 0, "iterations": 0,
+        "passes": 0, "retriangulations": 0, "not_begun": ["epipolar", "triangulation", "adjustment"],
+        "aligned": False, "alignment_scale": 1.0, "seconds": 0.0}
+    return section_of(report, 0, 0.0, 0.0, options)
+
+
 def model_statistics(report):
     """The refined model's statistics (colmap/model.py Model.statistics) from refine_model's
     report, as it counts them: reading the model back cost 1.5-1.7 s of a 30-minute session's
@@ -401,7 +465,12 @@ class ModelRefinement:
         self.log = log or (lambda level, text: None)
         self.progress = progress
 
-    def apply(self, project, model_path):
+    def apply(self, project, model_path, model=None, matched=0):
+        """Refines `model_path` (DIR/sparse/0) in place, keeping it as DIR/sparse/unrefined;
+        returns the report's `refinement` section. model, matched: the model written there and
+        the distinct observations of the project's matches, when the caller holds them (the
+        live finish): a budget that would pay for nothing (not_begun) does not start
+        refine_model."""
         from ..colmap.database import DatabaseError
         from ..colmap.project import ProjectError
         unrefined = os.path.join(os.path.dirname(model_path), "unrefined")
@@ -410,7 +479,8 @@ class ModelRefinement:
             keep_copy(model_path, unrefined)
             section = refine(model_path, model_path, self.options, database=project.database, tool=self.tool,
                              log_path=project.log_path, deadline=project.deadline,
-                             log=lambda text: self.log("info", text), progress=self.progress, budget_start=start)
+                             log=lambda text: self.log("info", text), progress=self.progress, budget_start=start,
+                             model=model, matched=matched)
         except (RefinementError, ProjectError, DatabaseError, colmap_model.ModelError, OSError, KeyError,
                 ValueError) as e:
             message = "refinement failed, the unrefined model stays in %s: %s" % (model_path, e)
