@@ -90,7 +90,8 @@ PARAMETERS = """Parameters (private, ~name):
                      model included: once spent, the model is what the adjustment reached by
                      then, or the epipolar stage's, or the model as it came (report.json: status
                      out_of_time, refinement.phase_seconds), so that a long session's finish
-                     stays bounded (5; 0: no limit)
+                     stays bounded; a budget that would pay for nothing (a 30-minute session's)
+                     does not start refine_model at all (5; 0: no limit)
   refine_tool        the refine_model executable ("": beside this node)
   refine_live        with live triangulation: refine while the recording goes on (false): windows of
                      new keyframes with what they see held, the whole model when the budget allows;
