@@ -418,13 +418,18 @@ class Bridge:
             if self.finishing:
                 return False, "a finish is running"
             self.finishing = True
-            change = self.stream.last_change_time
-            last_keyframe = self.stream.last_keyframe_time
         try:
             start, cpu_start = time.monotonic(), time.process_time()
             if not shutting_down:
                 self.sync()
             synced = time.monotonic()
+            with self.lock:
+                # What this finish is made from: the stream after its sync. Taken before it, a
+                # bridge that caught up here (started late, ~finish at once) saw the stream
+                # change since, finished again when idle and stopped the refinement after this
+                # finish as if a keyframe had come.
+                change = self.stream.last_change_time
+                last_keyframe = self.stream.last_keyframe_time
             keyframes, pairs, source = self.final_state(ask_node=not shutting_down)
             asked = time.monotonic()
             if len(keyframes) < 2:
