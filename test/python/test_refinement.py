@@ -288,10 +288,11 @@ def matched_observations(database):
     return len(np.unique(np.concatenate([a, b])))
 
 
-def skipped_below(model, matched):
+def skipped_below(model, matched, matches=0):
     """The budget under which the finish does not start refine_model (refiner.not_begun)."""
-    return min(2.0 * refiner.TRIANGULATION_SECONDS_PER_OBSERVATION * matched,
-               refiner.ADJUSTMENT_ALONE_SECONDS_PER_OBSERVATION * model.statistics()["observations"])
+    return refiner.READING_SECONDS_PER_MATCH * matches + \
+        min(2.0 * refiner.TRIANGULATION_SECONDS_PER_OBSERVATION * matched,
+            refiner.ADJUSTMENT_ALONE_SECONDS_PER_OBSERVATION * model.statistics()["observations"])
 
 
 def test_refine_model_begins_nothing_where_the_finish_does_not_start_it(tmp_path):
@@ -306,12 +307,12 @@ def test_refine_model_begins_nothing_where_the_finish_does_not_start_it(tmp_path
                          database=database, points=3000)
     cm.write_model(m, str(tmp_path / "in"))
     matches = str(tmp_path / "matches.bin")
-    refiner.write_matches(database, matches)
+    count = refiner.write_matches(database, matches)
     matched = matched_observations(database)
     assert matched >= m.statistics()["observations"]
-    bound = 0.99 * skipped_below(m, matched)
-    assert refiner.not_begun(m, matched, refiner.RefinementOptions(max_seconds=bound), bound) is not None
-    assert refiner.not_begun(m, matched, refiner.RefinementOptions(max_seconds=10 * bound), 10 * bound) is None
+    bound = 0.99 * skipped_below(m, matched, count)  # its reading of the matches counted in
+    assert refiner.not_begun(m, matched, refiner.RefinementOptions(max_seconds=bound), bound, count) is not None
+    assert refiner.not_begun(m, matched, refiner.RefinementOptions(max_seconds=10 * bound), 10 * bound, count) is None
     reports = {}
     for factor in (1.0, 10.0):
         options = refiner.RefinementOptions(max_seconds=factor * bound, threads=1)

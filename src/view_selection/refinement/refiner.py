@@ -39,12 +39,17 @@ FINISH_MAX_SECONDS = 5.0
 # the matches' triangulation (and the epipolar stage) begins when half the time left pays for 1 us
 # an observation of the matches (RefinementConfig::triangulation_seconds_per_observation); without
 # it, an adjustment of the model's own points alone begins when the time left pays for 11 x 3 us an
-# observation of the model (kAdjustmentAloneSolves x kSolveSecondsPerObservation). Where the
-# budget pays for neither, a finish does not start refine_model (not_begun): reading a 30-minute
-# session's model and counting its matches took 1.7-4.5 s of the finish to begin nothing.
-# test_refinement checks that refine_model begins nothing there.
+# observation of the model (kAdjustmentAloneSolves x kSolveSecondsPerObservation). Both are
+# weighed after refine_model read the model and the matches, out of the same budget; that reading
+# took 0.145 us a match on a small model and 0.26-0.39 us at 30 minutes (its model included), and
+# READING_SECONDS_PER_MATCH is a third of the least of them: counted as more, the rule would skip
+# a refinement refine_model begins (0.15 us: one round of two iterations on the test's model).
+# Where the budget pays for neither, a finish does not start refine_model (not_begun): reading a
+# 30-minute session's model and counting its matches took 1.7-4.5 s of the finish to begin
+# nothing. test_refinement checks that refine_model begins nothing there.
 TRIANGULATION_SECONDS_PER_OBSERVATION = 1e-6
 ADJUSTMENT_ALONE_SECONDS_PER_OBSERVATION = 33e-6
+READING_SECONDS_PER_MATCH = 0.05e-6
 
 
 class RefinementError(Exception):
@@ -321,7 +326,7 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
     in_place = model is not None and database and os.path.abspath(output) == os.path.abspath(model_dir)
 
     def paid_for_nothing(count):
-        section = not_begun(model, matched, options, options.max_seconds - (time.monotonic() - begun)) \
+        section = not_begun(model, matched, options, options.max_seconds - (time.monotonic() - begun), count) \
             if in_place else None
         if section is not None:
             section["matches"], section["seconds"] = count, time.monotonic() - start
@@ -394,16 +399,17 @@ def section_of(report, matches, cpu, seconds, options):
         "seconds": seconds, "options": options.to_json()}
 
 
-def not_begun(model, matched, options, left):
+def not_begun(model, matched, options, left, matches=0):
     """The `refinement` section of a refinement that would begin nothing, or None. model: the
     model as written (colmap.model.Model), to be refined with its matches; matched: how many
     distinct observations (image, keypoint) those matches hold; left: what is left of
-    options.max_seconds [s]. Where `left` pays for neither the triangulation nor an adjustment
-    alone (the constants above; refine_model's reading comes out of the same budget, so it would
-    have less), the section is refine_model's own for a budget that pays for nothing (status
-    out_of_time, every image kept at its pose), made without running it."""
+    options.max_seconds [s]; matches: how many refine_model would read (0: not known yet).
+    Where what is left after reading them pays for neither the triangulation nor an adjustment
+    alone (the constants above), the section is refine_model's own for a budget that pays for
+    nothing (status out_of_time, every image kept at its pose), made without running it."""
     statistics = model.statistics()
     observations = statistics["observations"]
+    left -= READING_SECONDS_PER_MATCH * matches
     if options.max_seconds <= 0 or options.retriangulations <= 0 or matched <= 0 or \
             left >= 2.0 * TRIANGULATION_SECONDS_PER_OBSERVATION * matched or \
             left >= ADJUSTMENT_ALONE_SECONDS_PER_OBSERVATION * observations:
@@ -417,7 +423,7 @@ def not_begun(model, matched, options, left):
     error = statistics["reprojection_error"]
     report = {
         "status": "out_of_time", "refined": False,
-        "message": "the time budget of %g s (%.3g s left) would not pay for refining a model of this size (%d "
+        "message": "the time budget of %g s (%.3g s of it left) would not pay for refining a model of this size (%d "
                    "observations, %d in its matches; epipolar, triangulation, adjustment not begun): refine_model "
                    "not started, every image keeps its input pose" % (options.max_seconds, left, observations, matched),
         "images": images, "points_input": statistics["points"], "points_refined": statistics["points"],
