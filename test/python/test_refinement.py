@@ -278,16 +278,6 @@ def test_a_model_its_budget_cannot_refine_is_said_once_and_kept_as_written(tmp_p
     assert {n: os.stat(str(model / n)).st_ino for n in os.listdir(str(model))} == inodes
 
 
-def matched_observations(database):
-    """The distinct (image id, keypoint) of the database's verified matches."""
-    from view_selection.colmap import database as cdb
-    with cdb.open_database(database) as d:
-        counts, m = d.verified_matches()
-    a = np.repeat(counts[:, 0], counts[:, 2]) * (1 << 32) + m[:, 0]
-    b = np.repeat(counts[:, 1], counts[:, 2]) * (1 << 32) + m[:, 1]
-    return len(np.unique(np.concatenate([a, b])))
-
-
 def skipped_below(model, matched, matches=0):
     """The budget under which the finish does not start refine_model (refiner.not_begun)."""
     return refiner.READING_SECONDS_PER_MATCH * matches + \
@@ -308,7 +298,7 @@ def test_refine_model_begins_nothing_where_the_finish_does_not_start_it(tmp_path
     cm.write_model(m, str(tmp_path / "in"))
     matches = str(tmp_path / "matches.bin")
     count = refiner.write_matches(database, matches)
-    matched = matched_observations(database)
+    matched = refiner.count_matched_observations(database)
     assert matched >= m.statistics()["observations"]
     bound = 0.99 * skipped_below(m, matched, count)  # its reading of the matches counted in
     assert refiner.not_begun(m, matched, refiner.RefinementOptions(max_seconds=bound), bound, count) is not None
@@ -342,7 +332,7 @@ def test_a_finish_whose_budget_pays_for_nothing_does_not_start_refine_model(tmp_
     project.database = database
     started = tmp_path / "started"
     tool = fake_tool(tmp_path / "refine_model", "touch %s; exit 1" % started)
-    matched = matched_observations(database)
+    matched = refiner.count_matched_observations(database)
     bound = skipped_below(m, matched)
     logged = []
     section = refiner.ModelRefinement(refiner.RefinementOptions(max_seconds=0.5 * bound), tool=tool,

@@ -256,6 +256,17 @@ def count_verified_matches(database_path):
         return int(sum(n for n in d.inlier_counts().values() if n > 0))
 
 
+def count_matched_observations(database_path):
+    """How many distinct observations (image id, keypoint) the database's verified matches hold:
+    refine_model's count before its tracks (the live model's union-find holds them as they came)."""
+    from ..colmap import database as cdb
+    with cdb.open_database(database_path) as d:
+        counts, m = d.verified_matches()
+    first = np.repeat(counts[:, 0], counts[:, 2]) * (1 << 32) + m[:, 0]
+    second = np.repeat(counts[:, 1], counts[:, 2]) * (1 << 32) + m[:, 1]
+    return len(np.unique(np.concatenate([first, second])))
+
+
 def write_matches(database_path, path, pairs=None, per_pair=0, max_matches=0):
     """The database's verified matches (two-view geometries' inliers) as refine_model's VSMATCH1
     file: image id and keypoint index of both sides, the ids the model's images have. `pairs`:
