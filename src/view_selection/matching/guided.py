@@ -163,32 +163,35 @@ def match_pair(fa, fb, ka, kb, options=None):
     kma, kmb = intrinsic_matrix(ka), intrinsic_matrix(kb)
     window = max(o.band_px, math.sqrt(kmb[0, 0] * kmb[1, 1]) * math.tan(math.radians(o.window_deg)))
     f = fundamental_of_motion(r, t, kma, kmb)
+    # One descriptor product and one distance matrix for steps 1 and 3: step 1 reads their block of
+    # the strongest features (all of them at QVGA, where a keyframe has 300-600 features), step 3
+    # the whole; computed twice they were about half of a guided pair's CPU.
+    cosines = fa.descriptors @ fb.descriptors.T
+    distances = epipolar_distances(f, fa.xy, fb.xy)
     # 1. the poses' search window, strict tests, the strongest features
     na1, nb1 = min(len(fa), o.search_features), min(len(fb), o.search_features)
-    distances = epipolar_distances(f, fa.xy[:na1], fb.xy[:nb1])
-    strong = fa.descriptors[:na1] @ fb.descriptors[:nb1].T
-    searched = mutual_ratio_matches(np.where(distances <= window, strong, np.float32(-1.0)), o.strict_ratio,
-                                    o.max_distance)
+    strong = cosines[:na1, :nb1]
+    searched = mutual_ratio_matches(np.where(distances[:na1, :nb1] <= window, strong, np.float32(-1.0)),
+                                    o.strict_ratio, o.max_distance)
     path, why = GUIDED, ""
     if len(searched) < o.min_inliers:
         # 1'. The poses disagree with the images (drift across a revisit): the strongest features
         # matched without them, and the geometry those give guides instead, as COLMAP's guided
         # matching does, when it holds min_inliers; else COLMAP's matcher (5 times the CPU).
         why = "%d matches within %.0f px of the poses' epipolar lines" % (len(searched), window)
-        unguided = mutual_ratio_matches(strong, o.strict_ratio, o.max_distance)
+        unguided = mutual_ratio_matches(strong.copy(), o.strict_ratio, o.max_distance)
         coarse = two_view.estimate(unguided, fa, fb, ka, kb) if len(unguided) >= o.min_inliers else None
         if coarse is None or len(coarse.inliers) < o.min_inliers or not np.linalg.norm(coarse.t) > 1e-12:
             return PairResult(FALLBACK, why, searched=len(searched))
         path, searched = IMAGES, coarse.inliers
         f = fundamental_of_motion(coarse.R, coarse.t, kma, kmb)
-        distances = epipolar_distances(f, fa.xy[:na1], fb.xy[:nb1])
+        distances = epipolar_distances(f, fa.xy, fb.xy)
     # 2. the band those matches need
     band = float(min(window, max(o.band_px, np.percentile(distances[searched[:, 0], searched[:, 1]], 90) + 1.0)))
     # 3. every feature within the band, COLMAP's tests; the ratio test against every candidate
     # the window allows (a feature with a look-alike along its epipolar line is ambiguous, even
     # when the look-alike lies outside the band)
-    similarity = fa.descriptors @ fb.descriptors.T
-    distances = epipolar_distances(f, fa.xy, fb.xy)
+    similarity = cosines
     similarity[distances > window] = -1.0
     in_band = np.where(distances <= band, similarity, np.float32(-1.0))
     matches = mutual_ratio_matches(in_band, o.ratio, o.max_distance, competitors=similarity)
