@@ -781,6 +781,8 @@ def main(argv):
     start_from_environment()  # development: where the time goes (VIEW_SELECTION_STACK_SAMPLES)
     import cv2
     cv2.setNumThreads(1)  # the budget: the node keeps the cores (docs/live.md)
+    from ..allocator import pad_heap
+    pad_heap()  # SIFT beside the features held: a third of its CPU (allocator.py)
     try:
         bridge = Bridge()
     except (ProjectError, DatabaseError) as e:

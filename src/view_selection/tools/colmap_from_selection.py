@@ -38,6 +38,7 @@ import sqlite3
 import sys
 import time
 
+from ..allocator import pad_heap
 from ..colmap.database import DatabaseError
 from ..colmap.project import ColmapProject, ProjectError, write_json_atomically
 from ..export_folder import ExportError, ExportFolder
@@ -117,6 +118,7 @@ def main(argv=None):
         if args.threads > 0:
             import cv2
             cv2.setNumThreads(args.threads)
+        pad_heap()  # SIFT beside the features held (allocator.py)
         known = args.model == "known_poses"
         matcher = args.matcher or ("guided" if known else "colmap")
         backend = PoseGuidedBackend(project, progress=progress.report) if matcher == "guided" else None
