@@ -1,17 +1,18 @@
 """glibc's heap, set for a process that extracts features while it holds earlier ones.
 
 OpenCV's SIFT builds its scale space in buffers of a few MB an image, freed when the image is
-done. A process that also holds what earlier images gave (colmap_bridge: its feature cache, the
-live model, numpy arrays on the heap) gets those buffers from the top of glibc's heap, which
-grows by brk and is trimmed back at every free, so each image's buffers are fresh pages again.
-SIFT's CPU then grows with what the process holds: on the built-in walk's QVGA keyframes, 20-29
-ms an image in a fresh process, 70-99 ms once it held the features of 48-120 images, with
-OpenCV on one thread (dev/benchmark_extraction). colmap_bridge's extraction stage measured 67-77
-ms a keyframe live, where SIFT alone took 20-37 ms.
+done. In a process that also holds what earlier images gave (colmap_bridge: its feature cache,
+the live model; numpy arrays on the heap), SIFT's CPU grows with what the process holds:
+`dev/benchmark_extraction` on a rendered walk's QVGA keyframes, OpenCV on one thread, gave 23 ms
+an image with nothing held and 53-68 ms with the features of 48-120 images held. colmap_bridge's
+extraction stage measured 67-77 ms a keyframe live, where SIFT alone took 20-37 ms. As far as
+measured, it is where those buffers come from: the top of glibc's heap, grown and given back
+around each image (glibc's M_TRIM_THRESHOLD or M_MMAP_THRESHOLD alone did not help).
 
 glibc's M_TOP_PAD (mallopt) makes the heap grow and stay in steps of `pad` bytes: the same
-measurement gives 17-21 ms at 64 MB and 22-24 ms at 16 MB, whatever is held. Setting it also
-fixes glibc's mmap threshold at its default (128 kB), as any mallopt of these does.
+benchmark gives 15-16 ms at 64 MB, whatever is held (at 16 MB: 16 ms up to 72 images held, 26-32
+ms beyond). Setting it also fixes glibc's mmap threshold at its default (128 kB), as any mallopt
+of these does.
 """
 import ctypes
 import ctypes.util
