@@ -1,5 +1,5 @@
-"""allocator.pad_heap: glibc's heap grows in steps of the pad (each case in a process of its own:
-mallopt is the process's)."""
+"""allocator.pad_heap: glibc's heap grows in steps of the pad (each measured case in a process of
+its own: mallopt is the process's)."""
 import subprocess
 import sys
 import textwrap
@@ -29,7 +29,7 @@ ARENA_AFTER_GROWTH = textwrap.dedent("""
 
 def arena_growth(mode, pad=TOP_PAD_BYTES):
     out = subprocess.run([sys.executable, "-c", ARENA_AFTER_GROWTH % (sys.path, pad), mode], check=True,
-                         stdout=subprocess.PIPE, universal_newlines=True).stdout
+                         stdout=subprocess.PIPE, universal_newlines=True, timeout=60).stdout
     return int(out.split()[-1])
 
 

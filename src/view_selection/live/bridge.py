@@ -782,7 +782,7 @@ def main(argv):
     import cv2
     cv2.setNumThreads(1)  # the budget: the node keeps the cores (docs/live.md)
     from ..allocator import pad_heap
-    pad_heap()  # SIFT beside the features held: a third of its CPU (allocator.py)
+    pad_heap()  # SIFT beside the features held: about a third of the CPU it takes without (allocator.py)
     try:
         bridge = Bridge()
     except (ProjectError, DatabaseError) as e:
