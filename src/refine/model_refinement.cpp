@@ -1027,6 +1027,47 @@ void reportUntouched(RefinementReport& rep, const PassResult& result, const Refi
   rep.message = msg.str();
 }
 
+/// config.epipolar_only: the epipolar stage on the whole budget, the result aligned to the
+/// reference when every image moved, an implausible correction put back (as a refinement's second
+/// pass would keep it), the points left out. The model as it came (nullopt) when the stage moved
+/// nothing.
+/// `s` comes as the input and leaves as the result.
+std::optional<io::ColmapModel> epipolarOnly(RefinementReport& rep, const io::ColmapModel& input, State& s,
+                                            const std::map<int, State::Pose>& reference,
+                                            const std::set<int>& movable, const std::map<int, double>& depth,
+                                            const std::vector<EpipolarPair>& epipolar, const RefinementConfig& config,
+                                            const Deadline& deadline, io::Progress* progress) {
+  PassResult r;
+  r.state = s;
+  const Gauge gauge = gaugeOf(r.state, reference, movable, {}, config);
+  epipolarStage(r, gauge, epipolar, {}, config, deadline, "(epipolar only)", progress);
+  for (const auto& [name, seconds] : r.seconds) rep.phase_seconds[name] += seconds;
+  if (r.epipolar_iterations == 0 || r.epipolar_median_refined == r.epipolar_median_input) {
+    reportEpipolar(rep, r);
+    rep.status = "nothing_to_refine";
+    rep.message = "the epipolar stage moved nothing: every image keeps its input pose";
+    for (auto& c : rep.images)
+      if (c.movable) c.kept = "the epipolar stage moved nothing";
+    return std::nullopt;
+  }
+  if (movable.size() == s.poses.size() && config.align_to_input) alignToReference(r, reference, movable, {});
+  const std::map<int, std::string> kept = implausibleCorrections(r.state, movable, {}, reference, depth, config);
+  for (const auto& [id, why] : kept) r.state.poses[id] = reference.at(id);
+  r.out_of_time = deadline.passed();
+  reportRefined(rep, r, kept, movable.size(), config);
+  rep.status = "epipolar_only";
+  std::ostringstream msg;
+  msg << "the epipolar stage moved " << (movable.size() - kept.size()) << " of " << movable.size() << " images in "
+      << r.epipolar_iterations << " iterations (median Sampson distance " << r.epipolar_median_input << " -> "
+      << r.epipolar_median_refined << " px); " << kept.size() << " kept their input pose; no points";
+  rep.message = msg.str();
+  s = std::move(r.state);
+  s.tracks.clear();
+  s.points.clear();
+  s.colours.clear();
+  return modelOf(input, s);
+}
+
 }  // namespace
 
 void RefinementConfig::validate() const {
@@ -1067,6 +1108,29 @@ std::set<int> allImages(const io::ColmapModel& model) {
   std::set<int> ids;
   for (const auto& [id, im] : model.images) ids.insert(id);
   return ids;
+}
+
+io::ColmapModel startedAt(const io::ColmapModel& model, const io::ColmapModel& start) {
+  io::ColmapModel out = model;
+  std::map<int, std::pair<Eigen::Quaterniond, Eigen::Vector3d>> before;
+  for (auto& [id, im] : out.images) {
+    const auto it = start.images.find(id);
+    if (it == start.images.end()) continue;
+    if (!it->second.rotation.coeffs().allFinite() || !it->second.translation.allFinite())
+      throw core::InvalidArgument("start image " + it->second.name + " has a non-finite pose");
+    before[id] = {im.rotation, im.translation};
+    im.rotation = it->second.rotation.normalized();
+    im.translation = it->second.translation;
+  }
+  for (auto& [pid, p] : out.points) {
+    if (p.track.empty()) continue;
+    const auto moved = before.find(p.track.front().image_id);
+    if (moved == before.end()) continue;
+    const io::ColmapImage& now = out.images.at(moved->first);
+    const Eigen::Vector3d in_camera = moved->second.first * p.xyz + moved->second.second;
+    p.xyz = now.rotation.conjugate() * (in_camera - now.translation);
+  }
+  return out;
 }
 
 io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& movable,
@@ -1115,10 +1179,12 @@ std::optional<io::ColmapModel> refineModelIfChanged(const io::ColmapModel& input
   // and epipolar pairs are built (by the observations the matches hold: at most the tracks').
   // A 30-minute session's finish: 2.1 million observations at 1 us against 3.7 s left after
   // reading, where building them took 2.4-3.8 s to end in nothing.
-  const bool unpaid = matches && !spent && config.triangulate_first && deadline.set &&
+  const bool unpaid = matches && !spent && !config.epipolar_only && config.triangulate_first && deadline.set &&
                       !triangulationPaidFor(deadline, 1.0, countObservations(*matches), config);
   Tracks tracks;
-  if (matches && !spent && !unpaid) tracks = buildTracks(*matches);
+  if (config.epipolar_only && (!matches || !(config.prior_translation_ratio > 0.0) || !config.epipolar_first))
+    throw core::InvalidArgument("epipolar_only needs the matches, the priors and epipolar_first");
+  if (matches && !spent && !unpaid && !config.epipolar_only) tracks = buildTracks(*matches);
   std::vector<EpipolarPair> epipolar;
   if (matches && config.epipolar_first && !spent && !unpaid) {
     // The images by id in a table where the ids are small (the database's: 1, 2, ...): two
@@ -1190,6 +1256,13 @@ std::optional<io::ColmapModel> refineModelIfChanged(const io::ColmapModel& input
     for (auto& c : rep.images)
       if (c.movable) c.kept = "the time budget was spent before it was refined";
     return finish(std::nullopt, initial);
+  }
+  if (config.epipolar_only) {
+    State s = initial;
+    std::optional<io::ColmapModel> model =
+        epipolarOnly(rep, input, s, reference, movable, depth, epipolar, config, deadline, progress);
+    if (progress) progress->end();
+    return finish(std::move(model), s);
   }
   if (movable.empty() && with_tracks) {
     // Nothing may move: the matches are triangulated at the given poses, nothing adjusted (what

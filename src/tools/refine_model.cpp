@@ -62,7 +62,13 @@ Cameras must be PINHOLE or SIMPLE_PINHOLE.
   --epipolar-loss-scale PX       ... under a Huber loss from PX (default 4) ...
   --epipolar-time-share F        ... within F of the time budget (default 0.3) ...
   --epipolar-iterations N        ... and N Ceres iterations at most (default 100)
+  --epipolar-only    with --matches: the epipolar stage alone, on the whole budget; the output
+                     holds its poses (aligned to the input's) and no points (status epipolar_only)
   --fixed FILE       image names (one a line) that must not move; default: every image moves
+  --start MODEL      the poses (by image id) the refinement starts from, e.g. refined while the
+                     recording went on: each point moves with the first image of its track; the
+                     input's own poses are then the reference (below), and out of time or diverged
+                     the model at the start poses is the output
   --reference MODEL  the poses corrections are measured against, the result is aligned to and
                      kept images return to (default: the input's); e.g. the SLAM poses when the
                      input was refined once and re-triangulated
@@ -158,14 +164,14 @@ int run(int argc, char** argv) {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
   };
   const CommandLine cli(argc, argv,
-                        {"input", "output", "report", "fixed", "reference", "loss", "loss-scale", "max-error", "min-angle",
+                        {"input", "output", "report", "fixed", "reference", "start", "loss", "loss-scale", "max-error", "min-angle",
                          "rounds", "iterations", "min-observations", "max-correction-depth-ratio",
                          "max-correction-deg", "threads", "prior-translation-ratio", "prior-rotation-deg",
                          "prior-loss-scale", "dense-up-to", "function-tolerance", "matches", "retriangulations",
                          "triangulation-max-error", "triangulation-growth", "max-seconds", "sparse-up-to",
                          "progress-interval", "epipolar-matches-per-pair", "epipolar-loss-scale", "epipolar-time-share", "epipolar-iterations", "max-correction-path-ratio",
                          "max-correction-deg-per-path"},
-                        {"no-align", "quiet", "verbose", "no-triangulate-first", "no-epipolar", "no-progress", "help"});
+                        {"no-align", "quiet", "verbose", "no-triangulate-first", "no-epipolar", "epipolar-only", "no-progress", "help"});
   if (cli.flag("help")) {
     std::cout << kUsage;
     return 0;
@@ -195,6 +201,7 @@ int run(int argc, char** argv) {
   config.triangulation_growth = cli.real("triangulation-growth", config.triangulation_growth, 1.0, 100.0);
   config.triangulate_first = !cli.flag("no-triangulate-first");
   config.epipolar_first = !cli.flag("no-epipolar");
+  config.epipolar_only = cli.flag("epipolar-only");
   config.epipolar_matches_per_pair = static_cast<size_t>(
       cli.integer("epipolar-matches-per-pair", static_cast<long>(config.epipolar_matches_per_pair), 1, 100000));
   config.epipolar_loss_scale = cli.real("epipolar-loss-scale", config.epipolar_loss_scale, 1e-6, 1e6);
@@ -210,7 +217,7 @@ int run(int argc, char** argv) {
   // The budget covers the whole run: reading the model and the matches too (a 30-minute session's
   // 3.7 million matches take seconds to read and to build tracks from).
   config.budget_start = started;
-  const io::ColmapModel input = io::readColmapModel(*cli.text("input"));
+  io::ColmapModel input = io::readColmapModel(*cli.text("input"));
   std::set<int> movable = refine::allImages(input);
   if (cli.has("fixed")) {
     std::ifstream in(*cli.text("fixed"));
@@ -224,20 +231,27 @@ int run(int argc, char** argv) {
   refine::RefinementReport report;
   io::ColmapModel reference;
   if (cli.has("reference")) reference = io::readColmapModel(*cli.text("reference"));
+  // --start: the refinement begins at those poses, the input's points carried along; the input's
+  // own poses are the reference (unless one is given), and "the model as it came" is the started one.
+  const bool from_start = cli.has("start");
+  if (from_start) {
+    if (!cli.has("reference")) reference = input;
+    input = refine::startedAt(input, io::readColmapModel(*cli.text("start")));
+  }
   std::vector<refine::Match> matches;
   if (cli.has("matches")) matches = refine::readMatches(*cli.text("matches"));
   const double reading = since(started);
   io::Progress progress =
       io::Progress::toStderr(!cli.flag("no-progress"), cli.real("progress-interval", io::Progress::kLogInterval, 0.1, 1e6));
   const std::optional<io::ColmapModel> out = refine::refineModelIfChanged(
-      input, movable, config, &report, cli.has("reference") ? &reference : nullptr,
+      input, movable, config, &report, cli.has("reference") || from_start ? &reference : nullptr,
       cli.has("matches") ? &matches : nullptr, &progress);
   const auto writing = std::chrono::steady_clock::now();
   // The input as it came (out of time at a 30-minute session's size, a diverged solve): its
   // files linked, not written again (0.5 s there), nor copied.
   if (out)
     io::writeColmapModel(*out, *cli.text("output"));
-  else if (!io::linkColmapModel(*cli.text("input"), *cli.text("output")))
+  else if (from_start || !io::linkColmapModel(*cli.text("input"), *cli.text("output")))
     io::writeColmapModel(input, *cli.text("output"));
   report.phase_seconds["reading"] = reading;
   report.phase_seconds["writing"] = since(writing);
