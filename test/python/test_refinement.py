@@ -278,6 +278,49 @@ def test_a_model_its_budget_cannot_refine_is_said_once_and_kept_as_written(tmp_p
     assert {n: os.stat(str(model / n)).st_ino for n in os.listdir(str(model))} == inodes
 
 
+def test_a_finish_from_earlier_poses_starts_there_and_measures_against_the_given_ones(tmp_path):
+    """ModelRefinement.apply with start_poses (the poses refined while the recording went on,
+    refinement/background.py): refine_model --start. Out of time, sparse/0 is the model at the
+    start poses, its points carried by their first image; sparse/unrefined stays at the given
+    poses. With time, the corrections are measured against the given poses, the finish has no
+    epipolar stage of its own, and the result is no worse than where it started."""
+    exact = arc_poses()
+    given = drift.add_drift(exact, 0.02, 0.3, seed=3)
+    database = str(tmp_path / "database.db")
+    m = known_pose_model(exact, given, np.random.default_rng(11), database=database)
+    project = FakeProject(str(tmp_path))
+    project.database = database
+    half = drift.add_drift(exact, 0.01, 0.15, seed=3)  # "the runs' poses": half the drift
+    start = {iid: geometry.world_to_camera(*half[iid - 1]) for iid in m.images}
+    truth = [c for c, _ in exact]
+    for budget, folder in ((1e-6, "cut"), (0.0, "full")):
+        model = tmp_path / folder / "sparse" / "0"
+        cm.write_model(m, str(model))
+        section = refiner.ModelRefinement(refiner.RefinementOptions(max_seconds=budget), tool=refine_tool()).apply(
+            project, str(model), start_poses=start)
+        assert "started_from" in section, section
+        out = cm.read_model(str(model))
+        unrefined = cm.read_model(str(tmp_path / folder / "sparse" / "unrefined"))
+        assert np.allclose(centres(unrefined), centres(m), atol=1e-9)
+        if folder == "cut":
+            assert section["status"] == "out_of_time" and not section["refined"], section["message"]
+            assert np.allclose(centres(out), [c for c, _ in half], atol=1e-6)
+            for pid, p in list(m.points.items())[:50]:  # in its first image, a point stays where it was
+                first = p.image_ids[0]
+                was = geometry.rotation_of(m.images[first].qvec) @ p.xyz + np.asarray(m.images[first].tvec)
+                now = geometry.rotation_of(out.images[first].qvec) @ out.points[pid].xyz + \
+                    np.asarray(out.images[first].tvec)
+                assert np.allclose(was, now, atol=1e-6)
+        else:
+            assert section["refined"], section["message"]
+            assert (section["epipolar"] or {}).get("iterations", 0) == 0, section["epipolar"]
+            by_name = {k["name"]: k for k in section["keyframes"]}
+            for name, (t, _) in refiner.corrections(m, out).items():
+                assert by_name[name]["translation"] == pytest.approx(t, abs=1e-9)
+            assert ate_rmse(centres(out), truth) < ate_rmse([c for c, _ in half], truth)
+    assert not [n for n in os.listdir(tmp_path / "full" / "sparse") if n.startswith(".start_")]
+
+
 def skipped_below(model, matched, matches=0):
     """The budget under which the finish does not start refine_model (refiner.not_begun)."""
     return refiner.READING_SECONDS_PER_MATCH * matches + \

@@ -31,6 +31,7 @@ from ..colmap.database import DatabaseError
 from ..colmap.project import ColmapProject, ProjectError, Timeouts, write_json_atomically
 from ..keyframes import Keyframe
 from ..refinement.afterwards import RefinementAfterwards
+from ..refinement.background import BackgroundPoses
 from ..refinement.local import LocalRefinement
 from ..refinement.refiner import FINISH_MAX_SECONDS, ModelRefinement, RefinementOptions
 from ..features.sift import SiftExtractor
@@ -100,6 +101,11 @@ PARAMETERS = """Parameters (private, ~name):
                      1-minute walk's better than the finish alone, and with exact poses it moved
                      the keyframes further (median 5.8 mm against 3.3; docs/live.md)
   refine_live_cpu    [cores] the average CPU those runs may take over the session (0.25)
+  refine_poses_live  with live triangulation (and refine_live off): the whole model's poses refined
+                     while the recording goes on by the epipolar stage alone, each run from where the
+                     last one got to, and the finish's refinement starts from them
+                     (refinement/background.py) (true)
+  refine_poses_live_cpu  [cores] the average CPU those runs may take over the session (0.07)
   refine_afterwards  after a finish whose refinement stopped at refine_max_seconds (a long
                      session's), go on refining while nothing comes: refine_model without a
                      budget on sparse/unrefined with the strongest keypoints' matches (800,000 at
@@ -186,6 +192,8 @@ class Bridge:
                 tool=_param("refine_tool", "") or None, log=self._log)
             if bool(_param("refine_live", False)) and _param("triangulation", "live") == "live":
                 refinement = LocalRefinement(refinement, cpu_share=float(_param("refine_live_cpu", 0.25)))
+            elif bool(_param("refine_poses_live", True)) and _param("triangulation", "live") == "live":
+                refinement = BackgroundPoses(refinement, cpu_share=float(_param("refine_poses_live_cpu", 0.07)))
         loops = None
         if bool(_param("loop_pairs", True)) and self.model == "known_poses":
             loops = LoopOptions(min_gap=int(_param("loop_min_gap", 60)),
@@ -657,6 +665,9 @@ class Bridge:
         if report:
             values["last model"] = "%s points, %.1f s after the last keyframe" % (
                 report.get("points"), report.get("seconds_from_last_keyframe") or 0.0)
+        poses = getattr(w.refinement, "poses_summary", None)
+        if poses is not None:
+            values["poses refined while recording"] = poses()  # a glance, as below
         if self.afterwards is not None:
             a = self.afterwards.summary()  # read without the work lock: a glance, not a record
             last = a["last"] or {}

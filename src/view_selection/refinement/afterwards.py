@@ -25,10 +25,7 @@ from . import refiner
 from .local import _Run
 from ..colmap import durable
 
-# At most this many matches: the 30-minute walk's strongest 95 keypoints of every keyframe
-# (791,994 of 3.66 million matches) refined it to 22.9 mm in 220 s on two threads; its strongest
-# 25 (199,457) were too few to hold the loop (718 mm).
-MAX_MATCHES = 800000
+MAX_MATCHES = refiner.STRONGEST_MATCHES
 # Below the node, the odometry and the bridge's own matching: it uses what they leave.
 NICE = 10
 # Killed after this long [s]: a session's refinement to convergence took 220 s at 30 minutes

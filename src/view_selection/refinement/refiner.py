@@ -35,6 +35,15 @@ from ..colmap.process import Colmap, _death_signal_prefix
 # 120 s (docs/live.md, "Measured").
 FINISH_MAX_SECONDS = 5.0
 
+# The matches a long session's refinement is given at most, the strongest keypoints' (the one
+# after the finish, afterwards.py; the finish's from the poses refined while the recording went
+# on). The 30-minute walk's strongest 95 keypoints of every keyframe (791,994 of 3.66 million
+# matches) refined it to 22.9 mm in 220 s on two threads; its strongest 25 (199,457) were too
+# few to hold the loop (718 mm). A 10-minute walk's finish from those poses: with all 1.75
+# million, one adjustment iteration in 4.3 s of its 5 (95.8 mm stayed 95.8); with 800,000, four
+# (43.8 mm), its model 37,827 points against 83,368.
+STRONGEST_MATCHES = 800000
+
 # What refine_model's steps ask of the time left, in its own rules (src/refine/model_refinement.cpp):
 # the matches' triangulation (and the epipolar stage) begins when half the time left pays for 1 us
 # an observation of the matches (RefinementConfig::triangulation_seconds_per_observation); without
@@ -66,12 +75,13 @@ class RefinementOptions:
 
     def __init__(self, loss="cauchy", loss_scale=1.0, max_error=4.0, min_angle=1.5, rounds=4, iterations=100,
                  min_observations=15, max_correction_depth_ratio=0.5, max_correction_deg=15.0,
-                 retriangulations=1, threads=-1, timeout=120.0, max_seconds=0.0):
+                 retriangulations=1, threads=-1, timeout=120.0, max_seconds=0.0, epipolar=True):
         self.loss, self.loss_scale, self.max_error, self.min_angle = loss, float(loss_scale), float(max_error), float(min_angle)
         self.rounds, self.iterations, self.min_observations = int(rounds), int(iterations), int(min_observations)
         self.max_correction_depth_ratio, self.max_correction_deg = float(max_correction_depth_ratio), float(max_correction_deg)
         self.retriangulations, self.threads, self.timeout = int(retriangulations), int(threads), float(timeout)
         self.max_seconds = float(max_seconds)  # refine_model's own time budget (0: none); timeout kills it
+        self.epipolar = bool(epipolar)  # the epipolar stage before the first triangulation (False: --no-epipolar)
 
     def arguments(self):
         return ["--loss", self.loss, "--loss-scale", repr(self.loss_scale), "--max-error", repr(self.max_error),
@@ -80,7 +90,8 @@ class RefinementOptions:
                 "--max-correction-depth-ratio", repr(self.max_correction_depth_ratio),
                 "--max-correction-deg", repr(self.max_correction_deg),
                 "--retriangulations", str(self.retriangulations),
-                "--threads", str(max(0, self.threads)), "--max-seconds", repr(self.max_seconds)]
+                "--threads", str(max(0, self.threads)), "--max-seconds", repr(self.max_seconds)] + \
+            ([] if self.epipolar else ["--no-epipolar"])
 
     def to_json(self):
         return dict(vars(self))
@@ -113,13 +124,15 @@ def find_refine_tool(explicit=None):
 
 
 def refine_model_command(tool, model, output, report, options, fixed=(), reference=None, matches=None,
-                         progress=False):
+                         progress=False, start=None):
     """refine_model's command line (the list of images held written beside `output`)."""
     args = [tool, "--input", model, "--output", output, "--report", report, "--quiet"] + options.arguments()
     if progress:
         args += ["--progress-interval", "1"]
     if reference:
         args += ["--reference", reference]
+    if start:
+        args += ["--start", start]
     if matches:
         args += ["--matches", matches]
     args += os.environ.get("VS_REFINE_EXTRA", "").split()  # development: more refine_model options
@@ -159,11 +172,12 @@ def read_report(report):
 
 
 def run_refine_model(tool, model, output, report, options, fixed=(), reference=None, log_path=None, timeout=None,
-                     matches=None, progress=None):
+                     matches=None, progress=None, start=None):
     """One refine_model process; returns its report (dict). RefinementError when it cannot run,
     fails or exceeds the timeout (then it is killed). progress: called with each of its progress
     lines as it prints them (a line a second; None: they go to the log at the end, one every 10 s)."""
-    args = refine_model_command(tool, model, output, report, options, fixed, reference, matches, bool(progress))
+    args = refine_model_command(tool, model, output, report, options, fixed, reference, matches, bool(progress),
+                                start)
     timeout = options.timeout if timeout is None else timeout
     log = open(log_path, "a") if log_path else None
     try:
@@ -305,7 +319,8 @@ def write_matches(database_path, path, pairs=None, per_pair=0, max_matches=0):
 
 
 def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, log_path=None, deadline=None,
-           log=None, pairs=None, reference=None, progress=None, budget_start=None, model=None, matched=0):
+           log=None, pairs=None, reference=None, progress=None, budget_start=None, model=None, matched=0,
+           start_model=None, max_matches=0):
     """Refines the model in `model_dir` into `output` (replaced only at the end; on any error
     `output` is untouched and RefinementError says why). `fixed`: image names that must not
     move. `database`: the project's database, whose verified matches the points are
@@ -319,7 +334,9 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
     `matched`: the model in `model_dir` (refined in place: `output` is `model_dir`) and the
     distinct observations of the database's matches, when the caller holds them: where what is
     left of the budget pays for nothing (not_begun), before the matches are written or after,
-    refine_model is not started and the model stays as it is. Returns the report's `refinement`
+    refine_model is not started and the model stays as it is. `start_model`: a model folder with the
+    poses the refinement starts from (refine_model --start). `max_matches`: at most this many
+    of the matches, the strongest keypoints' (0: all). Returns the report's `refinement`
     section (dict)."""
     options = options or RefinementOptions()
     log = log or (lambda text: None)
@@ -349,7 +366,7 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
         nothing = paid_for_nothing(0)
         if nothing is None and database and options.retriangulations > 0:
             matches = os.path.join(work, "matches.bin")
-            count = write_matches(database, matches, pairs)
+            count = write_matches(database, matches, pairs, max_matches=max_matches)
             nothing = paid_for_nothing(count)
         if nothing is not None:
             return nothing
@@ -365,7 +382,7 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
         children = resource.getrusage(resource.RUSAGE_CHILDREN)
         report = run_refine_model(tool, os.path.abspath(model_dir), made, made + ".json", options, fixed,
                                   reference=reference, log_path=log_path, timeout=timeout, matches=matches,
-                                  progress=progress)
+                                  progress=progress, start=start_model)
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu = (after.ru_utime + after.ru_stime) - (children.ru_utime + children.ru_stime)
         log("refinement: %s" % report["message"])
@@ -469,6 +486,20 @@ def keep_copy(model_path, unrefined):
         shutil.rmtree(made, ignore_errors=True)
 
 
+def write_poses(model, poses, parent):
+    """A model folder (in a new folder in `parent`) of `model`'s cameras and its images at
+    `poses` ({image id: (qvec, tvec)}; an image without one: as it is), without 2D points or
+    points: refine_model --start's poses. Returns its path."""
+    out = colmap_model.Model(dict(model.cameras))
+    empty, none = np.zeros((0, 2)), np.zeros(0, np.int64)
+    for iid, im in model.images.items():
+        q, t = poses.get(iid, (im.qvec, im.tvec))
+        out.images[iid] = colmap_model.Image(iid, q, t, im.camera_id, im.name, empty, none)
+    folder = tempfile.mkdtemp(prefix=".start_", dir=parent)
+    colmap_model.write_model(out, os.path.join(folder, "start"), binary=True)
+    return os.path.join(folder, "start")
+
+
 class ModelRefinement:
     """What colmap_bridge and colmap_from_selection do with the known-pose model: keep it as
     DIR/sparse/unrefined, refine it into DIR/sparse/0 (re-triangulating with the project's
@@ -482,22 +513,47 @@ class ModelRefinement:
         self.log = log or (lambda level, text: None)
         self.progress = progress
 
-    def apply(self, project, model_path, model=None, matched=0):
+    def apply(self, project, model_path, model=None, matched=0, start_poses=None):
         """Refines `model_path` (DIR/sparse/0) in place, keeping it as DIR/sparse/unrefined;
         returns the report's `refinement` section. model, matched: the model written there and
         the distinct observations of the project's matches, when the caller holds them (the
         live finish): a budget that would pay for nothing (not_begun) does not start
-        refine_model."""
+        refine_model. start_poses ({image id: (qvec, tvec)}; refinement/background.py): where
+        the refinement starts, in place of the model's poses (its points carried along by their
+        first image); corrections are still measured against, and the result aligned to, the
+        model's poses (sparse/unrefined). Out of time, the model at the poses it started from
+        stays."""
         from ..colmap.database import DatabaseError
         from ..colmap.project import ProjectError
         unrefined = os.path.join(os.path.dirname(model_path), "unrefined")
         start = time.monotonic()
         try:
             keep_copy(model_path, unrefined)
-            section = refine(model_path, model_path, self.options, database=project.database, tool=self.tool,
-                             log_path=project.log_path, deadline=project.deadline,
-                             log=lambda text: self.log("info", text), progress=self.progress, budget_start=start,
-                             model=model, matched=matched)
+            options, started = self.options, None
+            if start_poses:
+                started = write_poses(model if model is not None else colmap_model.read_model(model_path),
+                                      start_poses, os.path.dirname(os.path.abspath(model_path)))
+                # Their epipolar stage is done: the finish's own from there moved the median Sampson
+                # distance 0.26 -> 0.20 px in 1.3 s of its 5 (the 1-minute walk); without it the
+                # adjustment had that time too: 6.5 mm against 33 (the 10-minute walk, offline).
+                import copy
+                options = copy.copy(options)
+                options.epipolar = False
+                # refine_model runs whatever the budget: out of time, its output is the model at
+                # the start poses (not_begun's shortcut would leave the node's).
+                model = None
+            try:
+                section = refine(model_path, model_path, options, database=project.database, tool=self.tool,
+                                 log_path=project.log_path, deadline=project.deadline,
+                                 log=lambda text: self.log("info", text), progress=self.progress,
+                                 budget_start=start, model=model, matched=matched, start_model=started,
+                                 max_matches=STRONGEST_MATCHES if started else 0)
+            finally:
+                if started:
+                    shutil.rmtree(os.path.dirname(started), ignore_errors=True)
+            if start_poses:
+                section["started_from"] = "the poses refined while the recording went on (%d keyframes)" \
+                    % len(start_poses)
         except (RefinementError, ProjectError, DatabaseError, colmap_model.ModelError, OSError, KeyError,
                 ValueError) as e:
             message = "refinement failed, the unrefined model stays in %s: %s" % (model_path, e)

@@ -18,6 +18,7 @@ from ..keyframes import pair_of
 from ..live.work import LiveWork
 from ..matching.backend import PoseGuidedBackend
 from ..matching.loops import LoopOptions
+from .background import BackgroundPoses
 from .local import LocalRefinement
 from .refiner import FINISH_MAX_SECONDS, ModelRefinement, RefinementOptions
 
@@ -25,9 +26,11 @@ from .refiner import FINISH_MAX_SECONDS, ModelRefinement, RefinementOptions
 class Replay:
     """colmap_bridge's work on `export` into the project folder `out` (replaced), at its
     defaults: the pose-guided matcher, live triangulation, the finish's refinement within
-    FINISH_MAX_SECONDS, and (refine_live) the refinement beside the matching."""
+    FINISH_MAX_SECONDS, and the refinement beside the matching (poses_live: the bridge's
+    default, refinement/background.py; else refine_live: refinement/local.py)."""
 
-    def __init__(self, export, out, refine_live=True, threads=1, log=None, refine_tool=None, batch=4, local=None):
+    def __init__(self, export, out, refine_live=True, threads=1, log=None, refine_tool=None, batch=4, local=None,
+                 poses_live=False):
         self.export = ExportFolder(export) if isinstance(export, str) else export
         self.log = log or (lambda level, text: None)
         if os.path.exists(out):
@@ -39,7 +42,13 @@ class Replay:
         self.now = 0.0  # the recording's time [s]
         self.finish = ModelRefinement(RefinementOptions(max_seconds=FINISH_MAX_SECONDS, threads=threads),
                                       tool=refine_tool, log=self.log)
-        self.local = LocalRefinement(self.finish, clock=lambda: self.now, **(local or {})) if refine_live else None
+        # the refinement beside the matching: the whole model's poses by the epipolar stage
+        # (poses_live, background.py: the bridge's default), or windows and the whole model
+        # (refine_live, local.py)
+        if poses_live:
+            self.local = BackgroundPoses(self.finish, clock=lambda: self.now, **(local or {}))
+        else:
+            self.local = LocalRefinement(self.finish, clock=lambda: self.now, **(local or {})) if refine_live else None
         self.work = LiveWork(self.project, backend=PoseGuidedBackend(self.project), log=self.log,
                              refinement=self.local or self.finish, loops=LoopOptions())
         self.batch = max(1, int(batch))

@@ -1,0 +1,259 @@
+"""The whole model's poses refined while the recording goes on, by the epipolar stage alone
+(issue 34: a refined model at every length).
+
+The finish's refinement has a few seconds (refiner.FINISH_MAX_SECONDS). On a 10-minute walk's
+2,500 keyframes that is a few epipolar iterations and one or two of the bundle adjustment: the
+odometry's drift came back at 0.21-0.82x. The epipolar stage (refine_model --epipolar-only: the
+poses adjusted to the verified matches' epipolar geometry and the SLAM's relative motion, no
+points) costs 0.3 s an iteration at that size, and its iterations add up from one run to the
+next. Measured offline on the other walk's 10-minute project (528 mm odometry): 5 iterations
+107 mm, then 5 more from there 69 mm (10 from the start: 64 mm); the finish's 5 s from those
+poses 33-38 mm, from the odometry's 255 mm.
+
+So while the recording goes on, runs of refine_model --epipolar-only on the live model (every
+keyframe movable) start from the poses the last run reached (a keyframe that came since: its
+node pose moved by the correction of the nearest keyframe before it, refinement/local.py
+`corrected`), measured against the node's poses (--reference: the priors are the SLAM's motion,
+and the result stays in its frame). A run starts when the verified pairs grew since the last one
+and the runs' CPU (the child's, by wait4, and the Python that prepares it) stays within `cpu_share`
+of a core over the session (a run may overspend; the next waits until that is paid back). The
+live model is not touched: its points stay at the node's poses, and the pose-guided matching
+uses those.
+
+The finish (`apply`) waits a moment for a run under way, then gives the finish's refinement
+(refiner.ModelRefinement) the runs' poses to start from: the live model at them, its points
+carried along; corrections are reported against the node's poses, and sparse/unrefined stays the
+model at them. A keyframe whose node pose moved since a run took it (a loop closure's corrected
+path) is predicted again from its new node pose.
+"""
+import bisect
+import copy
+import os
+import shutil
+import tempfile
+import time
+
+import numpy as np
+
+from ..colmap import model as colmap_model
+from . import refiner
+from .local import _Run, corrected
+
+
+class BackgroundPoses:
+    """The runs of the epipolar stage beside the matching (the module's docstring) and the
+    finish that starts from their poses; LiveWork's `refinement` (step, apply)."""
+
+    def __init__(self, finish, cpu_share=0.07, iterations=10, matches_per_pair=32, max_seconds=60.0,
+                 finish_wait=1.0, clock=time.monotonic):
+        """finish: the finish's refiner.ModelRefinement (its options, tool and log are the runs'
+        too). cpu_share: [cores] the runs' average CPU over the session. iterations: Ceres
+        iterations a run makes at most. matches_per_pair: what a run is given of each verified
+        pair's matches (the stage uses 8 of them). max_seconds: a run's own budget. finish_wait:
+        [s] how long the finish waits for a run under way before it stops it."""
+        self.finish_refinement = finish
+        self.log = finish.log
+        self.cpu_share, self.iterations = float(cpu_share), int(iterations)
+        self.matches_per_pair, self.max_seconds = int(matches_per_pair), float(max_seconds)
+        self.finish_wait = float(finish_wait)
+        self.clock = clock
+        self.work = None
+        self.poses = {}          # image id -> (qvec, tvec) the last run reached, (centre, orientation) of the node then
+        self.ids = []            # sorted image ids of self.poses
+        self.running = None
+        self.started_at = None
+        self.cpu_seconds = 0.0
+        self.runs = 0
+        self.failures = 0
+        self.pairs_then = 0      # verified pairs when the last run started
+        self.history = []        # per run: keyframes, iterations, status, cpu, seconds, Sampson before/after
+
+    def attach(self, work):
+        """LiveWork's hook; the live model keeps the node's poses (no pose_of)."""
+        self.work = work
+
+    # -- the poses -----------------------------------------------------------------------------
+    def _node_poses(self):
+        """{image id: (centre, orientation)} of the node, for the live model's images."""
+        fed = self.work.fed_poses
+        return {iid: fed[im.name] for iid, im in self.work.model.images.items() if im.name in fed}
+
+    def start_poses(self, node=None):
+        """{image id: (qvec, tvec)}: where the next run (or the finish) starts, for every image
+        with a node pose: the last run's pose while its node pose is the one it started from,
+        else the node pose moved by the correction of the nearest image before it that has one
+        (after it, for the first ones). Empty before a run took any."""
+        if not self.poses:
+            return {}
+        node = self._node_poses() if node is None else node
+        current = [i for i in self.ids if self.poses[i][1] == node.get(i)]
+        out = {}
+        for iid, pose in node.items():
+            taken = self.poses.get(iid)
+            if taken is not None and taken[1] == pose:
+                out[iid] = taken[0]
+                continue
+            if not current:
+                continue
+            q = bisect.bisect_left(current, iid)
+            near = current[q - 1] if q > 0 else current[0]
+            (qv, tv), then = self.poses[near]
+            out[iid] = corrected(pose, (qv, tv), then)
+        return out
+
+    # -- the worker loop's step ----------------------------------------------------------------
+    def allowance(self):
+        """CPU seconds the runs may still spend: cpu_share of the session's time so far, less what
+        they spent."""
+        if self.started_at is None:
+            self.started_at = self.clock()
+        return self.cpu_share * (self.clock() - self.started_at) - self.cpu_seconds
+
+    def step(self):
+        """Polls the run under way (its poses taken once it ended) and starts the next when the
+        verified pairs grew and the budget allows; returns quickly. True while a run is under way."""
+        if self.work is None or self.work.model is None:
+            return False
+        if self.running is not None:
+            run = self.running
+            if not run.poll():
+                if time.monotonic() - run.started <= run.timeout:
+                    return True
+                run.kill()  # a hung tool: refine_model stops itself at its --max-seconds
+                self.running = None
+                self.failures += 1
+                self.log("warn", "the background refinement of the poses did not end within %.0f s and was killed"
+                         % run.timeout)
+                return False
+            self._finish_run(run)
+            self.running = None
+        live = self.work.model
+        pairs = len(live.matched_pairs)
+        if pairs <= self.pairs_then or pairs < 2 or self.allowance() <= 0:
+            return False
+        if sum(1 for i in live.images if live.by_image.get(i)) < 3:
+            return False
+        self.pairs_then = pairs
+        self._start()
+        return self.running is not None
+
+    def _start(self):
+        work, t0 = self.work, time.process_time()
+        folder = tempfile.mkdtemp(prefix=".poses_", dir=os.path.join(work.project.root, "sparse"))
+        try:
+            node = self._node_poses()
+            at_node = work.model.to_model()  # the live model is at the node's poses
+            reference = colmap_model.Model(dict(at_node.cameras))
+            for iid, im in at_node.images.items():
+                reference.images[iid] = colmap_model.Image(iid, im.qvec, im.tvec, im.camera_id, im.name, im.xys,
+                                                           np.full(len(im.xys), -1, np.int64))
+            colmap_model.write_model(reference, os.path.join(folder, "reference"), binary=True)
+            start = self.start_poses(node)
+            if start:  # the last run's poses; the points stay (the stage uses only their depths)
+                for iid, (qv, tv) in start.items():
+                    im = at_node.images.get(iid)
+                    if im is not None:
+                        at_node.images[iid] = colmap_model.Image(iid, qv, tv, im.camera_id, im.name, im.xys,
+                                                                 im.point3D_ids)
+            colmap_model.write_model(at_node, os.path.join(folder, "input"), binary=True)
+            matches = os.path.join(folder, "matches.bin")
+            refiner.write_matches(work.project.database, matches, per_pair=self.matches_per_pair)
+            options = copy.copy(self.finish_refinement.options)
+            options.threads, options.max_seconds = 1, self.max_seconds
+            options.timeout = 4.0 * self.max_seconds + 30.0
+            args = refiner.refine_model_command(refiner.find_refine_tool(self.finish_refinement.tool),
+                                                os.path.join(folder, "input"), os.path.join(folder, "output"),
+                                                os.path.join(folder, "report.json"), options,
+                                                reference=os.path.join(folder, "reference"), matches=matches)
+            args += ["--epipolar-only", "--epipolar-iterations", str(self.iterations)]
+            proc = refiner.start_refine_model(args, getattr(work.project, "log_path", None))
+        except (OSError, refiner.RefinementError, colmap_model.ModelError, KeyError, ValueError) as e:
+            shutil.rmtree(folder, ignore_errors=True)
+            self.failures += 1
+            self.log("warn", "the background refinement of the poses could not start: %s" % e)
+            self.cpu_seconds += time.process_time() - t0
+            return
+        self.running = _Run("poses", sorted(at_node.images), [], folder, proc, node, set(),
+                            time.process_time() - t0, self.max_seconds, options.timeout)
+
+    def _finish_run(self, run):
+        """The run's poses taken for the images whose node pose did not move meanwhile."""
+        t0 = time.process_time()
+        cpu = 0.0
+        try:
+            cpu = run.rusage.ru_utime + run.rusage.ru_stime if run.rusage is not None else 0.0
+            if run.status != 0:
+                raise refiner.RefinementError("refine_model exited with %s" % run.status)
+            report = refiner.read_report(os.path.join(run.folder, "report.json"))
+            taken = 0
+            if report.get("status") == "epipolar_only":
+                images = colmap_model._read_images_bin(os.path.join(run.folder, "output", "images.bin"))
+                fed = self._node_poses()
+                for entry in report["images"]:
+                    iid = entry["image_id"]
+                    if not entry.get("refined") or iid not in images or fed.get(iid) != run.node.get(iid):
+                        continue  # kept its pose, or the node moved it meanwhile: predicted again
+                    if iid not in self.poses:
+                        bisect.insort(self.ids, iid)
+                    self.poses[iid] = ((tuple(images[iid].qvec), tuple(images[iid].tvec)), run.node[iid])
+                    taken += 1
+            epipolar = report.get("epipolar") or {}
+            self.runs += 1
+            self.history.append({"keyframes": len(run.free), "taken": taken, "status": report.get("status"),
+                                 "iterations": epipolar.get("iterations"),
+                                 "sampson_px": [round(epipolar.get("median_sampson_input", 0.0), 3),
+                                                round(epipolar.get("median_sampson_refined", 0.0), 3)],
+                                 "cpu_seconds": round(cpu, 3), "seconds": round(time.monotonic() - run.started, 3)})
+            del self.history[:-200]
+        except (OSError, refiner.RefinementError, colmap_model.ModelError, KeyError, ValueError) as e:
+            self.failures += 1
+            self.log("warn", "the background refinement of the poses gave nothing: %s" % e)
+        finally:
+            shutil.rmtree(run.folder, ignore_errors=True)
+            self.cpu_seconds += cpu + run.cpu + (time.process_time() - t0)
+
+    def wait(self, seconds):
+        """Waits at most `seconds` for the run under way and takes its poses; stops it when it
+        would take longer."""
+        run = self.running
+        if run is None:
+            return
+        end = time.monotonic() + seconds
+        while not run.poll() and time.monotonic() < end:
+            time.sleep(0.02)
+        if run.poll():
+            self._finish_run(run)
+        else:
+            self.log("info", "the background refinement of the poses under way was stopped for the finish")
+            run.kill()
+        self.running = None
+
+    def summary(self):
+        return {"runs": self.runs, "failures": self.failures, "cpu_seconds": round(self.cpu_seconds, 3),
+                "cpu_share": self.cpu_share, "iterations": self.iterations, "keyframes_with_poses": len(self.poses),
+                "last_runs": self.history[-5:]}
+
+    def poses_summary(self):
+        """One line for the bridge's diagnostics (its cost does not grow with the session)."""
+        last = self.history[-1] if self.history else None
+        line = "%d runs, %d keyframes, %.1f s of CPU" % (self.runs, len(self.poses), self.cpu_seconds)
+        if last:
+            line += "; the last: %d keyframes, median Sampson distance %.2f -> %.2f px" % (
+                last["keyframes"], last["sampson_px"][0], last["sampson_px"][1])
+        return line + ("; one under way" if self.running is not None else "")
+
+    # -- the finish ----------------------------------------------------------------------------
+    def apply(self, project, model_path, model=None, matched=0):
+        """ModelRefinement.apply's seam for the finish: the finish's refinement, from the runs'
+        poses (refiner.ModelRefinement.apply start_poses); the summary of the runs in the section
+        (`background`)."""
+        if self.running is not None:
+            wait = self.finish_wait
+            if project.deadline is not None:  # at shutdown: a quarter of what is left at most
+                wait = min(wait, max(0.0, (project.deadline - time.monotonic()) / 4))
+            self.wait(wait)
+        start = self.start_poses() if self.work is not None and self.work.model is not None else {}
+        section = self.finish_refinement.apply(project, model_path, model, matched, start_poses=start or None)
+        section["background"] = self.summary()
+        return section
+
