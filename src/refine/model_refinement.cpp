@@ -1040,6 +1040,15 @@ std::optional<io::ColmapModel> epipolarOnly(RefinementReport& rep, const io::Col
   PassResult r;
   r.state = s;
   const Gauge gauge = gaugeOf(r.state, reference, movable, {}, config);
+  {
+    State at_reference = s;
+    std::vector<const EpipolarPair*> pairs;
+    for (const auto& [id, pose] : reference)
+      if (at_reference.poses.count(id)) at_reference.poses[id] = pose;
+    for (const auto& p : epipolar)
+      if (at_reference.poses.count(p.a) && at_reference.poses.count(p.b)) pairs.push_back(&p);
+    rep.epipolar_median_reference = medianSampson(at_reference, pairs);
+  }
   epipolarStage(r, gauge, epipolar, {}, config, deadline, "(epipolar only)", progress);
   for (const auto& [name, seconds] : r.seconds) rep.phase_seconds[name] += seconds;
   if (r.epipolar_iterations == 0 || r.epipolar_median_refined == r.epipolar_median_input) {

@@ -136,6 +136,7 @@ nlohmann::json reportJson(const refine::RefinementReport& r) {
                         {"iterations", r.epipolar_iterations},
                         {"median_sampson_input", r.epipolar_median_input},
                         {"median_sampson_refined", r.epipolar_median_refined},
+                        {"median_sampson_reference", r.epipolar_median_reference},
                         {"undone", r.epipolar_undone}}},
           {"not_begun", r.not_begun},
           {"unchanged", r.unchanged},

@@ -49,6 +49,7 @@ def test_the_poses_refined_as_it_goes_are_where_the_finish_starts(tmp_path):
     assert runs.runs >= 3, summary  # a tenth of a core of the 20 s: several runs as the model grew
     assert runs.failures == 0, summary
     assert all(r["status"] == "epipolar_only" for r in summary["last_runs"]), summary
+    assert runs.node_off(), summary  # the drift puts the node's poses off the matches' geometry
     start = runs.start_poses()
     assert len(start) == len(replay.work.model.images)
     names = {iid: im.name for iid, im in replay.work.model.images.items()}
@@ -64,7 +65,7 @@ def test_the_poses_refined_as_it_goes_are_where_the_finish_starts(tmp_path):
     section = report["refinement"]
     assert section["refined"], section
     assert "started_from" in section, section
-    assert section["background"]["runs"] == runs.runs
+    assert section["background"]["runs"] == runs.runs and section["background"]["started_from"]
     assert (section.get("epipolar") or {}).get("iterations", 0) == 0, section  # the runs did it
     assert len(read_model(report["model_path"]).images) == len(keyframes)
     unrefined = os.path.join(project, "sparse", "unrefined")

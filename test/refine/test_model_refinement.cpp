@@ -729,6 +729,9 @@ TEST_F(Refinement, TheEpipolarStageAloneGivesItsPosesWhereTheyExplainTheTracksBe
   refine::RefinementReport second;
   const io::ColmapModel again = refine::refineModel(warm, refine::allImages(warm), config, &second, &input, &matches);
   EXPECT_LT(second.epipolar_median_input, 0.5) << second.message;  // it starts where the first one ended
+  // ... and says how far off the reference (the drifting poses) is: as far as the first run found
+  EXPECT_NEAR(first.epipolar_median_input, second.epipolar_median_reference, 1e-9);
+  EXPECT_NEAR(first.epipolar_median_input, first.epipolar_median_reference, 1e-9);
   EXPECT_LT(ate(again, exact), 1.05 * after) << second.message;
   for (const auto& c : second.images)  // corrections against the reference: the drifting poses
     EXPECT_NEAR((again.images.at(c.image_id).centre() - input.images.at(c.image_id).centre()).norm(), c.translation,

@@ -179,6 +179,10 @@ struct RefinementReport {
   size_t epipolar_correspondences = 0;
   int epipolar_iterations = 0;
   double epipolar_median_input = 0.0, epipolar_median_refined = 0.0;
+  /// With epipolar_only: the median |Sampson distance| [px] of the same matches at the reference
+  /// poses (the node's, where the input is an earlier run's): how far off the matches' geometry
+  /// the poses the refinement is measured against are.
+  double epipolar_median_reference = 0.0;
   /// Its poses were given up: the budget left no time to triangulate at them, and the model's
   /// points, made at the input poses, were adjusted from those.
   bool epipolar_undone = false;

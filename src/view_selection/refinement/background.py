@@ -20,7 +20,8 @@ of a core over the session (a run may overspend; the next waits until that is pa
 live model is not touched: its points stay at the node's poses, and the pose-guided matching
 uses those.
 
-The finish (`apply`) waits a moment for a run under way, then gives the finish's refinement
+The finish (`apply`) waits a moment for a run under way, then, where the last run found the
+node's poses off the matches' epipolar geometry (OFF_RATIO), gives the finish's refinement
 (refiner.ModelRefinement) the runs' poses to start from: the live model at them, its points
 carried along; corrections are reported against the node's poses, and sparse/unrefined stays the
 model at them. A keyframe whose node pose moved since a run took it (a loop closure's corrected
@@ -38,6 +39,13 @@ import numpy as np
 from ..colmap import model as colmap_model
 from . import refiner
 from .local import _Run, corrected
+
+
+# The finish starts from the runs' poses only where the node's poses are off the matches'
+# epipolar geometry: their median Sampson distance more than this many times what the last run
+# reached. Near-exact poses (a rendered sequence's, a motion-capture system's) are within the
+# noise of it, and from them the stage alone only adds its floor (the module's docstring).
+OFF_RATIO = 2.0
 
 
 class BackgroundPoses:
@@ -203,6 +211,7 @@ class BackgroundPoses:
                                  "iterations": epipolar.get("iterations"),
                                  "sampson_px": [round(epipolar.get("median_sampson_input", 0.0), 3),
                                                 round(epipolar.get("median_sampson_refined", 0.0), 3)],
+                                 "sampson_node_px": round(epipolar.get("median_sampson_reference", 0.0), 3),
                                  "cpu_seconds": round(cpu, 3), "seconds": round(time.monotonic() - run.started, 3)})
             del self.history[:-200]
         except (OSError, refiner.RefinementError, colmap_model.ModelError, KeyError, ValueError) as e:
@@ -238,8 +247,8 @@ class BackgroundPoses:
         last = self.history[-1] if self.history else None
         line = "%d runs, %d keyframes, %.1f s of CPU" % (self.runs, len(self.poses), self.cpu_seconds)
         if last:
-            line += "; the last: %d keyframes, median Sampson distance %.2f -> %.2f px" % (
-                last["keyframes"], last["sampson_px"][0], last["sampson_px"][1])
+            line += "; the last: %d keyframes, median Sampson distance %.2f -> %.2f px (at the node's poses %.2f)" % (
+                last["keyframes"], last["sampson_px"][0], last["sampson_px"][1], last["sampson_node_px"])
         return line + ("; one under way" if self.running is not None else "")
 
     # -- the finish ----------------------------------------------------------------------------
@@ -252,8 +261,14 @@ class BackgroundPoses:
             if project.deadline is not None:  # at shutdown: a quarter of what is left at most
                 wait = min(wait, max(0.0, (project.deadline - time.monotonic()) / 4))
             self.wait(wait)
-        start = self.start_poses() if self.work is not None and self.work.model is not None else {}
+        start = self.start_poses() if self.work is not None and self.work.model is not None and self.node_off() \
+            else {}
         section = self.finish_refinement.apply(project, model_path, model, matched, start_poses=start or None)
-        section["background"] = self.summary()
+        section["background"] = dict(self.summary(), started_from=bool(start))
         return section
+
+    def node_off(self):
+        """Whether the last run found the node's poses off the matches' epipolar geometry (OFF_RATIO)."""
+        last = next((h for h in reversed(self.history) if h["taken"]), None)
+        return last is not None and last["sampson_node_px"] > OFF_RATIO * last["sampson_px"][1]
 

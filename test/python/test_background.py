@@ -1,0 +1,78 @@
+"""The whole model's poses refined while the recording goes on (refinement/background.py), without
+refine_model: where the next run and the finish start from, and when the finish takes them.
+test/python_colmap/test_background_poses.py runs it with refine_model and COLMAP's database."""
+import types
+
+import numpy as np
+
+from view_selection import geometry
+from view_selection.refinement import background, local
+
+
+class Finish:
+    """refiner.ModelRefinement's seam: records what the finish was given."""
+
+    def __init__(self):
+        self.log = lambda level, text: None
+        self.given = "not called"
+
+    def apply(self, project, model_path, model=None, matched=0, start_poses=None):
+        self.given = start_poses
+        return {"refined": True}
+
+
+def session(n=4):
+    """A work with n keyframes along x (the node's poses), and BackgroundPoses attached."""
+    fed = {"k%d" % i: ((float(i), 0.0, 0.0), (1.0, 0.0, 0.0, 0.0)) for i in range(1, n + 1)}
+    images = {i: types.SimpleNamespace(name="k%d" % i) for i in range(1, n + 1)}
+    work = types.SimpleNamespace(fed_poses=fed, model=types.SimpleNamespace(images=images))
+    runs = background.BackgroundPoses(Finish())
+    runs.attach(work)
+    return work, runs
+
+
+def took(runs, iid, pose, node):
+    """As _finish_run takes a run's pose."""
+    runs.poses[iid] = (pose, node)
+    runs.ids = sorted(runs.poses)
+
+
+def centre(qt):
+    return np.array(geometry.centre_of(*qt))
+
+
+def test_nothing_to_start_from_before_a_run_took_poses():
+    work, runs = session()
+    assert runs.start_poses() == {}
+    runs.apply(types.SimpleNamespace(deadline=None), "model")
+    assert runs.finish_refinement.given is None  # the finish from the node's poses
+
+
+def test_a_keyframe_keeps_the_runs_pose_until_the_node_moves_it_and_the_newer_ones_follow_the_correction():
+    work, runs = session()
+    shifted = {i: geometry.world_to_camera((i + 0.5, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0)) for i in (1, 2)}
+    for i in (1, 2):
+        took(runs, i, shifted[i], work.fed_poses["k%d" % i])
+    start = runs.start_poses()
+    assert np.allclose(centre(start[1]), [1.5, 0, 0]) and np.allclose(centre(start[2]), [2.5, 0, 0])
+    # 3 and 4 came since: their node poses moved by keyframe 2's correction (0.5 along x)
+    assert np.allclose(centre(start[3]), [3.5, 0, 0]) and np.allclose(centre(start[4]), [4.5, 0, 0])
+    # a loop closure moved keyframe 2's node pose: it is predicted again, from keyframe 1
+    work.fed_poses["k2"] = ((2.2, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))
+    start = runs.start_poses()
+    assert np.allclose(centre(start[2]), [2.7, 0, 0])
+    assert np.allclose(start[2][0], local.corrected(work.fed_poses["k2"], shifted[1], work.fed_poses["k1"])[0])
+
+
+def test_the_finish_starts_from_the_runs_poses_only_where_the_node_is_off_the_matches():
+    work, runs = session()
+    took(runs, 1, geometry.world_to_camera((1.5, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0)), work.fed_poses["k1"])
+    project = types.SimpleNamespace(deadline=None)
+    for node_px, used in ((0.31, False), (1.3, True)):  # exact poses: within the noise; drift: off
+        runs.history = [{"taken": 4, "keyframes": 4, "sampson_px": [0.29, 0.27], "sampson_node_px": node_px}]
+        section = runs.apply(project, "model")
+        assert (runs.finish_refinement.given is not None) == used, node_px
+        assert section["background"]["started_from"] == used
+    # a run that took nothing (its node poses all moved meanwhile) does not count
+    runs.history.append({"taken": 0, "keyframes": 4, "sampson_px": [0.29, 0.27], "sampson_node_px": 0.3})
+    assert runs.node_off()
