@@ -61,3 +61,39 @@ def without_real_data(test, folder):
 def needs_colmap():
     if shutil.which("colmap") is None:
         pytest.fail("COLMAP is not installed (scripts/install_deps colmap)")
+
+
+def drifted_loop(tmp_path):
+    """The built-in walk's one loop of the room with the seeded drift, and its selection: 300
+    frames at QVGA, 15 Hz, walking at 0.35 m/s (one loop in 20 s, about 55 keyframes, back where
+    it started; the frames are those of the default 0.7 m/s at 30 Hz). At half the walk's pace
+    the refinement's CPU budget beside the matching (a share of the recording's time) covers the
+    whole model a few times during the session (at the default pace it does not keep up over a
+    minute: docs/live.md). Returns (the selection's ExportFolder, ate): ate({name: centre}) is
+    the ATE against the exact poses of the keyframes named."""
+    import numpy as np
+    from view_selection.evaluation.trajectory import ate_rmse
+    from view_selection.export_folder import ExportFolder
+    from view_selection.refinement import drift
+    walk, posed, selection = (str(tmp_path / n) for n in ("walk", "posed", "selection"))
+    subprocess.run([tool("generate_sequence"), "--out", walk, "--frames", "300", "--width", "320", "--height", "240",
+                    "--fps", "15", "--speed", "0.35", "--quiet"], check=True, timeout=600)
+    exact_rows, _ = drift.drifted_tum_folder(walk, posed)
+    subprocess.run([tool("select_views"), "--dataset", posed, "--out", selection], check=True, timeout=600,
+                   stdout=subprocess.DEVNULL)
+    export = ExportFolder(selection)
+    by_stamp = {round(s, 6): np.array(c) for s, c, _ in exact_rows}
+    exact = {k.name: by_stamp[round(k.stamp, 6)] for k in export.keyframes}
+
+    def ate(named):
+        names = sorted(n for n in named if n in exact)
+        return ate_rmse([named[n] for n in names], [exact[n] for n in names])
+    return export, ate
+
+
+def model_centres(path):
+    """{image name: camera centre} of a model folder."""
+    import numpy as np
+    from view_selection import geometry
+    from view_selection.colmap.model import read_model
+    return {im.name: np.array(geometry.centre_of(im.qvec, im.tvec)) for im in read_model(path).images.values()}

@@ -6,47 +6,26 @@ happen during the session and bring the poses closer to the exact ones, the fini
 them without an epipolar stage of its own, the live model and sparse/unrefined stay at the node's
 poses, and the finished model is as accurate as a full refinement run to convergence."""
 import os
-import subprocess
 
 import numpy as np
 
-from conftest import tool
+from conftest import drifted_loop, model_centres, tool
 from view_selection import geometry
 from view_selection.colmap.model import read_model
-from view_selection.evaluation.trajectory import ate_rmse
-from view_selection.export_folder import ExportFolder
-from view_selection.refinement import drift, refiner
+from view_selection.refinement import refiner
 from view_selection.refinement.session import Replay
 
 
-def centres(path):
-    return {im.name: np.array(geometry.centre_of(im.qvec, im.tvec)) for im in read_model(path).images.values()}
-
-
 def test_the_poses_refined_as_it_goes_are_where_the_finish_starts(tmp_path):
-    walk, posed, selection = (str(tmp_path / n) for n in ("walk", "posed", "selection"))
-    # One loop of the room in 20 s (300 frames at 15 Hz, 0.35 m/s; about 55 keyframes), back
-    # where it started: the drift is seen where the loop closes.
-    subprocess.run([tool("generate_sequence"), "--out", walk, "--frames", "300", "--width", "320", "--height", "240",
-                    "--fps", "15", "--speed", "0.35", "--quiet"], check=True, timeout=600)
-    exact_rows, _ = drift.drifted_tum_folder(walk, posed)
-    subprocess.run([tool("select_views"), "--dataset", posed, "--out", selection], check=True, timeout=600,
-                   stdout=subprocess.DEVNULL)
-    export = ExportFolder(selection)
-    by_stamp = {round(s, 6): np.array(c) for s, c, _ in exact_rows}
-    exact = {k.name: by_stamp[round(k.stamp, 6)] for k in export.keyframes}
-
-    def ate(named):
-        names = sorted(n for n in named if n in exact)
-        return ate_rmse([named[n] for n in names], [exact[n] for n in names])
-
+    # The drifted loop (conftest.drifted_loop): the drift is seen where the loop closes.
+    export, ate = drifted_loop(tmp_path)
     project = str(tmp_path / "project")
     replay = Replay(export, project, refine_tool=tool("refine_model"), poses_live=True)
     replay.session()
     keyframes = replay.keyframes
     runs = replay.local
     summary = runs.summary()
-    assert runs.runs >= 3, summary  # a tenth of a core of the 20 s: several runs as the model grew
+    assert runs.runs >= 3, summary  # 0.07 of a core of the 20 s: several runs as the model grew
     assert runs.failures == 0, summary
     assert all(r["status"] == "epipolar_only" for r in summary["last_runs"]), summary
     assert runs.node_off(), summary  # the drift puts the node's poses off the matches' geometry
@@ -69,10 +48,10 @@ def test_the_poses_refined_as_it_goes_are_where_the_finish_starts(tmp_path):
     assert (section.get("epipolar") or {}).get("iterations", 0) == 0, section  # the runs did it
     assert len(read_model(report["model_path"]).images) == len(keyframes)
     unrefined = os.path.join(project, "sparse", "unrefined")
-    for name, c in centres(unrefined).items():  # the model at the drifting poses
+    for name, c in model_centres(unrefined).items():  # the model at the drifting poses
         assert np.allclose(c, node[name], atol=1e-6)
     # corrections are reported against the node's poses
-    refined_centres = centres(report["model_path"])
+    refined_centres = model_centres(report["model_path"])
     for k in section["keyframes"]:
         assert abs(k["translation"] - np.linalg.norm(refined_centres[k["name"]] - node[k["name"]])) < 1e-6, k
 
@@ -80,7 +59,7 @@ def test_the_poses_refined_as_it_goes_are_where_the_finish_starts(tmp_path):
     full_path = str(tmp_path / "full")
     refiner.refine(unrefined, full_path, refiner.RefinementOptions(), database=replay.project.database,
                    tool=tool("refine_model"))
-    full = ate(centres(full_path))
+    full = ate(model_centres(full_path))
     print("ATE drifting %.2f mm, the runs' poses %.2f mm, finished %.2f mm, full refinement %.2f mm; %s"
           % (1e3 * drifted, 1e3 * started, 1e3 * refined, 1e3 * full, summary))
     assert refined <= 0.5 * drifted

@@ -5,43 +5,18 @@ clock), then the finish. The runs happen during the session, the finish refines 
 keyframes that changed since the whole model was last refined, and the model it gives is as
 accurate as a full refinement of the same project run to convergence."""
 import os
-import subprocess
 
 import numpy as np
 
-from conftest import tool
-from view_selection import geometry
+from conftest import drifted_loop, model_centres, tool
 from view_selection.colmap.model import read_model
-from view_selection.evaluation.trajectory import ate_rmse
-from view_selection.export_folder import ExportFolder
-from view_selection.refinement import drift, refiner
+from view_selection.refinement import refiner
 from view_selection.refinement.session import Replay
 
 
-def centres(path):
-    return {im.name: np.array(geometry.centre_of(im.qvec, im.tvec)) for im in read_model(path).images.values()}
-
-
 def test_a_session_refined_as_it_goes_matches_a_full_refinement(tmp_path):
-    walk, posed, selection = (str(tmp_path / n) for n in ("walk", "posed", "selection"))
-    # 300 frames at QVGA, 15 Hz, walking at 0.35 m/s: one loop of the room in 20 s (about 55
-    # keyframes), back where it started; the session is its first 14 s. The walk's frames are
-    # those of the default 0.7 m/s at 30 Hz; at half its pace the runs' CPU budget (a share of
-    # the recording's time) covers the whole model a few times during the session (at the
-    # default pace it does not keep up over a minute: docs/live.md).
-    subprocess.run([tool("generate_sequence"), "--out", walk, "--frames", "300", "--width", "320", "--height", "240",
-                    "--fps", "15", "--speed", "0.35", "--quiet"], check=True, timeout=600)
-    exact_rows, _ = drift.drifted_tum_folder(walk, posed)
-    subprocess.run([tool("select_views"), "--dataset", posed, "--out", selection], check=True, timeout=600,
-                   stdout=subprocess.DEVNULL)
-    export = ExportFolder(selection)
-    by_stamp = {round(s, 6): np.array(c) for s, c, _ in exact_rows}
-    exact = {k.name: by_stamp[round(k.stamp, 6)] for k in export.keyframes}
-
-    def ate(named):
-        names = sorted(n for n in named if n in exact)
-        return ate_rmse([named[n] for n in names], [exact[n] for n in names])
-
+    # The drifted loop (conftest.drifted_loop); the session is its first 14 s.
+    export, ate = drifted_loop(tmp_path)
     replay = Replay(export, str(tmp_path / "project"), refine_tool=tool("refine_model"))
     keyframes = sorted(export.keyframes, key=lambda k: k.id)
     # before the walk comes back to its start; its last keyframes come just before the finish
@@ -65,16 +40,16 @@ def test_a_session_refined_as_it_goes_matches_a_full_refinement(tmp_path):
     assert section["finish_fixed"] > 0
     assert len(read_model(report["model_path"]).images) == len(keyframes)
     # sparse/unrefined is the model at the drifting poses
-    for name, c in centres(os.path.join(str(tmp_path / "project"), "sparse", "unrefined")).items():
+    for name, c in model_centres(os.path.join(str(tmp_path / "project"), "sparse", "unrefined")).items():
         k = next(k for k in keyframes if k.name == name)
         assert np.allclose(c, k.position, atol=1e-6)
 
     drifted = ate({k.name: np.array(k.position) for k in keyframes})
-    refined = ate(centres(report["model_path"]))
+    refined = ate(model_centres(report["model_path"]))
     full_path = str(tmp_path / "full")
     refiner.refine(os.path.join(str(tmp_path / "project"), "sparse", "unrefined"), full_path,
                    refiner.RefinementOptions(), database=replay.project.database, tool=tool("refine_model"))
-    full = ate(centres(full_path))
+    full = ate(model_centres(full_path))
     print("ATE drifting %.2f mm, refined as it went %.2f mm, full refinement %.2f mm; %s"
           % (1e3 * drifted, 1e3 * refined, 1e3 * full, live.summary()))
     assert refined <= 0.5 * drifted

@@ -34,11 +34,10 @@ import shutil
 import tempfile
 import time
 
-import numpy as np
 
 from ..colmap import model as colmap_model
 from . import refiner
-from .local import _Run, corrected
+from .local import _Run, node_poses, predicted
 
 
 # The finish starts from the runs' poses only where the node's poses are off the matches'
@@ -82,9 +81,7 @@ class BackgroundPoses:
 
     # -- the poses -----------------------------------------------------------------------------
     def _node_poses(self):
-        """{image id: (centre, orientation)} of the node, for the live model's images."""
-        fed = self.work.fed_poses
-        return {iid: fed[im.name] for iid, im in self.work.model.images.items() if im.name in fed}
+        return node_poses(self.work)
 
     def start_poses(self, node=None):
         """{image id: (qvec, tvec)}: where the next run (or the finish) starts, for every image
@@ -101,12 +98,8 @@ class BackgroundPoses:
             if taken is not None and taken[1] == pose:
                 out[iid] = taken[0]
                 continue
-            if not current:
-                continue
-            q = bisect.bisect_left(current, iid)
-            near = current[q - 1] if q > 0 else current[0]
-            (qv, tv), then = self.poses[near]
-            out[iid] = corrected(pose, (qv, tv), then)
+            if current:
+                out[iid] = predicted(current, self.poses.get, iid, pose)
         return out
 
     # -- the worker loop's step ----------------------------------------------------------------
@@ -124,15 +117,14 @@ class BackgroundPoses:
             return False
         if self.running is not None:
             run = self.running
-            if not run.poll():
-                if time.monotonic() - run.started <= run.timeout:
-                    return True
-                run.kill()  # a hung tool: refine_model stops itself at its --max-seconds
+            if run.overdue():
                 self.running = None
                 self.failures += 1
                 self.log("warn", "the background refinement of the poses did not end within %.0f s and was killed"
                          % run.timeout)
                 return False
+            if not run.poll():
+                return True
             self._finish_run(run)
             self.running = None
         live = self.work.model
@@ -151,11 +143,7 @@ class BackgroundPoses:
         try:
             node = self._node_poses()
             at_node = work.model.to_model()  # the live model is at the node's poses
-            reference = colmap_model.Model(dict(at_node.cameras))
-            for iid, im in at_node.images.items():
-                reference.images[iid] = colmap_model.Image(iid, im.qvec, im.tvec, im.camera_id, im.name, im.xys,
-                                                           np.full(len(im.xys), -1, np.int64))
-            colmap_model.write_model(reference, os.path.join(folder, "reference"), binary=True)
+            refiner.write_poses(at_node, {}, os.path.join(folder, "reference"))
             start = self.start_poses(node)
             if start:  # the last run's poses; the points stay (the stage uses only their depths)
                 for iid, (qv, tv) in start.items():
@@ -227,14 +215,10 @@ class BackgroundPoses:
         run = self.running
         if run is None:
             return
-        end = time.monotonic() + seconds
-        while not run.poll() and time.monotonic() < end:
-            time.sleep(0.02)
-        if run.poll():
+        if run.wait(seconds):
             self._finish_run(run)
         else:
             self.log("info", "the background refinement of the poses under way was stopped for the finish")
-            run.kill()
         self.running = None
 
     def summary(self):

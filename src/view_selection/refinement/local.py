@@ -211,6 +211,22 @@ def at_node_poses(model, node_poses, max_error=4.0):
     return out
 
 
+def node_poses(work):
+    """{image id: (centre, orientation)} of the node, for a LiveWork's live model's images."""
+    fed = work.fed_poses
+    return {iid: fed[im.name] for iid, im in work.model.images.items() if im.name in fed}
+
+
+def predicted(ids, taken, iid, node):
+    """COLMAP's (qvec, tvec) for image `iid` at node pose `node`: moved by the correction of the
+    nearest image before it in `ids` (sorted; after it, for the first ones), whose `taken` entry
+    is ((qvec, tvec) refined, its node pose then)."""
+    q = bisect.bisect_left(ids, iid)
+    near = ids[q - 1] if q > 0 else ids[0]
+    refined_pose, then = taken(near)
+    return corrected(node, refined_pose, then)
+
+
 class _Run:
     """One refine_model child: what it was given and what it is."""
 
@@ -237,6 +253,25 @@ class _Run:
             refiner.Colmap._kill(self.proc)
             self.status = self.proc.returncode if self.proc.returncode is not None else -9
         shutil.rmtree(self.folder, ignore_errors=True)
+
+    def overdue(self):
+        """Still running past its timeout (a hung tool: refine_model stops itself at its
+        --max-seconds): killed here. False while it runs within it or once it ended."""
+        if self.poll() or time.monotonic() - self.started <= self.timeout:
+            return False
+        self.kill()
+        return True
+
+    def wait(self, seconds):
+        """Waits at most `seconds` for the child to end; kills it when it would take longer.
+        True when it ended by itself."""
+        end = time.monotonic() + seconds
+        while not self.poll() and time.monotonic() < end:
+            time.sleep(0.02)
+        if self.poll():
+            return True
+        self.kill()
+        return False
 
 
 class LocalRefinement:
@@ -286,13 +321,9 @@ class LocalRefinement:
         return self.predict(iid, node)
 
     def predict(self, iid, node):
-        ids = self.refined_ids
-        if not ids:
+        if not self.refined_ids:
             return geometry.world_to_camera(*node)
-        q = bisect.bisect_left(ids, iid)
-        near = ids[q - 1] if q > 0 else ids[0]
-        qv, tv, then = self.refined[near]
-        return corrected(node, (qv, tv), then)
+        return predicted(self.refined_ids, lambda i: (self.refined[i][:2], self.refined[i][2]), iid, node)
 
     def _forget(self, iid):
         if self.refined.pop(iid, None) is not None:
@@ -306,9 +337,7 @@ class LocalRefinement:
     # -- what the live model holds ---------------------------------------------------------
 
     def _node_poses(self):
-        """{image id: (centre, orientation)} of the node, for the live model's images."""
-        fed = self.work.fed_poses
-        return {iid: fed[im.name] for iid, im in self.work.model.images.items() if im.name in fed}
+        return node_poses(self.work)
 
     def _state(self):
         live = self.work.model
@@ -351,16 +380,15 @@ class LocalRefinement:
             return False
         if self.running is not None:
             run = self.running
-            if not run.poll():
-                if time.monotonic() - run.started <= run.timeout:
-                    return True
-                # refine_model stops itself at its --max-seconds; one that does not (a hung
-                # tool) is killed at the options' timeout, as the finish's own run would be.
-                run.kill()
+            # refine_model stops itself at its --max-seconds; one that does not (a hung tool) is
+            # killed at the options' timeout, as the finish's own run would be.
+            if run.overdue():
                 self.running = None
                 self.failures += 1
                 self.log("warn", "the %s refinement did not end within %.0f s and was killed" % (run.kind, run.timeout))
                 return False
+            if not run.poll():
+                return True
             self._finish_run(run)
             self.running = None
         order, observed, node, current = self._state()
@@ -488,14 +516,10 @@ class LocalRefinement:
         run = self.running
         if run is None:
             return
-        end = time.monotonic() + seconds
-        while not run.poll() and time.monotonic() < end:
-            time.sleep(0.05)
-        if run.poll():
+        if run.wait(seconds):
             self._finish_run(run)
         else:
             self.log("info", "the %s refinement under way was stopped for the finish" % run.kind)
-            run.kill()
         self.running = None
 
     def summary(self):

@@ -486,18 +486,17 @@ def keep_copy(model_path, unrefined):
         shutil.rmtree(made, ignore_errors=True)
 
 
-def write_poses(model, poses, parent):
-    """A model folder (in a new folder in `parent`) of `model`'s cameras and its images at
-    `poses` ({image id: (qvec, tvec)}; an image without one: as it is), without 2D points or
-    points: refine_model --start's poses. Returns its path."""
+def write_poses(model, poses, path):
+    """The model folder `path` of `model`'s cameras and its images at `poses` ({image id: (qvec,
+    tvec)}; an image without one: as it is), without 2D points or points: poses alone, as
+    refine_model --start and --reference read them. Returns `path`."""
     out = colmap_model.Model(dict(model.cameras))
     empty, none = np.zeros((0, 2)), np.zeros(0, np.int64)
     for iid, im in model.images.items():
         q, t = poses.get(iid, (im.qvec, im.tvec))
         out.images[iid] = colmap_model.Image(iid, q, t, im.camera_id, im.name, empty, none)
-    folder = tempfile.mkdtemp(prefix=".start_", dir=parent)
-    colmap_model.write_model(out, os.path.join(folder, "start"), binary=True)
-    return os.path.join(folder, "start")
+    colmap_model.write_model(out, path, binary=True)
+    return path
 
 
 class ModelRefinement:
@@ -531,8 +530,9 @@ class ModelRefinement:
             keep_copy(model_path, unrefined)
             options, started = self.options, None
             if start_poses:
+                folder = tempfile.mkdtemp(prefix=".start_", dir=os.path.dirname(os.path.abspath(model_path)))
                 started = write_poses(model if model is not None else colmap_model.read_model(model_path),
-                                      start_poses, os.path.dirname(os.path.abspath(model_path)))
+                                      start_poses, os.path.join(folder, "start"))
                 # Their epipolar stage is done: the finish's own from there moved the median Sampson
                 # distance 0.26 -> 0.20 px in 1.3 s of its 5 (the 1-minute walk); without it the
                 # adjustment had that time too: 6.5 mm against 33 (the 10-minute walk, offline).
