@@ -76,3 +76,42 @@ def test_the_finish_starts_from_the_runs_poses_only_where_the_node_is_off_the_ma
     # a run that took nothing (its node poses all moved meanwhile) does not count
     runs.history.append({"taken": 0, "keyframes": 4, "sampson_px": [0.29, 0.27], "sampson_node_px": 0.3})
     assert runs.node_off()
+
+
+def test_a_replay_counts_its_own_charge_for_a_run_not_the_cpu_it_measured(tmp_path):
+    # A run that failed after 3 s of CPU (refine_model's status 1): the bridge counts the 3 s and
+    # the Python's; a replay (refinement/session.py) counts what its charge gives, whatever the
+    # machine measured.
+    def failed_run():
+        folder = tmp_path / "run"
+        folder.mkdir(exist_ok=True)
+        run = local._Run("poses", [1, 2], [], str(folder), None, {}, set(), 0.5, 10.0, 70.0)
+        run.status, run.rusage = 1, types.SimpleNamespace(ru_utime=2.0, ru_stime=1.0)
+        return run
+
+    charged = []
+    for charge in (None, lambda entry: charged.append(entry) or 0.2):
+        work, runs = session()
+        runs.charge = charge
+        runs._finish_run(failed_run())
+        assert runs.failures == 1 and runs.runs == 0
+        if charge is None:
+            assert 3.5 <= runs.cpu_seconds < 3.6, runs.cpu_seconds  # the child's 3 s and the 0.5 before
+        else:
+            assert runs.cpu_seconds == 0.2 and charged == [None]
+
+
+def test_the_finish_waits_for_a_run_under_way_only_when_it_should_end_in_time():
+    import time
+    work, runs = session()
+    project = types.SimpleNamespace(deadline=None)
+    runs.running = types.SimpleNamespace(started=time.monotonic())
+    assert runs.finish_waits(project) == runs.finish_wait  # no run ended yet: its time is not known
+    runs.history = [{"seconds": 0.3}]  # a short model: the run should end within the wait
+    assert runs.finish_waits(project) == runs.finish_wait
+    runs.history = [{"seconds": 10.0}]  # 2,500 keyframes: it will not, the finish does not wait
+    assert runs.finish_waits(project) == 0.0
+    runs.running.started -= 9.8  # nearly done
+    assert runs.finish_waits(project) == runs.finish_wait
+    project.deadline = time.monotonic() + 2.0  # at shutdown: a quarter of what is left at most
+    assert runs.finish_waits(project) <= 0.5

@@ -20,8 +20,9 @@ of a core over the session (a run may overspend; the next waits until that is pa
 live model is not touched: its points stay at the node's poses, and the pose-guided matching
 uses those.
 
-The finish (`apply`) waits a moment for a run under way, then, where the last run found the
-node's poses off the matches' epipolar geometry (OFF_RATIO), gives the finish's refinement
+The finish (`apply`) waits a moment for a run under way (not when the last run took longer than
+that), then, where the last run found the node's poses off the matches' epipolar geometry
+(OFF_RATIO), gives the finish's refinement
 (refiner.ModelRefinement) the runs' poses to start from: the live model at them, its points
 carried along; corrections are reported against the node's poses, and sparse/unrefined stays the
 model at them. A keyframe whose node pose moved since a run took it (a loop closure's corrected
@@ -52,18 +53,23 @@ class BackgroundPoses:
     finish that starts from their poses; LiveWork's `refinement` (step, apply)."""
 
     def __init__(self, finish, cpu_share=0.07, iterations=10, matches_per_pair=32, max_seconds=60.0,
-                 finish_wait=1.0, clock=time.monotonic):
+                 finish_wait=1.0, clock=time.monotonic, charge=None):
         """finish: the finish's refiner.ModelRefinement (its options, tool and log are the runs'
         too). cpu_share: [cores] the runs' average CPU over the session. iterations: Ceres
         iterations a run makes at most. matches_per_pair: what a run is given of each verified
         pair's matches (the stage uses 8 of them). max_seconds: a run's own budget. finish_wait:
-        [s] how long the finish waits for a run under way before it stops it."""
+        [s] how long the finish waits at most for a run under way before it stops it (none when
+        the last run says it will not end in time: finish_waits). clock: the session's
+        time [s]. charge: None (the bridge) counts a run's measured CPU against the budget; a
+        replay passes a function of the run's history entry (None for a run that gave nothing)
+        giving the CPU seconds to count instead, so that its runs do not depend on the machine."""
         self.finish_refinement = finish
         self.log = finish.log
         self.cpu_share, self.iterations = float(cpu_share), int(iterations)
         self.matches_per_pair, self.max_seconds = int(matches_per_pair), float(max_seconds)
         self.finish_wait = float(finish_wait)
         self.clock = clock
+        self.charge = charge
         self.work = None
         self.poses = {}          # image id -> (qvec, tvec) the last run reached, (centre, orientation) of the node then
         self.ids = []            # sorted image ids of self.poses
@@ -167,7 +173,7 @@ class BackgroundPoses:
             shutil.rmtree(folder, ignore_errors=True)
             self.failures += 1
             self.log("warn", "the background refinement of the poses could not start: %s" % e)
-            self.cpu_seconds += time.process_time() - t0
+            self.cpu_seconds += self.charge(None) if self.charge is not None else time.process_time() - t0
             return
         self.running = _Run("poses", sorted(at_node.images), [], folder, proc, node, set(),
                             time.process_time() - t0, self.max_seconds, options.timeout)
@@ -176,6 +182,7 @@ class BackgroundPoses:
         """The run's poses taken for the images whose node pose did not move meanwhile."""
         t0 = time.process_time()
         cpu = 0.0
+        entry = None
         try:
             cpu = run.rusage.ru_utime + run.rusage.ru_stime if run.rusage is not None else 0.0
             if run.status != 0:
@@ -185,9 +192,9 @@ class BackgroundPoses:
             if report.get("status") == "epipolar_only":
                 images = colmap_model._read_images_bin(os.path.join(run.folder, "output", "images.bin"))
                 fed = self._node_poses()
-                for entry in report["images"]:
-                    iid = entry["image_id"]
-                    if not entry.get("refined") or iid not in images or fed.get(iid) != run.node.get(iid):
+                for image in report["images"]:
+                    iid = image["image_id"]
+                    if not image.get("refined") or iid not in images or fed.get(iid) != run.node.get(iid):
                         continue  # kept its pose, or the node moved it meanwhile: predicted again
                     if iid not in self.poses:
                         bisect.insort(self.ids, iid)
@@ -195,19 +202,23 @@ class BackgroundPoses:
                     taken += 1
             epipolar = report.get("epipolar") or {}
             self.runs += 1
-            self.history.append({"keyframes": len(run.free), "taken": taken, "status": report.get("status"),
-                                 "iterations": epipolar.get("iterations"),
-                                 "sampson_px": [round(epipolar.get("median_sampson_input", 0.0), 3),
-                                                round(epipolar.get("median_sampson_refined", 0.0), 3)],
-                                 "sampson_node_px": round(epipolar.get("median_sampson_reference", 0.0), 3),
-                                 "cpu_seconds": round(cpu, 3), "seconds": round(time.monotonic() - run.started, 3)})
+            entry = {"keyframes": len(run.free), "taken": taken, "status": report.get("status"),
+                     "iterations": epipolar.get("iterations"),
+                     "sampson_px": [round(epipolar.get("median_sampson_input", 0.0), 3),
+                                    round(epipolar.get("median_sampson_refined", 0.0), 3)],
+                     "sampson_node_px": round(epipolar.get("median_sampson_reference", 0.0), 3),
+                     "cpu_seconds": round(cpu, 3), "seconds": round(time.monotonic() - run.started, 3)}
+            self.history.append(entry)
             del self.history[:-200]
         except (OSError, refiner.RefinementError, colmap_model.ModelError, KeyError, ValueError) as e:
             self.failures += 1
             self.log("warn", "the background refinement of the poses gave nothing: %s" % e)
         finally:
             shutil.rmtree(run.folder, ignore_errors=True)
-            self.cpu_seconds += cpu + run.cpu + (time.process_time() - t0)
+            if self.charge is not None:
+                self.cpu_seconds += self.charge(entry)
+            else:
+                self.cpu_seconds += cpu + run.cpu + (time.process_time() - t0)
 
     def wait(self, seconds):
         """Waits at most `seconds` for the run under way and takes its poses; stops it when it
@@ -241,15 +252,26 @@ class BackgroundPoses:
         poses (refiner.ModelRefinement.apply start_poses); the summary of the runs in the section
         (`background`)."""
         if self.running is not None:
-            wait = self.finish_wait
-            if project.deadline is not None:  # at shutdown: a quarter of what is left at most
-                wait = min(wait, max(0.0, (project.deadline - time.monotonic()) / 4))
-            self.wait(wait)
+            self.wait(self.finish_waits(project))
         start = self.start_poses() if self.work is not None and self.work.model is not None and self.node_off() \
             else {}
         section = self.finish_refinement.apply(project, model_path, model, matched, start_poses=start or None)
         section["background"] = dict(self.summary(), started_from=bool(start))
         return section
+
+    def finish_waits(self, project):
+        """[s] How long the finish waits for the run under way: finish_wait at most, a quarter of
+        what is left at shutdown, and nothing when the last run took longer than the time this one
+        has left would allow (at 2,500 keyframes a run takes about 10 s: a wait of 1 s then
+        rarely ended with its poses, and made one finish 10.4 s after the bag, a second late)."""
+        wait = self.finish_wait
+        if project.deadline is not None:  # at shutdown: a quarter of what is left at most
+            wait = min(wait, max(0.0, (project.deadline - time.monotonic()) / 4))
+        last = self.history[-1]["seconds"] if self.history else None
+        if self.running is not None and last is not None \
+                and last - (time.monotonic() - self.running.started) > wait:
+            return 0.0
+        return wait
 
     def node_off(self):
         """Whether the last run found the node's poses off the matches' epipolar geometry (OFF_RATIO)."""
