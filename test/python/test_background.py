@@ -115,3 +115,18 @@ def test_the_finish_waits_for_a_run_under_way_only_when_it_should_end_in_time():
     assert runs.finish_waits(project) == runs.finish_wait
     project.deadline = time.monotonic() + 2.0  # at shutdown: a quarter of what is left at most
     assert runs.finish_waits(project) <= 0.5
+
+
+def test_a_run_waits_while_the_process_as_a_whole_is_over_its_share(monkeypatch):
+    now, used = [0.0], [10.0]
+    monkeypatch.setattr(background, "process_cpu", lambda: used[0])
+    runs = background.BackgroundPoses(Finish(), cpu_share=0.07, process_share=0.45, clock=lambda: now[0])
+    assert runs.allowance() == 0.0  # the first step: the session's clock and the process's CPU start
+    now[0], used[0] = 100.0, 10.0 + 30.0  # 0.3 of a core: the runs' own share decides
+    assert abs(runs.allowance() - 7.0) < 1e-9
+    used[0] = 10.0 + 44.0  # the bridge's own work came to 0.44 of a core: 1 s left under 0.45
+    assert abs(runs.allowance() - 1.0) < 1e-9
+    used[0] = 10.0 + 50.0  # over it: no run, whatever the runs' own share has left
+    assert runs.allowance() < 0
+    runs.process_share = None  # ~refine_poses_live_bridge_cpu: 0
+    assert abs(runs.allowance() - 7.0) < 1e-9

@@ -31,6 +31,7 @@ path) is predicted again from its new node pose.
 import bisect
 import copy
 import os
+import resource
 import shutil
 import tempfile
 import time
@@ -48,12 +49,18 @@ from .local import _Run, node_poses, predicted
 OFF_RATIO = 2.0
 
 
+def process_cpu():
+    """[s] This process's CPU and that of its children that ended and were waited for."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
 class BackgroundPoses:
     """The runs of the epipolar stage beside the matching (the module's docstring) and the
     finish that starts from their poses; LiveWork's `refinement` (step, apply)."""
 
     def __init__(self, finish, cpu_share=0.07, iterations=10, matches_per_pair=32, max_seconds=60.0,
-                 finish_wait=1.0, clock=time.monotonic, charge=None):
+                 finish_wait=1.0, clock=time.monotonic, charge=None, process_share=None):
         """finish: the finish's refiner.ModelRefinement (its options, tool and log are the runs'
         too). cpu_share: [cores] the runs' average CPU over the session. iterations: Ceres
         iterations a run makes at most. matches_per_pair: what a run is given of each verified
@@ -62,7 +69,10 @@ class BackgroundPoses:
         the last run says it will not end in time: finish_waits). clock: the session's
         time [s]. charge: None (the bridge) counts a run's measured CPU against the budget; a
         replay passes a function of the run's history entry (None for a run that gave nothing)
-        giving the CPU seconds to count instead, so that its runs do not depend on the machine."""
+        giving the CPU seconds to count instead, so that its runs do not depend on the machine.
+        process_share: [cores] or None: a run starts only while the whole process (its own CPU and
+        its ended children's: the bridge's extraction, matching and runs) has used less than this
+        since the first step, so the runs take only what the bridge's other work leaves under it."""
         self.finish_refinement = finish
         self.log = finish.log
         self.cpu_share, self.iterations = float(cpu_share), int(iterations)
@@ -70,6 +80,8 @@ class BackgroundPoses:
         self.finish_wait = float(finish_wait)
         self.clock = clock
         self.charge = charge
+        self.process_share = None if process_share is None else float(process_share)
+        self.process_cpu_then = None  # the process's CPU at the first step [s]
         self.work = None
         self.poses = {}          # image id -> (qvec, tvec) the last run reached, (centre, orientation) of the node then
         self.ids = []            # sorted image ids of self.poses
@@ -111,10 +123,15 @@ class BackgroundPoses:
     # -- the worker loop's step ----------------------------------------------------------------
     def allowance(self):
         """CPU seconds the runs may still spend: cpu_share of the session's time so far, less what
-        they spent."""
+        they spent; no more than what the process as a whole has left of process_share."""
         if self.started_at is None:
             self.started_at = self.clock()
-        return self.cpu_share * (self.clock() - self.started_at) - self.cpu_seconds
+            self.process_cpu_then = process_cpu()
+        elapsed = self.clock() - self.started_at
+        left = self.cpu_share * elapsed - self.cpu_seconds
+        if self.process_share is not None:
+            left = min(left, self.process_share * elapsed - (process_cpu() - self.process_cpu_then))
+        return left
 
     def step(self):
         """Polls the run under way (its poses taken once it ended) and starts the next when the
@@ -234,7 +251,8 @@ class BackgroundPoses:
 
     def summary(self):
         return {"runs": self.runs, "failures": self.failures, "cpu_seconds": round(self.cpu_seconds, 3),
-                "cpu_share": self.cpu_share, "iterations": self.iterations, "keyframes_with_poses": len(self.poses),
+                "cpu_share": self.cpu_share, "process_share": self.process_share, "iterations": self.iterations,
+                "keyframes_with_poses": len(self.poses),
                 "last_runs": self.history[-5:]}
 
     def poses_summary(self):
