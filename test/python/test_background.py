@@ -14,6 +14,7 @@ class Finish:
 
     def __init__(self):
         self.log = lambda level, text: None
+        self.options = types.SimpleNamespace(max_seconds=5.0)
         self.given = "not called"
 
     def apply(self, project, model_path, model=None, matched=0, start_poses=None):
@@ -70,7 +71,7 @@ def test_the_finish_starts_from_the_runs_poses_only_where_the_node_is_off_the_ma
     project = types.SimpleNamespace(deadline=None)
     for node_px, used in ((0.31, False), (1.3, True)):  # exact poses: within the noise; drift: off
         runs.history = [{"taken": 4, "keyframes": 4, "sampson_px": [0.29, 0.27], "sampson_node_px": node_px}]
-        section = runs.apply(project, "model")
+        section = runs.apply(project, "model", matched=700000)  # a 10-minute walk's
         assert (runs.finish_refinement.given is not None) == used, node_px
         assert section["background"]["started_from"] == used
     # a run that took nothing (its node poses all moved meanwhile) does not count
@@ -130,3 +131,19 @@ def test_a_run_waits_while_the_process_as_a_whole_is_over_its_share(monkeypatch)
     assert runs.allowance() < 0
     runs.process_share = None  # ~refine_poses_live_bridge_cpu: 0
     assert abs(runs.allowance() - 7.0) < 1e-9
+
+
+def test_a_finish_that_converges_by_itself_starts_from_the_node_poses():
+    work, runs = session()
+    took(runs, 1, geometry.world_to_camera((1.5, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0)), work.fed_poses["k1"])
+    runs.history = [{"taken": 4, "keyframes": 4, "sampson_px": [0.29, 0.27], "sampson_node_px": 1.3}]
+    project = types.SimpleNamespace(deadline=None)
+    # a minute's walk (92,341 matched observations): 5 s pay for 36 iterations; 10 minutes' do not
+    for matched, started in ((92341, False), (700000, True)):
+        section = runs.apply(project, "model", matched=matched)
+        assert section["background"]["started_from"] == started, matched
+        assert section["background"]["finish_converges"] == (not started)
+        assert (runs.finish_refinement.given is not None) == started
+    runs.finish_refinement.options.max_seconds = 60.0  # a longer ~refine_max_seconds converges there too
+    assert runs.apply(project, "model", matched=700000)["background"]["started_from"] is False
+    assert background.finish_converges(0.0, 10 ** 9)  # no limit

@@ -22,7 +22,9 @@ uses those.
 
 The finish (`apply`) waits a moment for a run under way (not when the last run took longer than
 that), then, where the last run found the node's poses off the matches' epipolar geometry
-(OFF_RATIO), gives the finish's refinement
+(OFF_RATIO) and the finish's budget would not refine the model to convergence from them
+(finish_converges: a short session's finish does, and from the runs' poses it did worse), gives
+the finish's refinement
 (refiner.ModelRefinement) the runs' poses to start from: the live model at them, its points
 carried along; corrections are reported against the node's poses, and sparse/unrefined stays the
 model at them. A keyframe whose node pose moved since a run took it (a loop closure's corrected
@@ -53,6 +55,26 @@ def process_cpu():
     """[s] This process's CPU and that of its children that ended and were waited for."""
     own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
     return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+# The finish starts from the runs' poses only where its own budget would not refine the model to
+# convergence from the node's: where it does not pay for CONVERGED_ITERATIONS adjustment
+# iterations at ADJUSTMENT_SECONDS_PER_OBSERVATION a matched observation each. Measured on the
+# built-in walk's minute on odometry (246 keyframes, 92,341 matched observations): the finish
+# from the node's poses made 32 iterations in its 5 s (4.4 s of adjustment, one thread: 1.5 us an
+# observation an iteration) and reached 2.8 mm; from the runs' poses of the same session (50.5 mm
+# against the node's 70.6) it reached 23.6 mm, in a basin its adjustment did not leave (18.9 with
+# its own epipolar stage first). Over six live runs of that minute the finish from the runs' poses
+# gave 2.9-23.4 mm, from the node's 2.7-4.2. At 10 minutes (700,000-860,000) the finish makes
+# 1-4 iterations and the runs' poses are what refines the model (docs/live.md).
+ADJUSTMENT_SECONDS_PER_OBSERVATION = 1.5e-6
+CONVERGED_ITERATIONS = 20
+
+
+def finish_converges(max_seconds, matched):
+    """Whether a finish of `max_seconds` (0: no limit) refines a model of `matched` matched
+    observations to convergence from the node's poses (the constants above)."""
+    return max_seconds <= 0 or CONVERGED_ITERATIONS * ADJUSTMENT_SECONDS_PER_OBSERVATION * matched <= max_seconds
 
 
 class BackgroundPoses:
@@ -269,12 +291,13 @@ class BackgroundPoses:
         """ModelRefinement.apply's seam for the finish: the finish's refinement, from the runs'
         poses (refiner.ModelRefinement.apply start_poses); the summary of the runs in the section
         (`background`)."""
+        converges = finish_converges(self.finish_refinement.options.max_seconds, matched)
         if self.running is not None:
-            self.wait(self.finish_waits(project))
+            self.wait(0.0 if converges else self.finish_waits(project))
         start = self.start_poses() if self.work is not None and self.work.model is not None and self.node_off() \
-            else {}
+            and not converges else {}
         section = self.finish_refinement.apply(project, model_path, model, matched, start_poses=start or None)
-        section["background"] = dict(self.summary(), started_from=bool(start))
+        section["background"] = dict(self.summary(), started_from=bool(start), finish_converges=converges)
         return section
 
     def finish_waits(self, project):
