@@ -147,3 +147,19 @@ def test_a_finish_that_converges_by_itself_starts_from_the_node_poses():
     runs.finish_refinement.options.max_seconds = 60.0  # a longer ~refine_max_seconds converges there too
     assert runs.apply(project, "model", matched=700000)["background"]["started_from"] is False
     assert background.finish_converges(0.0, 10 ** 9)  # no limit
+
+
+def test_no_run_starts_while_the_finish_would_refine_the_model_to_convergence_by_itself():
+    now = [0.0]
+    runs = background.BackgroundPoses(Finish(), clock=lambda: now[0])
+    live = types.SimpleNamespace(matched_pairs={(1, 2), (2, 3), (1, 3)}, images={1: 0, 2: 0, 3: 0},
+                                 by_image={1: [0], 2: [0], 3: [0]}, parent=dict.fromkeys(range(1000)))
+    runs.attach(types.SimpleNamespace(model=live))
+    started = []
+    runs._start = lambda: started.append(len(live.parent))
+    runs.step()  # the first step starts the session's clock
+    now[0] = 100.0
+    assert not runs.step() and started == []  # 1,000 matched observations: the finish converges
+    live.parent = dict.fromkeys(range(200000))  # past what 5 s refine to convergence (167,000)
+    runs.step()
+    assert started == [200000]

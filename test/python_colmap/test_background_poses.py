@@ -3,8 +3,9 @@ bridge's default) with the real refine_model and COLMAP's database: the built-in
 seeded drift, its selection replayed into the bridge's work keyframe by keyframe
 (refinement/session.py, the recording's clock), then the finish. The runs of the epipolar stage
 happen during the session and bring the poses closer to the exact ones; the live model and
-sparse/unrefined stay at the node's poses. The loop's finish converges by itself and starts from
-the node's poses; a long session's starts from the runs' without an epipolar stage of its own.
+sparse/unrefined stay at the node's poses. The loop is short, and stands for a long session; at
+the defaults its finish converges by itself from the node's poses, and a long session's starts
+from the runs' without an epipolar stage of its own.
 Either finished model is as accurate as a full refinement run to convergence."""
 import os
 
@@ -22,6 +23,12 @@ def test_the_poses_refined_as_it_goes_are_where_a_long_sessions_finish_starts(tm
     export, ate = drifted_loop(tmp_path)
     project = str(tmp_path / "project")
     replay = Replay(export, project, refine_tool=tool("refine_model"), poses_live=True)
+    # The loop is short: its finish's 5 s refine it to convergence from the node's poses
+    # (background.finish_converges), and at the defaults no run would start. Here it stands for a
+    # long session (10 minutes: 700,000 matched observations and more), which its finish's budget
+    # does not refine to convergence.
+    converged_iterations = background.CONVERGED_ITERATIONS
+    monkeypatch.setattr(background, "CONVERGED_ITERATIONS", 10 ** 9)
     replay.session()
     keyframes = replay.keyframes
     runs = replay.local
@@ -58,13 +65,13 @@ def test_the_poses_refined_as_it_goes_are_where_a_long_sessions_finish_starts(tm
             assert abs(k["translation"] - np.linalg.norm(refined_centres[k["name"]] - node[k["name"]])) < 1e-6, k
         return section, ate(refined_centres)
 
-    # The loop is short: the finish's 5 s refine it to convergence from the node's poses, with its
-    # own epipolar stage (background.finish_converges), and it does not take the runs' poses.
+    # At the defaults the loop's finish converges from the node's poses, with its own epipolar
+    # stage, and does not take the runs' poses.
+    monkeypatch.setattr(background, "CONVERGED_ITERATIONS", converged_iterations)
     section, converged = finished()
     assert section["background"]["finish_converges"] and not section["background"]["started_from"], section
     assert "started_from" not in section and section["epipolar"]["iterations"] > 0, section
-    # As a long session's finish, which its budget does not refine to convergence (10 minutes:
-    # 700,000 matched observations and more): from the runs' poses, without an epipolar stage.
+    # As a long session's finish: from the runs' poses, without an epipolar stage.
     monkeypatch.setattr(background, "CONVERGED_ITERATIONS", 10 ** 9)
     section, started_refined = finished()
     assert not section["background"]["finish_converges"] and section["background"]["started_from"], section

@@ -14,9 +14,11 @@ So while the recording goes on, runs of refine_model --epipolar-only on the live
 keyframe movable) start from the poses the last run reached (a keyframe that came since: its
 node pose moved by the correction of the nearest keyframe before it, refinement/local.py
 `corrected`), measured against the node's poses (--reference: the priors are the SLAM's motion,
-and the result stays in its frame). A run starts when the verified pairs grew since the last one
-and the runs' CPU (the child's, by wait4, and the Python that prepares it) stays within `cpu_share`
-of a core over the session (a run may overspend; the next waits until that is paid back). The
+and the result stays in its frame). A run starts when the verified pairs grew since the last one,
+the runs' CPU (the child's, by wait4, and the Python that prepares it) stays within `cpu_share`
+of a core over the session (a run may overspend; the next waits until that is paid back), and
+the live model has grown past what the finish refines to convergence by itself
+(finish_converges: about a minute's walk; before that the runs' poses would not be used). The
 live model is not touched: its points stay at the node's poses, and the pose-guided matching
 uses those.
 
@@ -178,6 +180,8 @@ class BackgroundPoses:
             return False
         if sum(1 for i in live.images if live.by_image.get(i)) < 3:
             return False
+        if finish_converges(self.finish_refinement.options.max_seconds, len(live.parent)):
+            return False  # the finish refines it to convergence by itself, from the node's poses
         self.pairs_then = pairs
         self._start()
         return self.running is not None
