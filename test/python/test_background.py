@@ -163,3 +163,23 @@ def test_no_run_starts_while_the_finish_would_refine_the_model_to_convergence_by
     live.parent = dict.fromkeys(range(200000))  # past what 5 s refine to convergence (167,000)
     runs.step()
     assert started == [200000]
+
+
+def test_a_pose_sent_again_with_other_last_bits_keeps_the_runs_pose_and_one_the_node_moved_does_not():
+    work, runs = session()
+    shifted = {i: geometry.world_to_camera((i + 0.5, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0)) for i in (1, 2)}
+    for i in (1, 2):
+        took(runs, i, shifted[i], work.fed_poses["k%d" % i])
+    # the stream's resync gave every keyframe again: keyframe 1 1e-12 m off, keyframe 2 moved 0.2 m
+    work.fed_poses["k1"] = ((1.0 + 1e-12, 0.0, 0.0), (1.0, 0.0, 0.0, 1e-13))
+    work.fed_poses["k2"] = ((2.2, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))
+    start = runs.start_poses()
+    assert start[1] == shifted[1] and runs.moved == 1
+    assert np.allclose(centre(start[2]), [2.7, 0, 0])  # keyframe 1's correction, from its new pose
+    # both moved (a loop closure): each predicted by the nearest one's correction all the same
+    work.fed_poses["k1"] = ((1.1, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))
+    start = runs.start_poses()
+    assert runs.moved == 2 and len(start) == 4
+    assert np.allclose(centre(start[1]), [1.6, 0, 0]) and np.allclose(centre(start[4]), [4.5, 0, 0])
+    assert local.same_pose(((0, 0, 0), (1, 0, 0, 0)), ((0, 0, 0), (-1, 0, 0, 0)))  # q and -q
+    assert not local.same_pose(((0, 0, 0), (1, 0, 0, 0)), None) and local.same_pose(None, None)

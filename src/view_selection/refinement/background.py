@@ -43,7 +43,7 @@ import time
 
 from ..colmap import model as colmap_model
 from . import refiner
-from .local import _Run, node_poses, predicted
+from .local import _Run, node_poses, predicted, same_pose
 
 
 # The finish starts from the runs' poses only where the node's poses are off the matches'
@@ -115,6 +115,7 @@ class BackgroundPoses:
         self.runs = 0
         self.failures = 0
         self.pairs_then = 0      # verified pairs when the last run started
+        self.moved = 0           # of the images a run took, those the node moved since (start_poses)
         self.history = []        # per run: keyframes, iterations, status, cpu, seconds, Sampson before/after
 
     def attach(self, work):
@@ -127,21 +128,22 @@ class BackgroundPoses:
 
     def start_poses(self, node=None):
         """{image id: (qvec, tvec)}: where the next run (or the finish) starts, for every image
-        with a node pose: the last run's pose while its node pose is the one it started from,
-        else the node pose moved by the correction of the nearest image before it that has one
-        (after it, for the first ones). Empty before a run took any."""
+        with a node pose: the last run's pose while its node pose is the one it started from
+        (local.same_pose), else the node pose moved by the correction of the nearest image before
+        it that has one (after it, for the first ones); where the node moved every image a run
+        took, by the nearest one's correction all the same. Empty before a run took any."""
         if not self.poses:
             return {}
         node = self._node_poses() if node is None else node
-        current = [i for i in self.ids if self.poses[i][1] == node.get(i)]
+        current = [i for i in self.ids if same_pose(self.poses[i][1], node.get(i))]
+        self.moved = len(self.ids) - len(current)
         out = {}
         for iid, pose in node.items():
             taken = self.poses.get(iid)
-            if taken is not None and taken[1] == pose:
+            if taken is not None and same_pose(taken[1], pose):
                 out[iid] = taken[0]
                 continue
-            if current:
-                out[iid] = predicted(current, self.poses.get, iid, pose)
+            out[iid] = predicted(current or self.ids, self.poses.get, iid, pose)
         return out
 
     # -- the worker loop's step ----------------------------------------------------------------
@@ -237,7 +239,8 @@ class BackgroundPoses:
                 fed = self._node_poses()
                 for image in report["images"]:
                     iid = image["image_id"]
-                    if not image.get("refined") or iid not in images or fed.get(iid) != run.node.get(iid):
+                    if not image.get("refined") or iid not in images \
+                            or not same_pose(fed.get(iid), run.node.get(iid)):
                         continue  # kept its pose, or the node moved it meanwhile: predicted again
                     if iid not in self.poses:
                         bisect.insort(self.ids, iid)
@@ -278,7 +281,7 @@ class BackgroundPoses:
     def summary(self):
         return {"runs": self.runs, "failures": self.failures, "cpu_seconds": round(self.cpu_seconds, 3),
                 "cpu_share": self.cpu_share, "process_share": self.process_share, "iterations": self.iterations,
-                "keyframes_with_poses": len(self.poses),
+                "keyframes_with_poses": len(self.poses), "keyframes_moved_since": self.moved,
                 "last_runs": self.history[-5:]}
 
     def poses_summary(self):

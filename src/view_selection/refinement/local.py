@@ -217,6 +217,21 @@ def node_poses(work):
     return {iid: fed[im.name] for iid, im in work.model.images.items() if im.name in fed}
 
 
+def same_pose(a, b, tolerance=1e-6):
+    """Whether node poses a and b ((centre, (w, x, y, z)), or None) are the same within
+    `tolerance` [m, and in each quaternion component]: a pose sent again (the stream's `full`
+    resync, the node's final selection) may differ from the first in its last bits."""
+    if a is None or b is None:
+        return a is b
+    if a == b:
+        return True
+    qa, qb = np.asarray(a[1], float), np.asarray(b[1], float)
+    if float(np.dot(qa, qb)) < 0:
+        qb = -qb
+    return bool(np.max(np.abs(np.asarray(a[0], float) - np.asarray(b[0], float))) <= tolerance
+                and np.max(np.abs(qa - qb)) <= tolerance)
+
+
 def predicted(ids, taken, iid, node):
     """COLMAP's (qvec, tvec) for image `iid` at node pose `node`: moved by the correction of the
     nearest image before it in `ids` (sorted; after it, for the first ones), whose `taken` entry
