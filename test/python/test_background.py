@@ -65,9 +65,15 @@ def test_a_keyframe_keeps_the_runs_pose_until_the_node_moves_it_and_the_newer_on
     assert np.allclose(start[2][0], local.corrected(work.fed_poses["k2"], shifted[1], work.fed_poses["k1"])[0])
 
 
+def took_half(work, runs):
+    """Runs' poses for keyframes 1 and 2 of 4 (MIN_TAKEN_SHARE)."""
+    for i in (1, 2):
+        took(runs, i, geometry.world_to_camera((i + 0.5, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0)), work.fed_poses["k%d" % i])
+
+
 def test_the_finish_starts_from_the_runs_poses_only_where_the_node_is_off_the_matches():
     work, runs = session()
-    took(runs, 1, geometry.world_to_camera((1.5, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0)), work.fed_poses["k1"])
+    took_half(work, runs)
     project = types.SimpleNamespace(deadline=None)
     for node_px, used in ((0.31, False), (1.3, True)):  # exact poses: within the noise; drift: off
         runs.history = [{"taken": 4, "keyframes": 4, "sampson_px": [0.29, 0.27], "sampson_node_px": node_px}]
@@ -135,7 +141,7 @@ def test_a_run_waits_while_the_process_as_a_whole_is_over_its_share(monkeypatch)
 
 def test_a_finish_that_converges_by_itself_starts_from_the_node_poses():
     work, runs = session()
-    took(runs, 1, geometry.world_to_camera((1.5, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0)), work.fed_poses["k1"])
+    took_half(work, runs)
     runs.history = [{"taken": 4, "keyframes": 4, "sampson_px": [0.29, 0.27], "sampson_node_px": 1.3}]
     project = types.SimpleNamespace(deadline=None)
     # a minute's walk (92,341 matched observations): 5 s pay for 36 iterations; 10 minutes' do not
@@ -183,3 +189,21 @@ def test_a_pose_sent_again_with_other_last_bits_keeps_the_runs_pose_and_one_the_
     assert np.allclose(centre(start[1]), [1.6, 0, 0]) and np.allclose(centre(start[4]), [4.5, 0, 0])
     assert local.same_pose(((0, 0, 0), (1, 0, 0, 0)), ((0, 0, 0), (-1, 0, 0, 0)))  # q and -q
     assert not local.same_pose(((0, 0, 0), (1, 0, 0, 0)), None) and local.same_pose(None, None)
+
+
+def test_the_finish_starts_from_the_runs_poses_only_where_they_took_half_the_keyframes():
+    # The other walk's 30 minutes: the runs stopped at 864 of 7,474 keyframes; the rest would be
+    # predicted from the nearest one's correction.
+    work, runs = session(n=10)
+    runs.history = [{"taken": 4, "keyframes": 4, "sampson_px": [0.29, 0.27], "sampson_node_px": 1.3}]
+    project = types.SimpleNamespace(deadline=None)
+    for taken, started in ((4, False), (5, True)):
+        for i in range(1, taken + 1):
+            took(runs, i, geometry.world_to_camera((i + 0.5, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0)),
+                 work.fed_poses["k%d" % i])
+        section = runs.apply(project, "model", matched=700000)
+        assert section["background"]["started_from"] == started, taken
+        assert ("MIN_TAKEN_SHARE" in section["background"].get("not_started_from_because", "")) == (not started)
+    # a keyframe the node moved since is not one the runs took
+    work.fed_poses["k5"] = ((5.3, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))
+    assert runs.apply(project, "model", matched=700000)["background"]["started_from"] is False

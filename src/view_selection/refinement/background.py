@@ -25,8 +25,8 @@ uses those.
 The finish (`apply`) waits a moment for a run under way (not when the last run took longer than
 that), then, where the last run found the node's poses off the matches' epipolar geometry
 (OFF_RATIO) and the finish's budget would not refine the model to convergence from them
-(finish_converges: a short session's finish does, and from the runs' poses it did worse), gives
-the finish's refinement
+(finish_converges: a short session's finish does, and from the runs' poses it did worse), and
+the runs took at least half the keyframes (MIN_TAKEN_SHARE), gives the finish's refinement
 (refiner.ModelRefinement) the runs' poses to start from: the live model at them, its points
 carried along; corrections are reported against the node's poses, and sparse/unrefined stays the
 model at them. A keyframe whose node pose moved since a run took it (a loop closure's corrected
@@ -71,6 +71,16 @@ def process_cpu():
 # 1-4 iterations and the runs' poses are what refines the model (docs/live.md).
 ADJUSTMENT_SECONDS_PER_OBSERVATION = 1.5e-6
 CONVERGED_ITERATIONS = 20
+
+# And only where the runs took at least this share of the keyframes at their present node poses:
+# the rest are predicted from the nearest one's correction, which does not follow the drift
+# after it. On the other walk's 30 minutes the runs stopped at 864 of 7,474 keyframes (the
+# bridge's own work was over ~refine_poses_live_bridge_cpu); from their poses the finish gave
+# 884.8 mm against the odometry's 892.7, and since refine_model runs from start poses whatever its
+# budget (to give the model at them), it read and wrote for 5.8 s and began nothing: ready 12.1 s
+# after the bag, where the finish from the node's poses is not started (5.2 s). At 10 minutes the
+# last run took 1,810-2,136 of 2,500.
+MIN_TAKEN_SHARE = 0.5
 
 
 def finish_converges(max_seconds, matched):
@@ -301,10 +311,23 @@ class BackgroundPoses:
         converges = finish_converges(self.finish_refinement.options.max_seconds, matched)
         if self.running is not None:
             self.wait(0.0 if converges else self.finish_waits(project))
-        start = self.start_poses() if self.work is not None and self.work.model is not None and self.node_off() \
-            and not converges else {}
+        start, why = {}, None
+        if self.work is None or self.work.model is None or not self.poses:
+            why = "no run took poses"
+        elif converges:
+            why = "the finish refines the model to convergence from the node's poses"
+        elif not self.node_off():
+            why = "the node's poses are not off the matches' epipolar geometry (OFF_RATIO)"
+        else:
+            start = self.start_poses()
+            taken = len(self.ids) - self.moved
+            if taken < MIN_TAKEN_SHARE * len(start):
+                why = "the runs took %d of %d keyframes (MIN_TAKEN_SHARE)" % (taken, len(start))
+                start = {}
         section = self.finish_refinement.apply(project, model_path, model, matched, start_poses=start or None)
         section["background"] = dict(self.summary(), started_from=bool(start), finish_converges=converges)
+        if why:
+            section["background"]["not_started_from_because"] = why
         return section
 
     def finish_waits(self, project):
