@@ -190,10 +190,10 @@ class BackgroundPoses:
         pairs = len(live.matched_pairs)
         if pairs <= self.pairs_then or pairs < 2 or self.allowance() <= 0:
             return False
-        if sum(1 for i in live.images if live.by_image.get(i)) < 3:
-            return False
         if finish_converges(self.finish_refinement.options.max_seconds, len(live.parent)):
             return False  # the finish refines it to convergence by itself, from the node's poses
+        if sum(1 for i in live.images if live.by_image.get(i)) < 3:
+            return False
         self.pairs_then = pairs
         self._start()
         return self.running is not None
