@@ -173,6 +173,30 @@ def test_two_points_that_merge_are_triangulated_from_scratch():
     assert len(model.points) == n and all(len(p.image_ids) == 6 for p in model.points.values())
 
 
+def test_a_short_track_that_merges_into_a_long_one_joins_its_point():
+    """A revisit joins a short track with a point (2 observations) to a long one of the same 3D
+    point (6): the short one's observations join the long one's point, as a growing track's do,
+    and only they are looked at (a triangulation from scratch would handle all 8)."""
+    n = 20
+    points, poses, kps = scene(n_images=8, n_points=n)
+    m = LiveModel()
+    for i, ((q, t), (uv, _)) in enumerate(zip(poses, kps)):
+        m.add_image(i + 1, "%d.png" % i, 1, CAMERA, q, t, np.hstack([uv, np.zeros((len(uv), 2))]))
+    for a, b in [(0, 1), (1, 2), (2, 3), (3, 4), (4, 5), (6, 7)]:
+        add_pair(m, kps, a, b, n)
+    m.update()
+    assert len(m.points) == 2 * n
+    before = m.observations_triangulated
+    add_pair(m, kps, 5, 6, n)
+    m.update()
+    assert m.observations_triangulated - before == 2 * n  # the short tracks' observations only
+    model = m.to_model()
+    assert len(model.points) == n and all(len(p.image_ids) == 8 for p in model.points.values())
+    for p in model.points.values():
+        im = model.images[int(p.image_ids[0])]
+        assert np.linalg.norm(p.xyz - points[kps[im.id - 1][1][int(p.point2D_idxs[0])]]) < 1e-6
+
+
 def views_along_x(xs, n, seed):
     """A live model with one image at each x (looking down z), n random points seen by all,
     keypoint j being point j in every image; and the matches of a pair (every point)."""

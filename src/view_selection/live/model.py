@@ -9,7 +9,9 @@ again at the next `update()`: a linear (DLT) point from all its observations, th
 on the reprojection error. A track whose point was triangulated from at least three
 observations and that only grew since (fewer than twice as many observations) is extended
 instead: each new observation joins the point when it lies within `max_error_px` of its
-projection, as COLMAP's incremental triangulator continues a track. So the cost of an update is
+projection, as COLMAP's incremental triangulator continues a track. Two tracks with points that a
+match joins (a revisit) are one such track: the observations of the one with fewer join the
+other's point, unless they would double it. So the cost of an update is
 that of its new observations, not of whole tracks that grow with every revisit (issue 28: in a
 room walked round for 3 minutes the mean track reached 22 observations and a full
 re-triangulation 0.31 s of CPU an update). A full triangulation is the package's one
@@ -149,9 +151,13 @@ class LiveModel:
             self.members[ra] = ma
             self.members.pop(rb, None)
             if self.points.pop(rb, None) is not None or rb in self.full:
-                self.full.add(ra)  # two points (or one to redo) become one: triangulated from scratch
                 if self.changed is not None:
                     self.changed.add(rb)
+                if not self._extensible(ra):
+                    self.full.add(ra)  # two points (or one to redo) become one: triangulated from scratch
+                # else rb's observations join ra's point as a growing track's do (pending, below):
+                # each where it projects within max_error_px, and the whole triangulated again once
+                # the point's observations would double (the cost of a merge is the smaller side's)
             self.full.discard(rb)
             self.full_size.pop(rb, None)
             self.failed_size.pop(rb, None)
@@ -163,6 +169,11 @@ class LiveModel:
                 roots = self.by_image.setdefault(img, set())
                 roots.discard(rb)
                 roots.add(ra)
+
+    def _extensible(self, root):
+        """A track whose point new observations may join without triangulating it again: its point
+        made from at least three observations at the present poses."""
+        return root in self.points and root not in self.full and self.full_size.get(root, 0) >= 3
 
     # -- triangulation -----------------------------------------------------------------------
     def update(self, final=False):
