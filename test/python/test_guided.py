@@ -92,6 +92,28 @@ def test_every_inlier_lies_within_colmaps_threshold_of_the_stored_geometry():
     assert np.allclose(unit(g.F), unit(np.linalg.inv(kb).T @ g.E @ np.linalg.inv(ka)), atol=1e-9)
 
 
+def test_one_triangulation_gives_the_cheirality_of_t_and_minus_t():
+    """estimate() triangulates once for t and -t: the depths with -t are those with t, negated.
+    Checked against a triangulation of its own for -t, on correspondences in front, behind and
+    on both sides of a pair of cameras, at each rotation of an essential matrix's decomposition."""
+    rng = np.random.default_rng(3)
+    r_true = cv2.Rodrigues(np.array([0.05, -0.2, 0.03]))[0]
+    t_true = np.array([0.3, 0.02, -0.1])
+    x = rng.uniform([-2, -2, -3], [2, 2, 6], (300, 3))  # some behind a, some behind b
+    xb = x @ r_true.T + t_true
+    na, nb = x[:, :2] / x[:, 2:], xb[:, :2] / xb[:, 2:]
+    e = guided.skew(t_true / np.linalg.norm(t_true)) @ r_true
+    r1, r2, t = cv2.decomposeEssentialMat(e)
+    mixed = 0
+    for r in (r1, r2):
+        za, zb = two_view.depths(na, nb, r, t)
+        finite = np.isfinite(za) & np.isfinite(zb)
+        assert np.array_equal(two_view.in_front(na, nb, r, t), finite & (za > 0) & (zb > 0))
+        assert np.array_equal(two_view.in_front(na, nb, r, -t), finite & (za < 0) & (zb < 0))
+        mixed += int(np.sum(finite & (za > 0) & (zb < 0)))
+    assert mixed > 0  # a sign of one depth alone does not tell: both are looked at
+
+
 def test_the_stored_geometry_is_the_poses_in_colmaps_pixel_convention():
     """Noise-free correspondences at exact poses: the stored E is the poses' (E does not depend on
     the pixel convention), and the stored F is the poses' moved to COLMAP's pixel centres (x + 0.5):

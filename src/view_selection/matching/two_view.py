@@ -79,14 +79,20 @@ def normalised_threshold(ka, kb, max_error_px):
     return (max_error_px / mean_focal(ka) + max_error_px / mean_focal(kb)) / 2.0
 
 
-def in_front(na, nb, r, t):
-    """Which normalised correspondences triangulate in front of both cameras (x_b = R x_a + t)."""
+def depths(na, nb, r, t):
+    """The depths in a and in b of the normalised correspondences triangulated with x_b = R x_a + t
+    (OpenCV's linear triangulation), NaN or inf where it gives none."""
     pa = np.hstack([np.eye(3), np.zeros((3, 1))])
     pb = np.hstack([r, np.asarray(t, float).reshape(3, 1)])
     x = cv2.triangulatePoints(pa, pb, np.ascontiguousarray(na.T), np.ascontiguousarray(nb.T))
     with np.errstate(divide="ignore", invalid="ignore"):
         pts = (x[:3] / x[3]).T
-    za, zb = pts[:, 2], (pts @ r.T + np.asarray(t, float).reshape(3))[:, 2]
+    return pts[:, 2], (pts @ r.T + np.asarray(t, float).reshape(3))[:, 2]
+
+
+def in_front(na, nb, r, t):
+    """Which normalised correspondences triangulate in front of both cameras (x_b = R x_a + t)."""
+    za, zb = depths(na, nb, r, t)
     return np.isfinite(za) & (za > 0) & np.isfinite(zb) & (zb > 0)
 
 
@@ -109,10 +115,16 @@ def estimate(matches, fa, fb, ka, kb, max_error_px=COLMAP_MAX_ERROR_PX):
         return None
     best = None
     r1, r2, t = cv2.decomposeEssentialMat(e)
-    for r, tt in ((r1, t), (r1, -t), (r2, t), (r2, -t)):
-        ok = close.copy()
-        ok[close] = in_front(na[close], nb[close], r, tt)
-        if best is None or ok.sum() > best[0].sum():
-            best = (ok, r, tt.reshape(3))
+    for r in (r1, r2):
+        # One triangulation serves t and -t: with -t the linear triangulation's point is the
+        # other's mirrored through a's centre (its system's last column changes sign), so both
+        # depths change sign, exactly.
+        za, zb = depths(na[close], nb[close], r, t)
+        finite = np.isfinite(za) & np.isfinite(zb)
+        for tt, front in ((t, finite & (za > 0) & (zb > 0)), (-t, finite & (za < 0) & (zb < 0))):
+            ok = close.copy()
+            ok[close] = front
+            if best is None or ok.sum() > best[0].sum():
+                best = (ok, r, tt.reshape(3))
     ok, r, t = best
     return TwoViewGeometry(matches[ok], e, f, r, t)
