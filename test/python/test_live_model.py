@@ -158,12 +158,7 @@ def test_two_points_that_merge_are_triangulated_from_scratch():
     one point is triangulated from all observations, not extended from either."""
     n = 20
     points, poses, kps = scene(n_images=6, n_points=n)
-    m = LiveModel()
-    for i, ((q, t), (uv, _)) in enumerate(zip(poses, kps)):
-        m.add_image(i + 1, "%d.png" % i, 1, CAMERA, q, t, np.hstack([uv, np.zeros((len(uv), 2))]))
-    for a, b in [(0, 1), (1, 2), (0, 2), (3, 4), (4, 5), (3, 5)]:
-        add_pair(m, kps, a, b, n)
-    m.update()
+    m = build(points, poses, kps, pairs=[(0, 1), (1, 2), (0, 2), (3, 4), (4, 5), (3, 5)])
     assert len(m.points) == 2 * n
     before = m.observations_triangulated
     add_pair(m, kps, 2, 3, n)
@@ -179,12 +174,7 @@ def test_a_short_track_that_merges_into_a_long_one_joins_its_point():
     and only they are looked at (a triangulation from scratch would handle all 8)."""
     n = 20
     points, poses, kps = scene(n_images=8, n_points=n)
-    m = LiveModel()
-    for i, ((q, t), (uv, _)) in enumerate(zip(poses, kps)):
-        m.add_image(i + 1, "%d.png" % i, 1, CAMERA, q, t, np.hstack([uv, np.zeros((len(uv), 2))]))
-    for a, b in [(0, 1), (1, 2), (2, 3), (3, 4), (4, 5), (6, 7)]:
-        add_pair(m, kps, a, b, n)
-    m.update()
+    m = build(points, poses, kps, pairs=[(0, 1), (1, 2), (2, 3), (3, 4), (4, 5), (6, 7)])
     assert len(m.points) == 2 * n
     before = m.observations_triangulated
     add_pair(m, kps, 5, 6, n)

@@ -153,7 +153,7 @@ class LiveModel:
             if self.points.pop(rb, None) is not None or rb in self.full:
                 if self.changed is not None:
                     self.changed.add(rb)
-                if not self._extensible(ra):
+                if not self._extensible(ra, self.full):
                     self.full.add(ra)  # two points (or one to redo) become one: triangulated from scratch
                 # else rb's observations join ra's point as a growing track's do (pending, below):
                 # each where it projects within max_error_px, and the whole triangulated again once
@@ -170,10 +170,11 @@ class LiveModel:
                 roots.discard(rb)
                 roots.add(ra)
 
-    def _extensible(self, root):
+    def _extensible(self, root, full):
         """A track whose point new observations may join without triangulating it again: its point
-        made from at least three observations at the present poses."""
-        return root in self.points and root not in self.full and self.full_size.get(root, 0) >= 3
+        made from at least three observations, and not to be made again (`full`: the roots whose
+        pose moved or whose points merged)."""
+        return root in self.points and root not in full and self.full_size.get(root, 0) >= 3
 
     # -- triangulation -----------------------------------------------------------------------
     def update(self, final=False):
@@ -189,8 +190,7 @@ class LiveModel:
         for root in todo:
             point = self.points.get(root)
             joined = self.pending.pop(root, {})
-            if (point is not None and root not in full and self.full_size.get(root, 0) >= 3
-                    and len(point[2]) + len(joined) < 2 * self.full_size[root]):
+            if self._extensible(root, full) and len(point[2]) + len(joined) < 2 * self.full_size[root]:
                 # Only what joined is looked at: the cost is that of the new observations.
                 new = {img: kp for img, kp in joined.items() if img in self.images and img not in point[2]}
                 if new:
