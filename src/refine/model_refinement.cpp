@@ -346,6 +346,57 @@ void takePoses(State& s, const std::map<int, PoseBlock>& blocks, const std::set<
   }
 }
 
+/// A fixed rigid motion applied after a pose block's (world -> camera): x' = q x + t. It moves an
+/// image rigidly with the block of the first image of its run (RefinementConfig::epipolar_max_blocks).
+struct Offset {
+  Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+
+  /// The offset that takes `leader`'s pose to `image`'s: image = offset o leader.
+  static Offset between(const State::Pose& image, const State::Pose& leader) {
+    Offset d;
+    d.q = (image.rotation * leader.rotation.conjugate()).normalized();
+    d.t = image.translation - d.q * leader.translation;
+    return d;
+  }
+
+  /// The pose block `out` of this offset after the block `in` (Eigen's x, y, z, w, then t).
+  template <typename T>
+  void apply(const T* in, T* out) const {
+    const Eigen::Map<const Eigen::Quaternion<T>> r(in);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> t_in(in + 4);
+    Eigen::Map<Eigen::Quaternion<T>> r_out(out);
+    Eigen::Map<Eigen::Matrix<T, 3, 1>> t_out(out + 4);
+    const Eigen::Quaternion<T> qd = q.cast<T>();
+    r_out = qd * r;
+    t_out = qd * t_in + t.cast<T>();
+  }
+
+  State::Pose applied(const PoseBlock& block) const {
+    PoseBlock out;
+    apply(block.data(), out.data());
+    return {Eigen::Quaterniond(out[3], out[0], out[1], out[2]).normalized(), Eigen::Vector3d(out[4], out[5], out[6])};
+  }
+};
+
+/// A residual of two poses (Functor: EpipolarErrors, RelativePosePrior) evaluated on two blocks,
+/// each through its image's offset.
+template <typename Functor>
+struct ThroughOffsets {
+  ThroughOffsets(Functor f, const Offset& a, const Offset& b) : f(std::move(f)), a(a), b(b) {}
+
+  template <typename T>
+  bool operator()(const T* block_a, const T* block_b, T* residuals) const {
+    T pose_a[7], pose_b[7];
+    a.apply(block_a, pose_a);
+    b.apply(block_b, pose_b);
+    return f(pose_a, pose_b, residuals);
+  }
+
+  Functor f;
+  Offset a, b;
+};
+
 /// What every solve here shares: at most `iterations`, the function tolerance, stopped at the
 /// deadline (however briefly, it runs), the configured threads (0: one per core), silent.
 ceres::Solver::Options solverOptions(const RefinementConfig& config, const Deadline& deadline, int iterations) {
@@ -664,24 +715,72 @@ void epipolarStage(PassResult& r, const Gauge& gauge, const std::vector<Epipolar
   ceres::Problem problem;  // owns the cost functions and the pairs' losses
   ceres::CauchyLoss* prior_loss = new ceres::CauchyLoss(config.prior_loss_scale);
   std::map<int, PoseBlock> pose = poseBlocks(s);
+  // With more images than epipolar_max_blocks, the images in runs of consecutive ids: each run
+  // moves rigidly with one block (`leader`: its first image, or the one the gauge holds, which
+  // then holds the run), so a pair or a prior within one run is constant and left out.
+  // Otherwise every image is its own block.
+  std::map<int, int> leader;
+  std::map<int, Offset> offset;
+  std::vector<int> images;
+  for (const auto& [id, p] : s.poses)
+    if (!kept.count(id)) images.push_back(id);
+  const bool grouped = config.epipolar_max_blocks > 0 && images.size() > config.epipolar_max_blocks;
+  if (grouped) {
+    const size_t run = (images.size() + config.epipolar_max_blocks - 1) / config.epipolar_max_blocks;
+    for (size_t begin = 0; begin < images.size(); begin += run) {
+      const size_t end = std::min(images.size(), begin + run);
+      int first = images[begin];
+      for (size_t k = begin; k < end; ++k)
+        if (!gauge.moving.count(images[k])) {
+          first = images[k];
+          break;
+        }
+      for (size_t k = begin; k < end; ++k) {
+        leader[images[k]] = first;
+        offset[images[k]] = Offset::between(s.poses.at(images[k]), s.poses.at(first));
+      }
+    }
+  }
+  const auto blockOf = [&](int id) {
+    const auto it = leader.find(id);
+    return it == leader.end() ? id : it->second;
+  };
+  const auto offsetOf = [&](int id) {
+    const auto it = offset.find(id);
+    return it == offset.end() ? Offset() : it->second;
+  };
   std::set<int> used;
   for (const EpipolarPair* p : pairs) {
     const int n = static_cast<int>(p->rays_a.size());
-    auto* cost = new ceres::AutoDiffCostFunction<EpipolarErrors, ceres::DYNAMIC, 7, 7>(new EpipolarErrors(*p), n);
+    const int a = blockOf(p->a), b = blockOf(p->b);
+    if (a == b) continue;
+    ceres::CostFunction* cost = nullptr;
+    if (grouped)
+      cost = new ceres::AutoDiffCostFunction<ThroughOffsets<EpipolarErrors>, ceres::DYNAMIC, 7, 7>(
+          new ThroughOffsets<EpipolarErrors>(EpipolarErrors(*p), offsetOf(p->a), offsetOf(p->b)), n);
+    else
+      cost = new ceres::AutoDiffCostFunction<EpipolarErrors, ceres::DYNAMIC, 7, 7>(new EpipolarErrors(*p), n);
     // Huber on the block's sum of squares: quadratic while the pair's RMS is within the scale.
-    problem.AddResidualBlock(cost, new ceres::HuberLoss(config.epipolar_loss_scale * std::sqrt(n)), pose[p->a].data(),
-                             pose[p->b].data());
-    used.insert(p->a);
-    used.insert(p->b);
+    problem.AddResidualBlock(cost, new ceres::HuberLoss(config.epipolar_loss_scale * std::sqrt(n)), pose[a].data(),
+                             pose[b].data());
+    used.insert(a);
+    used.insert(b);
   }
   bool prior_loss_used = false;
   for (const Prior& p : gauge.priors) {
-    problem.AddResidualBlock(new ceres::AutoDiffCostFunction<RelativePosePrior, 6, 7, 7>(
-                                 new RelativePosePrior(p.rotation_ba, p.translation_ba, p.sigma_r, p.sigma_t)),
-                             prior_loss, pose[p.a].data(), pose[p.b].data());
+    const int a = blockOf(p.a), b = blockOf(p.b);
+    if (a == b) continue;
+    const RelativePosePrior prior(p.rotation_ba, p.translation_ba, p.sigma_r, p.sigma_t);
+    ceres::CostFunction* cost = nullptr;
+    if (grouped)
+      cost = new ceres::AutoDiffCostFunction<ThroughOffsets<RelativePosePrior>, 6, 7, 7>(
+          new ThroughOffsets<RelativePosePrior>(prior, offsetOf(p.a), offsetOf(p.b)));
+    else
+      cost = new ceres::AutoDiffCostFunction<RelativePosePrior, 6, 7, 7>(new RelativePosePrior(prior));
+    problem.AddResidualBlock(cost, prior_loss, pose[a].data(), pose[b].data());
     prior_loss_used = true;
-    used.insert(p.a);
-    used.insert(p.b);
+    used.insert(a);
+    used.insert(b);
   }
   if (!prior_loss_used) delete prior_loss;
   using PoseManifold = ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>;
@@ -719,6 +818,8 @@ void epipolarStage(PassResult& r, const Gauge& gauge, const std::vector<Epipolar
     r.epipolar_median_refined = r.epipolar_median_input;
     return;
   }
+  for (const auto& [id, first] : leader)  // a moving run's images follow its leader's block
+    if (used.count(first) && gauge.moving.count(first)) s.poses[id] = offset.at(id).applied(pose.at(first));
   takePoses(s, pose, used);
   r.epipolar_median_refined = medianSampson(s, pairs);
 }

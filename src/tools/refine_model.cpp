@@ -62,6 +62,8 @@ Cameras must be PINHOLE or SIMPLE_PINHOLE.
   --epipolar-loss-scale PX       ... under a Huber loss from PX (default 4) ...
   --epipolar-time-share F        ... within F of the time budget (default 0.3) ...
   --epipolar-iterations N        ... and N Ceres iterations at most (default 100)
+  --epipolar-max-blocks N  ... with the moving images in at most N runs of consecutive ids, each
+                     moving rigidly (default 0: every image on its own)
   --epipolar-only    with --matches: the epipolar stage alone, on the whole budget; the output
                      holds its poses (aligned to the input's) and no points (status epipolar_only)
   --fixed FILE       image names (one a line) that must not move; default: every image moves
@@ -170,7 +172,7 @@ int run(int argc, char** argv) {
                          "max-correction-deg", "threads", "prior-translation-ratio", "prior-rotation-deg",
                          "prior-loss-scale", "dense-up-to", "function-tolerance", "matches", "retriangulations",
                          "triangulation-max-error", "triangulation-growth", "max-seconds", "sparse-up-to",
-                         "progress-interval", "epipolar-matches-per-pair", "epipolar-loss-scale", "epipolar-time-share", "epipolar-iterations", "max-correction-path-ratio",
+                         "progress-interval", "epipolar-matches-per-pair", "epipolar-loss-scale", "epipolar-time-share", "epipolar-iterations", "epipolar-max-blocks", "max-correction-path-ratio",
                          "max-correction-deg-per-path"},
                         {"no-align", "quiet", "verbose", "no-triangulate-first", "no-epipolar", "epipolar-only", "no-progress", "help"});
   if (cli.flag("help")) {
@@ -209,6 +211,8 @@ int run(int argc, char** argv) {
   config.epipolar_time_share = cli.real("epipolar-time-share", config.epipolar_time_share, 1e-6, 1.0);
   config.epipolar_max_iterations =
       static_cast<int>(cli.integer("epipolar-iterations", config.epipolar_max_iterations, 1, 100000));
+  config.epipolar_max_blocks = static_cast<size_t>(
+      cli.integer("epipolar-max-blocks", static_cast<long>(config.epipolar_max_blocks), 0, 100000000));
   config.function_tolerance = cli.real("function-tolerance", config.function_tolerance, 1e-12, 0.5);
   config.dense_up_to = static_cast<size_t>(cli.integer("dense-up-to", static_cast<long>(config.dense_up_to), 0, 100000));
   config.threads = static_cast<int>(cli.integer("threads", config.threads, 0, 256));

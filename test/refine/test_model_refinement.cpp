@@ -738,6 +738,62 @@ TEST_F(Refinement, TheEpipolarStageAloneGivesItsPosesWhereTheyExplainTheTracksBe
                 1e-9);
 }
 
+TEST_F(Refinement, WithFewerBlocksThanImagesTheEpipolarStageMovesRunsOfConsecutiveImagesRigidly) {
+  // refine_model --epipolar-max-blocks (a 30-minute session's runs): the 30 images in 10 runs of
+  // 3 consecutive ids. The drift here is between the runs alone (each run's three poses moved by
+  // one rigid motion, a random walk from run to run): the stage corrects it, and within a run
+  // the relative poses stay the input's.
+  std::normal_distribution<double> n(0.0, 1.0);
+  rotation.clear();
+  translation.clear();
+  Eigen::Quaterniond turn = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d shift = Eigen::Vector3d::Zero();
+  for (size_t i = 0; i < exact.rotation.size(); ++i) {
+    if (i % 3 == 0 && i > 0) {  // the world moved by (turn, shift) under this run's cameras
+      turn = Eigen::Quaterniond(Eigen::AngleAxisd(0.004, Eigen::Vector3d(n(rng), n(rng), n(rng)).normalized())) * turn;
+      shift += 0.01 * Eigen::Vector3d(n(rng), n(rng), n(rng));
+    }
+    rotation.push_back((exact.rotation[i] * turn.conjugate()).normalized());
+    translation.push_back(exact.translation[i] - rotation.back() * shift);
+  }
+  std::vector<refine::Match> matches;
+  const io::ColmapModel input = knownPoseModel(exact, rotation, translation, rng, 0.0, 4.0, &matches);
+  refine::RefinementConfig config;
+  config.epipolar_only = true;
+  config.threads = 1;
+  config.epipolar_max_blocks = 10;
+  refine::RefinementReport report;
+  const io::ColmapModel out = refine::refineModel(input, refine::allImages(input), config, &report, nullptr, &matches);
+  ASSERT_EQ("epipolar_only", report.status) << report.message;
+  ASSERT_EQ(30u, out.images.size());
+  EXPECT_GT(report.epipolar_median_input, 1.0) << report.message;
+  EXPECT_LT(report.epipolar_median_refined, 0.5) << report.message;
+  // as close as with a block an image (the stage alone has a floor: the steps' scale is the priors')
+  refine::RefinementConfig each = config;
+  each.epipolar_max_blocks = 0;
+  refine::RefinementReport each_report;
+  const io::ColmapModel free = refine::refineModel(input, refine::allImages(input), each, &each_report, nullptr, &matches);
+  EXPECT_LT(ate(out, exact), 1.1 * ate(free, exact)) << report.message;
+  const auto relative = [](const io::ColmapModel& m, int a, int b) {
+    return m.images.at(b).rotation * m.images.at(a).rotation.conjugate();
+  };
+  const auto ratio = [](const io::ColmapModel& m, int a, int b, int c) {  // free of the alignment's scale
+    return (m.images.at(b).centre() - m.images.at(a).centre()).norm() /
+           (m.images.at(c).centre() - m.images.at(b).centre()).norm();
+  };
+  int across_moved = 0;
+  for (int id = 1; id < 30; ++id) {
+    const double turned = relative(out, id, id + 1).angularDistance(relative(input, id, id + 1));
+    if ((id - 1) / 3 == id / 3) {  // ids 1-3, 4-6, ...: one run each
+      EXPECT_LT(turned, 1e-9) << id;
+      if (id % 3 == 1) EXPECT_NEAR(ratio(input, id, id + 1, id + 2), ratio(out, id, id + 1, id + 2), 1e-9) << id;
+    } else if (turned > 1e-4) {
+      ++across_moved;
+    }
+  }
+  EXPECT_GT(across_moved, 5);
+}
+
 TEST_F(Refinement, FromTheEpipolarStagesPosesTheAdjustmentReachesWhatItReachesFromTheInputs) {
   // The fixture's own drift (3.0 mm on the arc) is below the epipolar stage's floor: alone it
   // leaves the poses further off (each step's scale is the priors'), though its Sampson distances

@@ -108,7 +108,8 @@ PARAMETERS = """Parameters (private, ~name):
   refine_poses_live_cpu  [cores] the average CPU those runs may take over the session (0.07)
   refine_poses_live_bridge_cpu  [cores] and a run starts only while this node (with the COLMAP
                      and refine_model it ran) has used less than this on average since the first
-                     keyframes (0.45: the bridge at most half a core; 0: no such limit)
+                     keyframes (0.48: the bridge at most half a core, with room for a run's
+                     overshoot and the finish; 0: no such limit)
   refine_afterwards  after a finish whose refinement stopped at refine_max_seconds (a long
                      session's), go on refining while nothing comes: refine_model without a
                      budget on sparse/unrefined with the strongest keypoints' matches (800,000 at
@@ -196,7 +197,7 @@ class Bridge:
             if bool(_param("refine_live", False)) and _param("triangulation", "live") == "live":
                 refinement = LocalRefinement(refinement, cpu_share=float(_param("refine_live_cpu", 0.25)))
             elif bool(_param("refine_poses_live", True)) and _param("triangulation", "live") == "live":
-                process_share = float(_param("refine_poses_live_bridge_cpu", 0.45))
+                process_share = float(_param("refine_poses_live_bridge_cpu", 0.48))
                 refinement = BackgroundPoses(refinement, cpu_share=float(_param("refine_poses_live_cpu", 0.07)),
                                              process_share=process_share if process_share > 0 else None)
         loops = None

@@ -82,6 +82,15 @@ CONVERGED_ITERATIONS = 20
 # last run took 1,810-2,136 of 2,500.
 MIN_TAKEN_SHARE = 0.5
 
+# A run moves at most this many pose blocks (refine_model --epipolar-max-blocks): past it the
+# keyframes move in runs of consecutive ids, each rigidly. The stage's sparse Cholesky
+# factorisation is what grows with the session: on the other walk's 30-minute project (7,600
+# keyframes, from the node's poses, one thread) 10 iterations took 17.9 s with a block a keyframe
+# (898.5 -> 371.9 mm) and 5.7 s with 2,000 blocks (226.4 mm); 30 iterations 44.9 s (273.0 mm)
+# and 14.7 s (120.4 mm); 1,000 blocks were cheaper (10.6 s) and worse (208.2 mm). Sessions of
+# up to 2,000 keyframes (about 10 minutes) are not affected.
+MAX_BLOCKS = 2000
+
 
 def finish_converges(max_seconds, matched):
     """Whether a finish of `max_seconds` (0: no limit) refines a model of `matched` matched
@@ -222,7 +231,8 @@ class BackgroundPoses:
                                                 os.path.join(folder, "input"), os.path.join(folder, "output"),
                                                 os.path.join(folder, "report.json"), options,
                                                 reference=os.path.join(folder, "reference"), matches=matches)
-            args += ["--epipolar-only", "--epipolar-iterations", str(self.iterations)]
+            args += ["--epipolar-only", "--epipolar-iterations", str(self.iterations),
+                     "--epipolar-max-blocks", str(MAX_BLOCKS)]
             proc = refiner.start_refine_model(args, getattr(work.project, "log_path", None))
         except (OSError, refiner.RefinementError, colmap_model.ModelError, KeyError, ValueError) as e:
             shutil.rmtree(folder, ignore_errors=True)
