@@ -321,6 +321,63 @@ def test_a_finish_from_earlier_poses_starts_there_and_measures_against_the_given
     assert not [n for n in os.listdir(tmp_path / "full" / "sparse") if n.startswith(".start_")]
 
 
+def as_table(model):
+    """The model with its points as a colmap.model.PointTable (as the live model hands them)."""
+    ids = sorted(model.points)
+    points = [model.points[i] for i in ids]
+    counts = [len(p.image_ids) for p in points]
+    table = cm.PointTable(ids, [p.xyz for p in points], [p.rgb for p in points], [p.error for p in points],
+                          np.concatenate([[0], np.cumsum(counts)]),
+                          np.concatenate([p.image_ids for p in points]), np.concatenate([p.point2D_idxs for p in points]))
+    return cm.Model(dict(model.cameras), dict(model.images), table)
+
+
+def test_a_finish_from_earlier_poses_its_budget_cannot_refine_makes_that_model_without_refine_model(tmp_path):
+    """The finish from the runs' poses on a model its budget pays nothing for (30 minutes): given
+    the live model, the model at the start poses is made here (refiner.carried), and is the one
+    refine_model --start gives out of time: the same poses, points, reprojection errors and
+    corrections against the given poses."""
+    exact = arc_poses()
+    database = str(tmp_path / "database.db")
+    m = known_pose_model(exact, drift.add_drift(exact, 0.02, 0.3, seed=3), np.random.default_rng(11),
+                         database=database)
+    project = FakeProject(str(tmp_path))
+    project.database = database
+    half = drift.add_drift(exact, 0.01, 0.15, seed=3)
+    start = {iid: geometry.world_to_camera(*half[iid - 1]) for iid in m.images}
+    matched = refiner.count_matched_observations(database)
+    budget = 0.5 * skipped_below(m, matched)
+    out, sections, logged = {}, {}, []
+    for folder, given in (("refine_model", None), ("here", as_table(m))):
+        model = tmp_path / folder / "sparse" / "0"
+        cm.write_model(m, str(model))
+        sections[folder] = refiner.ModelRefinement(
+            refiner.RefinementOptions(max_seconds=budget), tool=refine_tool(),
+            log=lambda level, text: logged.append(text)).apply(project, str(model), model=given, matched=matched,
+                                                                start_poses=start)
+        out[folder] = cm.read_model(str(model))
+        assert sections[folder]["status"] == "out_of_time" and not sections[folder]["refined"]
+        assert "started_from" in sections[folder]
+    assert "refine_model not started" in sections["here"]["message"], sections["here"]["message"]
+    assert "refine_model not started" not in sections["refine_model"]["message"]
+    assert np.allclose(centres(out["here"]), [c for c, _ in half], atol=1e-9)
+    assert np.allclose(centres(out["here"]), centres(out["refine_model"]), atol=1e-9)
+    a, b = out["here"].points, out["refine_model"].points
+    assert len(a) == len(b) == len(m.points)
+    for pid in m.points:
+        assert np.allclose(a[pid].xyz, b[pid].xyz, atol=1e-7), pid
+    # refine_model reports the error at the start poses (its points3D.bin keeps the input's)
+    made = out["here"].statistics()["reprojection_error"]
+    assert made == pytest.approx(sections["refine_model"]["reprojection_error"][1], rel=1e-6)
+    assert sections["here"]["reprojection_error"] == [pytest.approx(made)] * 2
+    assert made > 2.0 * m.statistics()["reprojection_error"]  # the drift left is seen
+    ours = {k["name"]: k for k in sections["here"]["keyframes"]}
+    for k in sections["refine_model"]["keyframes"]:
+        assert ours[k["name"]]["translation"] == pytest.approx(k["translation"], abs=1e-7)
+        assert ours[k["name"]]["rotation_deg"] == pytest.approx(k["rotation_deg"], abs=1e-6)
+    assert not [n for n in os.listdir(tmp_path / "here" / "sparse") if n.startswith(".start_")]
+
+
 def skipped_below(model, matched, matches=0):
     """The budget under which the finish does not start refine_model (refiner.not_begun)."""
     return refiner.READING_SECONDS_PER_MATCH * matches + \

@@ -427,14 +427,15 @@ def section_of(report, matches, cpu, seconds, options):
         "seconds": seconds, "options": options.to_json()}
 
 
-def not_begun(model, matched, options, left, matches=0):
+def not_begun(model, matched, options, left, matches=0, at="its input pose"):
     """The `refinement` section of a refinement that would begin nothing, or None. model: the
     model as written (colmap.model.Model), to be refined with its matches; matched: how many
     distinct observations (image, keypoint) those matches hold; left: what is left of
     options.max_seconds [s]; matches: how many refine_model would read (0: not known yet).
     Where what is left after reading them pays for neither the triangulation nor an adjustment
     alone (the constants above), the section is refine_model's own for a budget that pays for
-    nothing (status out_of_time, every image kept at its pose), made without running it."""
+    nothing (status out_of_time, every image kept at its pose: `at` says which), made without
+    running it."""
     statistics = model.statistics()
     observations = statistics["observations"]
     left -= READING_SECONDS_PER_MATCH * matches
@@ -453,13 +454,69 @@ def not_begun(model, matched, options, left, matches=0):
         "status": "out_of_time", "refined": False,
         "message": "the time budget of %g s (%.3g s of it left) would not pay for refining a model of this size (%d "
                    "observations, %d in its matches; epipolar, triangulation, adjustment not begun): refine_model "
-                   "not started, every image keeps its input pose" % (options.max_seconds, left, observations, matched),
+                   "not started, every image keeps %s" % (options.max_seconds, left, observations, matched, at),
         "images": images, "points_input": statistics["points"], "points_refined": statistics["points"],
         "observations_input": observations, "observations_refined": observations, "observations_filtered": 0,
         "reprojection_error_input": error, "reprojection_error_refined": error, "rounds": 0, "iterations": 0,
         "passes": 0, "retriangulations": 0, "not_begun": ["epipolar", "triangulation", "adjustment"],
         "aligned": False, "alignment_scale": 1.0, "seconds": 0.0}
     return section_of(report, 0, 0.0, 0.0, options)
+
+
+def carried(model, poses):
+    """The model with its images at `poses` ({image id: (qvec, tvec)}; an image without one as it
+    is), each point moved with the first image of its track, as refine_model --start moves them
+    (it stays where it was in that image's camera), and its reprojection error computed anew at
+    the new poses (PINHOLE or SIMPLE_PINHOLE cameras). None where the points are not a
+    colmap.model.PointTable (the live model's) or a camera is of another model."""
+    table = model.points
+    if not isinstance(table, colmap_model.PointTable):
+        return None
+    intrinsics = {}
+    for cid, cam in model.cameras.items():
+        if cam.model == "PINHOLE":
+            intrinsics[cid] = tuple(cam.params[:4])
+        elif cam.model == "SIMPLE_PINHOLE":
+            intrinsics[cid] = (cam.params[0], cam.params[0], cam.params[1], cam.params[2])
+        else:
+            return None
+    ids = np.array(sorted(model.images), np.int64)
+    images = {}
+    for iid in ids.tolist():
+        im = model.images[iid]
+        q, t = poses.get(iid, (im.qvec, im.tvec))
+        images[iid] = colmap_model.Image(iid, q, t, im.camera_id, im.name, im.xys, im.point3D_ids)
+
+    def frames(of):
+        return (np.stack([geometry.rotation_of(of[i].qvec) for i in ids.tolist()]).reshape(-1, 3, 3),
+                np.array([of[i].tvec for i in ids.tolist()], float).reshape(-1, 3))
+    r_old, t_old = frames(model.images)
+    r_new, t_new = frames(images)
+    if len(table) == 0:
+        return colmap_model.Model(dict(model.cameras), images, table)
+    counts = np.diff(table.offsets)
+    obs = np.searchsorted(ids, table.image_ids)
+    if np.any(obs >= len(ids)) or np.any(ids[np.minimum(obs, len(ids) - 1)] != table.image_ids):
+        return None  # a track names an image the model does not hold
+    first = obs[table.offsets[:-1][counts > 0]]
+    xyz = table.xyz.copy()
+    has = counts > 0
+    in_camera = np.einsum("nij,nj->ni", r_old[first], xyz[has]) + t_old[first]
+    xyz[has] = np.einsum("nji,nj->ni", r_new[first], in_camera - t_new[first])
+    owner = np.repeat(np.arange(len(table)), counts)
+    p = np.einsum("nij,nj->ni", r_new[obs], xyz[owner]) + t_new[obs]
+    k = np.array([intrinsics[images[i].camera_id] for i in ids.tolist()], float).reshape(-1, 4)[obs]
+    sizes = np.array([len(images[i].xys) for i in ids.tolist()], np.int64)
+    base = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    xys = np.concatenate([images[i].xys for i in ids.tolist()]) if sizes.sum() else np.zeros((0, 2))
+    seen = xys[base[obs] + table.point2D_idxs]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        projected = np.stack([k[:, 0] * p[:, 0] / p[:, 2] + k[:, 2], k[:, 1] * p[:, 1] / p[:, 2] + k[:, 3]], axis=1)
+        error = np.linalg.norm(projected - seen, axis=1)
+        mean = np.bincount(owner, error, len(table)) / np.maximum(counts, 1)
+    mean = np.where(has & np.isfinite(mean), mean, -1.0)
+    return colmap_model.Model(dict(model.cameras), images, colmap_model.PointTable(
+        table.ids, xyz, table.rgb, mean, table.offsets, table.image_ids, table.point2D_idxs))
 
 
 def model_statistics(report):
@@ -528,8 +585,31 @@ class ModelRefinement:
         start = time.monotonic()
         try:
             keep_copy(model_path, unrefined)
-            options, started = self.options, None
-            if start_poses:
+            options, started, section = self.options, None, None
+            if start_poses and model is not None:
+                # A budget that pays for nothing from there (a 30-minute session's finish): the
+                # model at the start poses made here, refine_model not started (it read, set up
+                # and wrote for 4-5 s to give the same).
+                import copy
+                at_start = carried(model, start_poses)
+                if at_start is not None:
+                    cut = copy.copy(options)
+                    cut.epipolar = False
+                    section = not_begun(at_start, matched, cut, cut.max_seconds - (time.monotonic() - start),
+                                        at="the pose it started from")
+                if section is not None:
+                    made = tempfile.mkdtemp(prefix=".start_", dir=os.path.dirname(os.path.abspath(model_path)))
+                    try:
+                        colmap_model.write_model(at_start, made, binary=True)
+                        durable.replace_folder(made, model_path)
+                    finally:
+                        shutil.rmtree(made, ignore_errors=True)
+                    self.log("info", "refinement: %s" % section["message"])
+                    moved = corrections(model, at_start)  # against the given poses, as refine_model's
+                    for k in section["keyframes"]:
+                        k["translation"], k["rotation_deg"] = moved.get(k["name"], (0.0, 0.0))
+                    section["seconds"] = time.monotonic() - start
+            if start_poses and section is None:
                 folder = tempfile.mkdtemp(prefix=".start_", dir=os.path.dirname(os.path.abspath(model_path)))
                 started = write_poses(model if model is not None else colmap_model.read_model(model_path),
                                       start_poses, os.path.join(folder, "start"))
@@ -543,11 +623,12 @@ class ModelRefinement:
                 # the start poses (not_begun's shortcut would leave the node's).
                 model = None
             try:
-                section = refine(model_path, model_path, options, database=project.database, tool=self.tool,
-                                 log_path=project.log_path, deadline=project.deadline,
-                                 log=lambda text: self.log("info", text), progress=self.progress,
-                                 budget_start=start, model=model, matched=matched, start_model=started,
-                                 max_matches=STRONGEST_MATCHES if started else 0)
+                if section is None:
+                    section = refine(model_path, model_path, options, database=project.database, tool=self.tool,
+                                     log_path=project.log_path, deadline=project.deadline,
+                                     log=lambda text: self.log("info", text), progress=self.progress,
+                                     budget_start=start, model=model, matched=matched, start_model=started,
+                                     max_matches=STRONGEST_MATCHES if started else 0)
             finally:
                 if started:
                     shutil.rmtree(os.path.dirname(started), ignore_errors=True)
