@@ -378,6 +378,40 @@ def test_a_finish_from_earlier_poses_its_budget_cannot_refine_makes_that_model_w
     assert not [n for n in os.listdir(tmp_path / "here" / "sparse") if n.startswith(".start_")]
 
 
+def test_the_runs_matches_kept_between_runs_are_the_file_write_matches_writes(tmp_path):
+    """refiner.SampledMatches (the runs while the recording goes on): written again as the
+    database changes (a pair verified anew with other inliers, a pair that lost its geometry, a
+    pair added), the file is write_matches(per_pair=...)'s byte for byte, and a pair whose inliers
+    did not change is not read again."""
+    from view_selection.colmap import database as cdb
+    exact = arc_poses()
+    database = str(tmp_path / "database.db")
+    known_pose_model(exact, drift.add_drift(exact, 0.02, 0.3, seed=3), np.random.default_rng(5), database=database)
+    sampled = refiner.SampledMatches(8)
+    added = (29, 30)  # verified only later
+    with cdb.open_database(database) as d:
+        d.con.execute("DELETE FROM two_view_geometries WHERE pair_id = ?", (cdb.pair_id(*added),))
+
+    def same():
+        sampled.write(database, str(tmp_path / "kept.bin"))
+        refiner.write_matches(database, str(tmp_path / "read.bin"), per_pair=8)
+        return open(str(tmp_path / "kept.bin"), "rb").read() == open(str(tmp_path / "read.bin"), "rb").read()
+    assert same()
+    with cdb.open_database(database) as d:
+        pairs = sorted(p for p, n in d.inlier_counts().items() if n > 10)
+        (a, b), (c, e) = pairs[0], pairs[1]
+        d.write_two_view_geometry(a, b, d.matches(a, b, "two_view_geometries")[::2])  # matched again
+        d.con.execute("DELETE FROM two_view_geometries WHERE pair_id = ?", (cdb.pair_id(c, e),))
+        d.write_two_view_geometry(*added, np.stack([np.arange(20), np.arange(20)], axis=1))
+    unchanged = pairs[2]
+    kept = {p: rows for p, (_, rows) in sampled.pairs.items()}
+    assert added not in kept
+    assert same()
+    assert (c, e) not in sampled.pairs and added in sampled.pairs
+    assert sampled.pairs[(a, b)][1] is not kept[(a, b)]
+    assert sampled.pairs[unchanged][1] is kept[unchanged]  # not read again
+
+
 def skipped_below(model, matched, matches=0):
     """The budget under which the finish does not start refine_model (refiner.not_begun)."""
     return refiner.READING_SECONDS_PER_MATCH * matches + \

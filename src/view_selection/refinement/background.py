@@ -120,6 +120,7 @@ class BackgroundPoses:
         self.log = finish.log
         self.cpu_share, self.iterations = float(cpu_share), int(iterations)
         self.matches_per_pair, self.max_seconds = int(matches_per_pair), float(max_seconds)
+        self.matches = refiner.SampledMatches(self.matches_per_pair)  # each verified pair's, kept between runs
         self.finish_wait = float(finish_wait)
         self.clock = clock
         self.charge = charge
@@ -223,7 +224,7 @@ class BackgroundPoses:
                                                                  im.point3D_ids)
             colmap_model.write_model(at_node, os.path.join(folder, "input"), binary=True)
             matches = os.path.join(folder, "matches.bin")
-            refiner.write_matches(work.project.database, matches, per_pair=self.matches_per_pair)
+            self.matches.write(work.project.database, matches)
             options = copy.copy(self.finish_refinement.options)
             options.threads, options.max_seconds = 1, self.max_seconds
             options.timeout = 4.0 * self.max_seconds + 30.0
