@@ -15,6 +15,7 @@ without filtering and re-triangulation follows them (issue 29: COLMAP's bundle_a
 drifted DTU set 7.3x worse). The seam: `refine(model folder, which images stay fixed, the
 database) -> the refined folder + the report's section`, with the per-keyframe corrections.
 """
+import copy
 import json
 import os
 import shutil
@@ -410,7 +411,6 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
         if options.max_seconds > 0:
             # What is left of the budget (at least a moment: refine_model then returns the model
             # as it came, with status out_of_time, and still reports its figures).
-            import copy
             spent = time.monotonic() - begun
             options = copy.copy(options)
             options.max_seconds = max(1e-3, options.max_seconds - spent)
@@ -622,39 +622,18 @@ class ModelRefinement:
         try:
             keep_copy(model_path, unrefined)
             options, started, section = self.options, None, None
-            if start_poses and model is not None:
-                # A budget that pays for nothing from there (a 30-minute session's finish): the
-                # model at the start poses made here, refine_model not started (it read, set up
-                # and wrote for 4-5 s to give the same).
-                import copy
-                at_start = carried(model, start_poses)
-                if at_start is not None:
-                    cut = copy.copy(options)
-                    cut.epipolar = False
-                    section = not_begun(at_start, matched, cut, cut.max_seconds - (time.monotonic() - start),
-                                        at="the pose it started from")
-                if section is not None:
-                    made = tempfile.mkdtemp(prefix=".start_", dir=os.path.dirname(os.path.abspath(model_path)))
-                    try:
-                        colmap_model.write_model(at_start, made, binary=True)
-                        durable.replace_folder(made, model_path)
-                    finally:
-                        shutil.rmtree(made, ignore_errors=True)
-                    self.log("info", "refinement: %s" % section["message"])
-                    moved = corrections(model, at_start)  # against the given poses, as refine_model's
-                    for k in section["keyframes"]:
-                        k["translation"], k["rotation_deg"] = moved.get(k["name"], (0.0, 0.0))
-                    section["seconds"] = time.monotonic() - start
+            if start_poses:
+                # Their epipolar stage is done: the finish's own from there moved the median Sampson
+                # distance 0.26 -> 0.20 px in 1.3 s of its 5 (the 1-minute walk); without it the
+                # adjustment had that time too: 6.5 mm against 33 (the 10-minute walk, offline).
+                options = copy.copy(options)
+                options.epipolar = False
+                if model is not None:
+                    section = self._made_at_start(model_path, model, matched, start_poses, options, start)
             if start_poses and section is None:
                 folder = tempfile.mkdtemp(prefix=".start_", dir=os.path.dirname(os.path.abspath(model_path)))
                 started = write_poses(model if model is not None else colmap_model.read_model(model_path),
                                       start_poses, os.path.join(folder, "start"))
-                # Their epipolar stage is done: the finish's own from there moved the median Sampson
-                # distance 0.26 -> 0.20 px in 1.3 s of its 5 (the 1-minute walk); without it the
-                # adjustment had that time too: 6.5 mm against 33 (the 10-minute walk, offline).
-                import copy
-                options = copy.copy(options)
-                options.epipolar = False
                 # refine_model runs whatever the budget: out of time, its output is the model at
                 # the start poses (not_begun's shortcut would leave the node's).
                 model = None
@@ -689,4 +668,30 @@ class ModelRefinement:
             self.log("warn", "refinement: %d keyframes kept their input pose (%s: %s)" % (
                 len(section["keyframes_kept"]), section["keyframes_kept"][0]["name"],
                 section["keyframes_kept"][0]["why"]))
+        return section
+
+    def _made_at_start(self, model_path, model, matched, start_poses, options, start):
+        """The finish from `start_poses` on a `model` its budget pays nothing for from there (a
+        30-minute session's): the model at those poses made here (carried) and written to
+        `model_path`, and not_begun's section with the corrections against the given poses. None
+        where the budget pays for something or carried cannot make the model: refine_model
+        --start runs then (at 30 minutes it read, set up and wrote for 4-5 s to give the same)."""
+        at_start = carried(model, start_poses)
+        if at_start is None:
+            return None
+        section = not_begun(at_start, matched, options, options.max_seconds - (time.monotonic() - start),
+                            at="the pose it started from")
+        if section is None:
+            return None
+        made = tempfile.mkdtemp(prefix=".start_", dir=os.path.dirname(os.path.abspath(model_path)))
+        try:
+            colmap_model.write_model(at_start, made, binary=True)
+            durable.replace_folder(made, model_path)
+        finally:
+            shutil.rmtree(made, ignore_errors=True)
+        self.log("info", "refinement: %s" % section["message"])
+        moved = corrections(model, at_start)  # against the given poses, as refine_model's
+        for k in section["keyframes"]:
+            k["translation"], k["rotation_deg"] = moved.get(k["name"], (0.0, 0.0))
+        section["seconds"] = time.monotonic() - start
         return section
