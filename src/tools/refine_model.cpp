@@ -62,7 +62,7 @@ Cameras must be PINHOLE or SIMPLE_PINHOLE.
   --epipolar-loss-scale PX       ... under a Huber loss from PX (default 4) ...
   --epipolar-time-share F        ... within F of the time budget (default 0.3) ...
   --epipolar-iterations N        ... and N Ceres iterations at most (default 100)
-  --epipolar-max-blocks N  ... with the moving images in at most N runs of consecutive ids, each
+  --epipolar-max-blocks N  ... with the images in at most N runs of consecutive ids, each
                      moving rigidly (default 0: every image on its own)
   --epipolar-only    with --matches: the epipolar stage alone, on the whole budget; the output
                      holds its poses (aligned to the input's) and no points (status epipolar_only)

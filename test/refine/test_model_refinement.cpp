@@ -786,7 +786,9 @@ TEST_F(Refinement, WithFewerBlocksThanImagesTheEpipolarStageMovesRunsOfConsecuti
     const double turned = relative(out, id, id + 1).angularDistance(relative(input, id, id + 1));
     if ((id - 1) / 3 == id / 3) {  // ids 1-3, 4-6, ...: one run each
       EXPECT_LT(turned, 1e-9) << id;
-      if (id % 3 == 1) EXPECT_NEAR(ratio(input, id, id + 1, id + 2), ratio(out, id, id + 1, id + 2), 1e-9) << id;
+      if (id % 3 == 1) {
+        EXPECT_NEAR(ratio(input, id, id + 1, id + 2), ratio(out, id, id + 1, id + 2), 1e-9) << id;
+      }
     } else if (turned > 1e-4) {
       ++across_moved;
     }

@@ -67,10 +67,10 @@ struct RefinementConfig {
   double epipolar_loss_scale = 4.0;
   double epipolar_time_share = 0.3;
   int epipolar_max_iterations = 100;
-  /// At most this many pose blocks in the epipolar stage (0: one a moving image): with more
-  /// moving images, they move in runs of consecutive image ids (a SLAM system's keyframes in
-  /// their order), each run rigidly with its first image, so that its linear solve stays the
-  /// size of a shorter session's. Its sparse Cholesky factorisation is what grows: 1.3 s an
+  /// At most this many pose blocks in the epipolar stage (0: one an image): with more images
+  /// (those not kept), they move in runs of consecutive image ids (a SLAM system's keyframes in
+  /// their order), each run rigidly with its first image (a run holding an image the gauge holds
+  /// is held), so that its linear solve stays the size of a shorter session's. Its sparse Cholesky factorisation is what grows: 1.3 s an
   /// iteration of the 15.1 s of a 30-minute walk's 7,600 keyframes (docs/live.md). Drift within
   /// a run of consecutive keyframes is what the finish's adjustment corrects.
   size_t epipolar_max_blocks = 0;
