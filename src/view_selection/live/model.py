@@ -28,6 +28,8 @@ Cameras, keypoints and poses are in COLMAP's convention (the database's keypoint
 principal points shifted by half a pixel, world-to-camera poses), so the model written is the one
 point_triangulator would start from, with its points.
 """
+from itertools import compress
+
 import numpy as np
 
 from .. import geometry, triangulation
@@ -35,13 +37,14 @@ from ..colmap import model as colmap_model
 
 
 class _Image:
-    __slots__ = ("id", "name", "camera_id", "r", "t", "centre", "k", "keypoints")
+    __slots__ = ("id", "name", "camera_id", "r", "t", "centre", "k", "intrinsics", "keypoints")
 
     def __init__(self, iid, name, camera_id, qvec, tvec, params, keypoints):
         self.id, self.name, self.camera_id = iid, name, camera_id
         self.set_pose(qvec, tvec)
-        fx, fy, cx, cy = params[:4]
+        fx, fy, cx, cy = (float(v) for v in params[:4])
         self.k = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+        self.intrinsics = (fx, fy, cx, cy)
         self.keypoints = np.asarray(keypoints, np.float64).reshape(len(keypoints), -1)[:, :2] if len(keypoints) \
             else np.zeros((0, 2))
 
@@ -122,6 +125,9 @@ class LiveModel:
     # -- tracks ------------------------------------------------------------------------------
     def _find(self, o):
         parent = self.parent
+        up = parent.get(o)
+        if up is None or up == o:
+            return o  # a lone observation, or a root: most of what a match looks up
         root = o
         while parent.get(root, root) != root:
             root = parent[root]
@@ -132,42 +138,51 @@ class LiveModel:
     def add_matches(self, id1, id2, matches):
         """Verified matches of a pair (M x 2 keypoint indices of id1 and id2)."""
         self.matched_pairs.add((min(id1, id2), max(id1, id2)))
-        for k1, k2 in np.asarray(matches, np.int64).reshape(-1, 2):
-            a, b = (id1, int(k1)), (id2, int(k2))
-            ra, rb = self._find(a), self._find(b)
+        find, members, by_image = self._find, self.members, self.by_image
+        for k1, k2 in np.asarray(matches, np.int64).reshape(-1, 2).tolist():
+            ra, rb = find((id1, k1)), find((id2, k2))
             if ra == rb:
                 continue
-            ma = self.members.get(ra) or {a[0]: a[1]}
-            mb = self.members.get(rb) or {b[0]: b[1]}
-            if any(img in ma and ma[img] != kp for img, kp in mb.items()):
+            # A lone observation (no track yet) is its own root and has nothing to clear.
+            ma, mb = members.get(ra), members.get(rb)
+            lone_a, lone_b = ma is None, mb is None
+            if lone_a:
+                ma = {id1: k1}
+            if lone_b:
+                mb = {id2: k2}
+            if len(ma) < len(mb):
+                ra, rb, ma, mb, lone_a, lone_b = rb, ra, mb, ma, lone_b, lone_a
+            # an image both tracks see with different keypoints (looked for in the smaller one)
+            if any(ma.get(img, kp) != kp for img, kp in mb.items()):
                 self.conflicts += 1
                 continue
-            if len(ma) < len(mb):
-                ra, rb, ma, mb = rb, ra, mb, ma
-            lone = ra not in self.members  # a lone observation: no image knows its root yet
             self.parent[rb] = ra
             self.parent.setdefault(ra, ra)
             ma.update(mb)
-            self.members[ra] = ma
-            self.members.pop(rb, None)
-            if self.points.pop(rb, None) is not None or rb in self.full:
-                if self.changed is not None:
-                    self.changed.add(rb)
-                if not self._extensible(ra, self.full):
-                    self.full.add(ra)  # two points (or one to redo) become one: triangulated from scratch
-                # else rb's observations join ra's point as a growing track's do (pending, below):
-                # each where it projects within max_error_px, and the whole triangulated again once
-                # the point's observations would double (the cost of a merge is the smaller side's)
-            self.full.discard(rb)
-            self.full_size.pop(rb, None)
-            self.failed_size.pop(rb, None)
-            self.pending.pop(rb, None)
+            members[ra] = ma
+            if not lone_b:
+                del members[rb]
+                if self.points.pop(rb, None) is not None or rb in self.full:
+                    if self.changed is not None:
+                        self.changed.add(rb)
+                    if not self._extensible(ra, self.full):
+                        self.full.add(ra)  # two points (or one to redo) become one: triangulated from scratch
+                    # else rb's observations join ra's point as a growing track's do (pending, below):
+                    # each where it projects within max_error_px, and the whole triangulated again once
+                    # the point's observations would double (the cost of a merge is the smaller side's)
+                self.full.discard(rb)
+                self.full_size.pop(rb, None)
+                self.failed_size.pop(rb, None)
+                self.pending.pop(rb, None)
+                self.dirty.discard(rb)
             self.pending.setdefault(ra, {}).update(mb)  # new to ra's point, if it has one
-            self.dirty.discard(rb)
             self.dirty.add(ra)
-            for img in (ma if lone else mb):  # (ma holds mb's now) ma's images know ra, unless it was lone
-                roots = self.by_image.setdefault(img, set())
-                roots.discard(rb)
+            for img in (ma if lone_a else mb):  # (ma holds mb's now) ma's images know ra, unless it was lone
+                roots = by_image.get(img)
+                if roots is None:
+                    by_image[img] = roots = set()
+                if not lone_b:
+                    roots.discard(rb)
                 roots.add(ra)
 
     def _extensible(self, root, full):
@@ -220,18 +235,15 @@ class LiveModel:
         rows = [(root, img, kp) for root, new in extend for img, kp in new.items()]
         self.observations_triangulated += len(rows)
         x = np.array([self.points[root][0] for root, _, _ in rows])                          # N x 3
-        ims = [self.images[img] for _, img, _ in rows]
-        r = np.array([im.r for im in ims])
-        t = np.array([im.t for im in ims])
-        k = np.array([im.k for im in ims])
-        xy = np.array([im.keypoints[kp] for im, (_, _, kp) in zip(ims, rows)])               # N x 2
+        r, t, k, xy = self._gather(np.fromiter((img for _, img, _ in rows), np.int64, len(rows)),
+                                   np.fromiter((kp for _, _, kp in rows), np.int64, len(rows)))
         pc = np.einsum("nij,nj->ni", r, x) + t
         z = pc[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
-            uv = np.stack([k[:, 0, 0] * pc[:, 0] / z + k[:, 0, 2], k[:, 1, 1] * pc[:, 1] / z + k[:, 1, 2]], 1)
+            uv = np.stack([k[:, 0] * pc[:, 0] / z + k[:, 2], k[:, 1] * pc[:, 1] / z + k[:, 3]], 1)
             errors = np.linalg.norm(uv - xy, axis=1)
         ok = np.isfinite(errors) & (z > 0) & (errors <= self.max_error_px)
-        for (root, img, kp), good, e in zip(rows, ok, errors):
+        for (root, img, kp), good, e in zip(rows, ok.tolist(), errors.tolist()):
             if good:
                 xyz, mean, obs = self.points[root]
                 obs[img] = kp  # the point's own dict (made by the triangulation): no copy per observation
@@ -240,20 +252,20 @@ class LiveModel:
     def _triangulate(self, tracks):
         """Points of the tracks [(root, {image id: keypoint})] by the package's one triangulation
         (triangulation.py: the C++ of refine_model's re-triangulation), all in one call."""
-        rows = [(root, img, kp) for root, obs in tracks for img, kp in obs.items()]
-        self.observations_triangulated += len(rows)
-        ims = [self.images[img] for _, img, _ in rows]
+        lengths = [len(obs) for _, obs in tracks]
+        total = sum(lengths)
+        self.observations_triangulated += total
+        r, t, k, xy = self._gather(np.fromiter((img for _, obs in tracks for img in obs), np.int64, total),
+                                   np.fromiter((kp for _, obs in tracks for kp in obs.values()), np.int64, total))
         points, ok, mean_error, inlier = triangulation.triangulate_tracks(
-            [len(obs) for _, obs in tracks], np.array([im.r for im in ims]), np.array([im.t for im in ims]),
-            np.array([(im.k[0, 0], im.k[1, 1], im.k[0, 2], im.k[1, 2]) for im in ims]),
-            np.array([im.keypoints[kp] for im, (_, _, kp) in zip(ims, rows)]),
-            self.max_error_px, self.min_angle_deg, triangulation.DROP_ONE_BY_ONE)
+            lengths, r, t, k, xy, self.max_error_px, self.min_angle_deg, triangulation.DROP_ONE_BY_ONE)
+        ok, mean_error, inlier = ok.tolist(), mean_error.tolist(), inlier.tolist()
         at = 0
         for q, (root, obs) in enumerate(tracks):
-            kept = {img: kp for (img, kp), good in zip(obs.items(), inlier[at:at + len(obs)]) if good}
+            kept = dict(compress(obs.items(), inlier[at:at + len(obs)]))
             at += len(obs)
             if ok[q]:
-                self.points[root] = (points[q], float(mean_error[q]), kept)
+                self.points[root] = (points[q], mean_error[q], kept)
                 self.full_size[root] = len(kept)
                 self.failed_size.pop(root, None)
             else:
@@ -261,6 +273,23 @@ class LiveModel:
                 self.failed_size[root] = len(self.members.get(root, obs))
         if self.changed is not None:
             self.changed.update(root for root, _ in tracks)  # made, moved or removed
+
+    def _gather(self, img, kp):
+        """Per observation (image ids and keypoint indices, int arrays of N): the world-to-camera
+        rotations N x 3 x 3 and translations N x 3, the intrinsics N x 4 (fx, fy, cx, cy) and the
+        keypoints N x 2, gathered image by image (one lookup an image, not one an observation)."""
+        ids, inverse = np.unique(img, return_inverse=True)
+        ims = [self.images[i] for i in ids.tolist()]
+        r = np.array([im.r for im in ims]).reshape(-1, 3, 3)[inverse]
+        t = np.array([im.t for im in ims]).reshape(-1, 3)[inverse]
+        k = np.array([im.intrinsics for im in ims], np.float64).reshape(-1, 4)[inverse]
+        xy = np.empty((len(img), 2))
+        order = np.argsort(inverse, kind="stable")
+        bounds = np.searchsorted(inverse[order], np.arange(len(ims) + 1)).tolist()
+        for j, im in enumerate(ims):
+            at = order[bounds[j]:bounds[j + 1]]
+            xy[at] = im.keypoints[kp[at]]
+        return r, t, k, xy
 
     # -- the COLMAP model --------------------------------------------------------------------
     def to_model(self, image_ids=None, seen_by=None):
