@@ -36,9 +36,13 @@ class ModelTopics:
         self.view = ModelView(image_dir, frustum_depth)
         self.frame, self.period = frame, max(0.0, float(period))
         self.log = log or (lambda level, text: None)
-        self.points = rospy.Publisher("~points", PointCloud2, queue_size=1, latch=True)
-        self.cameras = rospy.Publisher("~cameras", MarkerArray, queue_size=1, latch=True)
         self.lock = threading.Condition()
+        # Sent only while someone subscribes (a message of a 30-minute session's model took 20 s of
+        # CPU over the session for nobody); one who comes gets the newest state at once.
+        listener = _Arrivals(self.lock)
+        self.points = rospy.Publisher("~points", PointCloud2, queue_size=1, latch=True, subscriber_listener=listener)
+        self.cameras = rospy.Publisher("~cameras", MarkerArray, queue_size=1, latch=True,
+                                       subscriber_listener=listener)
         self.sent = (0, 0)         # the view's (cloud, cameras) versions last published
         self.stopping = False
         self.published = 0         # rounds sent: ~points, and ~cameras when they changed
@@ -101,8 +105,7 @@ class ModelTopics:
         last, pause = 0.0, self.period
         while not rospy.is_shutdown():
             with self.lock:
-                while not self.stopping and self.pending is None and (
-                        self.sent == (self.view.cloud_version, self.view.cameras_version) or not self.frame()):
+                while not self.stopping and self.pending is None and (not any(self._due()) or not self.frame()):
                     self.lock.wait(1.0)
                     if rospy.is_shutdown():
                         return
@@ -131,26 +134,47 @@ class ModelTopics:
                     "send_cpu_seconds": round(self.send_cpu, 4), "points": len(self.view.cloud()),
                     "cameras": len(self.view.frusta()), "images_decoded": self.view.colours.decoded}
 
+    def _due(self):
+        """(~points, ~cameras): whether each has a subscriber and a state it was not sent. Under
+        `lock`."""
+        return (self.view.cloud_version != self.sent[0] and self.points.get_num_connections() > 0,
+                self.view.cameras_version != self.sent[1] and self.cameras.get_num_connections() > 0)
+
     def publish(self):
-        """One round: what changed since the last, sent; returns its CPU [s]."""
+        """One round: what changed since the last, sent to the topics someone subscribes to;
+        returns its CPU [s]."""
         start = time.thread_time()
         frame = self.frame()
         with self.lock:  # a consistent snapshot: the buffer's bytes and the frusta as they are now
             versions = (self.view.cloud_version, self.view.cameras_version)
-            cloud = self.view.cloud()
-            payload, count = cloud.payload(), len(cloud)
-            frusta = list(self.view.frusta()) if versions[1] != self.sent[1] else None
+            points_due, cameras_due = self._due()
+            if points_due:
+                cloud = self.view.cloud()
+                payload, count = cloud.payload(), len(cloud)
+            frusta = list(self.view.frusta()) if cameras_due else None
         stamp = rospy.Time.now()
-        if versions[0] != self.sent[0]:
+        if points_due:
             self.points.publish(cloud_message(payload, count, frame, stamp))
         if frusta is not None:
             self.cameras.publish(camera_markers(frusta, frame, stamp, self.view.frustum_depth, self.markers))
         with self.lock:
-            self.sent = versions
+            self.sent = (versions[0] if points_due else self.sent[0], versions[1] if cameras_due else self.sent[1])
             self.published += 1
             cost = time.thread_time() - start
             self.send_cpu += cost
         return cost
+
+
+class _Arrivals(rospy.SubscribeListener):
+    """Wakes the sending thread when a subscriber comes: what it has not been sent goes out."""
+
+    def __init__(self, condition):
+        super().__init__()
+        self.condition = condition
+
+    def peer_subscribe(self, topic_name, topic_publish, peer_publish):
+        with self.condition:
+            self.condition.notify_all()
 
 
 def cloud_message(payload, count, frame, stamp):

@@ -521,6 +521,23 @@ class LiveBridge(unittest.TestCase):
         finally:
             late.close()
 
+    def test_a_model_nobody_watches_is_not_sent_until_someone_comes(self):
+        """Nothing subscribes to bridge_c's ~points and ~cameras during the run: its report counts
+        no message sent. One who comes then gets its finished model at once."""
+        report = json.load(open(os.path.join(self.c, 'report.json')))
+        self.assertEqual(0, report['model_topics']['messages'], report['model_topics'])
+        self.assertGreater(report['model_topics']['points'], 100, report['model_topics'])
+        model = read_model(os.path.join(self.c, 'sparse', '0'))
+        late = ModelListener(self.bridge_c.name)
+        try:
+            wait_until(lambda: late.points is not None and late.cameras is not None and
+                       late.points.width == len(model.points), 30.0,
+                       "bridge_c's ~points (sparse/0's %d points) and ~cameras for a subscriber that came "
+                       "after the finish" % len(model.points))
+            self.assertEqual(sorted(model.images), sorted(m.id for m in late.cameras.markers[1:]))
+        finally:
+            late.close()
+
     def test_killed_bridge_ends_like_an_uninterrupted_one(self):
         """The same images extracted (the same keypoints), the same pairs matched and verified.
         COLMAP's CPU SIFT is not bit-reproducible between two runs on the same image (measured:
