@@ -168,16 +168,37 @@ def test_poses_that_disagree_with_the_images_are_matched_by_the_images_geometry(
     assert np.median(np.diag(guided.epipolar_distances(poses_f, fa.xy[r.inliers[:, 0]], fb.xy[r.inliers[:, 1]]))) > 10
 
 
-def test_poses_that_disagree_with_images_that_do_not_match_fall_back():
-    """Neither the poses nor the images give a geometry (b's features are not a's points): the
-    pair goes to COLMAP's matcher, with why."""
+def test_poses_that_disagree_with_images_that_do_not_match_are_not_handed_to_colmap():
+    """Neither the poses nor the images give a geometry, and b's features are not a's points:
+    fewer than min_inliers of them pass COLMAP's own matching tests, so COLMAP's matcher could
+    not verify the pair either. It is not verified (path 'unmatched'), with why, and its matches
+    are those COLMAP's tests pass."""
     a, b, fa, fb, _ = synthetic_pair(seed=2)
     rng = np.random.default_rng(7)
     other = rng.normal(size=fb.descriptors.shape).astype(np.float32)
     fb = Features(fb.xy, np.ones(len(fb.xy)), np.zeros(len(fb.xy)), other / np.linalg.norm(other, axis=1, keepdims=True))
     r = guided.match_pair(fa, fb, a, tilted(b))
-    assert r.path == guided.FALLBACK
-    assert "epipolar" in r.why
+    assert r.path == guided.UNMATCHED, r.why
+    assert "epipolar" in r.why and "pass COLMAP's tests" in r.why
+    loose = guided.mutual_ratio_matches(fa.descriptors @ fb.descriptors.T, 0.8, 0.7)
+    assert len(loose) < 15
+    np.testing.assert_array_equal(loose, r.matches)
+    assert len(r.inliers) == 0 and r.geometry is None
+
+
+def test_poses_that_disagree_with_features_that_match_without_a_geometry_fall_back():
+    """The features match (a's points, seen again) but their places in b give no geometry (b's
+    keypoints scattered at random), and the poses disagree: enough matches pass COLMAP's tests
+    for its matcher to try, so the pair goes to it, with why."""
+    a, b, fa, fb, n = synthetic_pair(seed=2, n=150, distractors=100)
+    rng = np.random.default_rng(5)
+    xy = fb.xy.copy()
+    xy[:n] = rng.uniform([0, 0], [640, 480], (n, 2))
+    fb = Features(xy, np.ones(len(xy)), np.zeros(len(xy)), fb.descriptors)
+    r = guided.match_pair(fa, fb, a, tilted(b))
+    assert r.path == guided.FALLBACK, r.why
+    assert "epipolar" in r.why and "inliers of" not in r.why
+    assert len(guided.mutual_ratio_matches(fa.descriptors @ fb.descriptors.T, 0.8, 0.7)) >= 15
 
 
 def test_no_baseline_falls_back():
@@ -238,3 +259,11 @@ def test_an_unreadable_image_is_a_clear_error(tmp_path):
     bad.write_bytes(b"not an image")
     with pytest.raises(ValueError, match="cannot read"):
         SiftExtractor().extract_file(str(bad))
+
+
+def test_fewer_features_than_colmap_verifies_are_not_handed_to_it():
+    a, b, fa, fb, _ = synthetic_pair()
+    few = Features(fb.xy[:14], fb.scale[:14], fb.orientation[:14], fb.descriptors[:14])
+    r = guided.match_pair(fa, few, a, b)
+    assert r.path == guided.UNMATCHED and "fewer than 15 features" in r.why
+    assert len(r.matches) == 0 and len(r.inliers) == 0

@@ -95,3 +95,53 @@ def test_a_loop_closure_and_a_missing_image_mid_session(tmp_path):
                            atol=1e-6)
     assert report["points"] > 200
     json.dumps(report, default=str)  # what report.json is made of
+
+
+def test_a_pair_whose_images_share_nothing_is_not_handed_to_colmaps_matcher(tmp_path):
+    """A keyframe whose image shows nothing of its neighbour's (a noise texture where the walk
+    was): neither the poses nor the images guide its pair, and fewer than 15 of its features pass
+    COLMAP's matching tests, so COLMAP's matcher is not started for it. It is stored as COLMAP
+    stores a pair it cannot verify (its matches, a two-view geometry of no inliers, DEGENERATE),
+    and COLMAP's own matches_importer, run on the same pair, does not verify it either."""
+    import cv2
+    import sqlite3
+    from view_selection.colmap import database as cdb
+
+    _, selection = walk_selection(tmp_path, 12)
+    export = ExportFolder(str(selection))
+    a, b = export.keyframes[:2]
+    project = ColmapProject(str(tmp_path / "project"), threads=2)
+    os.makedirs(project.images)
+    shutil.copyfile(os.path.join(export.image_root(), a.name), os.path.join(project.images, a.name))
+    os.makedirs(os.path.dirname(os.path.join(project.images, b.name)), exist_ok=True)
+    noise = np.random.default_rng(3).integers(0, 256, (b.height // 8, b.width // 8), np.uint8)
+    cv2.imwrite(os.path.join(project.images, b.name), cv2.resize(noise, (b.width, b.height)))
+    project.open()
+    backend = PoseGuidedBackend(project)
+    work = LiveWork(project, backend=backend)
+    work.extract([a, b])
+    work.match_all([a, b], [(a.name, b.name)])
+    totals = backend.path_totals()
+    assert (totals["unmatched"], totals["fallback"], totals["fallback_runs"]) == (1, 0, 0), totals
+    assert "pass COLMAP's tests" in backend.path_counts()["unmatched_pairs"]["%s %s" % (a.name, b.name)]
+    ids = project.image_ids()
+    with cdb.open_database(project.database) as d:
+        stored = d.two_view_geometry(ids[a.name], ids[b.name])
+        raw = d.matches(ids[a.name], ids[b.name])
+    assert (stored["rows"], stored["config"]) == (0, cdb.DEGENERATE)
+    assert len(raw) < 15
+    assert (a.name, b.name) in project.matched() and project.verified_count() == 0
+
+    # COLMAP's matcher on the same pair, in a copy of the project without it.
+    other = ColmapProject(str(tmp_path / "colmap"), threads=2, image_dir=project.images)
+    os.makedirs(other.root)
+    shutil.copyfile(project.database, other.database)
+    con = sqlite3.connect(other.database)
+    con.execute("DELETE FROM matches")
+    con.execute("DELETE FROM two_view_geometries")
+    con.commit()
+    con.close()
+    other.open()
+    assert other.match([(a.name, b.name)]) == 1
+    with cdb.open_database(other.database) as d:
+        assert d.two_view_geometry(ids[a.name], ids[b.name])["rows"] < 15

@@ -663,7 +663,7 @@ class Bridge:
             stages.update(self.backend.clock.summary())
             totals = self.backend.path_totals()
             values.update({"pairs guided": totals["guided"], "pairs guided by images": totals["images"],
-                           "pairs fallback": totals["fallback"],
+                           "pairs fallback": totals["fallback"], "pairs unmatched": totals["unmatched"],
                            "fallback runs": totals["fallback_runs"]})
         for stage, figures in stages.items():
             values["%s cpu [s]" % stage] = figures["cpu_seconds"]

@@ -174,6 +174,10 @@ class PoseGuidedBackend:
                         fallback.append((a, b))
                         continue
                     d.write_matches(ids[a], ids[b], result.matches)
+                    if result.path == guided.UNMATCHED:  # as COLMAP writes a pair with too few matches
+                        d.write_two_view_geometry(ids[a], ids[b], np.zeros((0, 2), np.int64), db.DEGENERATE)
+                        written.append(((a, b), 0))
+                        continue
                     g = result.geometry  # estimated from the matches, in the database's pixel convention
                     d.write_two_view_geometry(ids[a], ids[b], g.inliers, db.CALIBRATED, F=g.F, E=g.E,
                                               qvec=_quaternion(g.R), tvec=g.t)
@@ -207,26 +211,30 @@ class PoseGuidedBackend:
         self._path_totals[summary["path"]] += 1
 
     def path_totals(self):
-        """{'guided': n, 'images': n, 'fallback': n, 'fallback_runs': n} of the pairs matched so far
-        (by the poses, by the images' geometry, by COLMAP's matcher, and its runs), without looking
-        at each pair
+        """{'guided': n, 'images': n, 'fallback': n, 'unmatched': n, 'fallback_runs': n} of the pairs
+        matched so far (by the poses, by the images' geometry, by COLMAP's matcher, too few matches
+        for COLMAP's to verify, and its runs), without looking at each pair
         (the diagnostics ask once a second; path_counts() formats every pair)."""
         totals = dict(self._path_totals)
         return {"guided": totals.get(guided.GUIDED, 0), "images": totals.get(guided.IMAGES, 0),
-                "fallback": totals.get(guided.FALLBACK, 0), "fallback_runs": self.fallback_runs}
+                "fallback": totals.get(guided.FALLBACK, 0), "unmatched": totals.get(guided.UNMATCHED, 0),
+                "fallback_runs": self.fallback_runs}
 
     def path_counts(self):
-        """Which path the pairs matched so far took: {'guided': n, 'images': n, 'fallback': n} (by the
-        poses, by the images' geometry where the poses disagreed, by COLMAP's matcher), the fallbacks'
-        reasons, the bands of the guided ones (median, 90th percentile, max [px]), and each
+        """Which path the pairs matched so far took: {'guided': n, 'images': n, 'fallback': n,
+        'unmatched': n} (by the poses, by the images' geometry where the poses disagreed, by
+        COLMAP's matcher, not verified: too few matches for COLMAP's), the reasons of the last two, the bands of the guided ones (median, 90th percentile, max [px]), and each
         pair's summary."""
         paths = dict(self.paths)  # a copy taken at once: the diagnostics timer reads it beside the work
         counts = collections.Counter(s["path"] for s in paths.values())
         bands = [s["band_px"] for s in paths.values() if s["path"] == guided.GUIDED]
         return {"guided": counts.get(guided.GUIDED, 0), "images": counts.get(guided.IMAGES, 0),
-                "fallback": counts.get(guided.FALLBACK, 0), "fallback_runs": self.fallback_runs,
+                "fallback": counts.get(guided.FALLBACK, 0), "unmatched": counts.get(guided.UNMATCHED, 0),
+                "fallback_runs": self.fallback_runs,
                 "fallback_pairs": {"%s %s" % p: s.get("why", "") for p, s in sorted(paths.items())
                                    if s["path"] == guided.FALLBACK},
+                "unmatched_pairs": {"%s %s" % p: s.get("why", "") for p, s in sorted(paths.items())
+                                    if s["path"] == guided.UNMATCHED},
                 "band_px": {"median": float(np.median(bands)), "p90": float(np.percentile(bands, 90)),
                             "max": float(max(bands))} if bands else None,
                 "pairs": {"%s %s" % p: s for p, s in sorted(paths.items())}}

@@ -110,8 +110,9 @@ def summary_lines(project):
                                              seeing, stats["points"], stats["reprojection_error"],
                                              stats["track_length"]))
     m = r.get("matching") or {}
-    paths = ("%d guided by the poses, %d by the images' geometry, %d by COLMAP's matcher"
-             % (m.get("guided", 0), m.get("images", 0), m.get("fallback", 0)) if m else "all by COLMAP's matcher")
+    paths = ("%d guided by the poses, %d by the images' geometry, %d by COLMAP's matcher, %d with too few matches "
+             "for it" % (m.get("guided", 0), m.get("images", 0), m.get("fallback", 0), m.get("unmatched", 0))
+             if m else "all by COLMAP's matcher")
     wanted = r.get("final_pairs", 0) + r.get("continuity_pairs", 0)
     lines.append("pairs       %d matched%s (%s), %d verified in the database, %d wasted (matched, not wanted at "
                  "the end)" % (project.counts["pairs_with_geometry"], " of %d wanted" % wanted if wanted else "", paths,

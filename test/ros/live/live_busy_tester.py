@@ -125,8 +125,9 @@ class LiveBusy(unittest.TestCase):
             n = inliers.get(tuple(sorted((ids[a], ids[b]))), 0)
             self.assertGreaterEqual(n, 15, '%s %s: %d inliers' % (a, b, n))
         m = self.report['matching']
-        self.assertEqual(self.report['pairs_matched'], m['guided'] + m['images'] + m['fallback'])
+        self.assertEqual(self.report['pairs_matched'], m['guided'] + m['images'] + m['fallback'] + m['unmatched'])
         self.assertEqual(m['fallback'], len(m['fallback_pairs']))
+        self.assertEqual(m['unmatched'], len(m['unmatched_pairs']))
 
     def test_colmaps_own_commands_read_the_project(self):
         env = dict(os.environ, QT_QPA_PLATFORM='offscreen')
