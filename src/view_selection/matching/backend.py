@@ -223,8 +223,9 @@ class PoseGuidedBackend:
     def path_counts(self):
         """Which path the pairs matched so far took: {'guided': n, 'images': n, 'fallback': n,
         'unmatched': n} (by the poses, by the images' geometry where the poses disagreed, by
-        COLMAP's matcher, not verified: too few matches for COLMAP's), the reasons of the last two, the bands of the guided ones (median, 90th percentile, max [px]), and each
-        pair's summary."""
+        COLMAP's matcher, not verified: too few matches for COLMAP's), the reasons of the last
+        two, the bands of the guided ones (median, 90th percentile, max [px]), and each pair's
+        summary."""
         paths = dict(self.paths)  # a copy taken at once: the diagnostics timer reads it beside the work
         counts = collections.Counter(s["path"] for s in paths.values())
         bands = [s["band_px"] for s in paths.values() if s["path"] == guided.GUIDED]
