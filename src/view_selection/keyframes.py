@@ -71,3 +71,29 @@ def continuity_pairs(keyframes):
     the kitchen). Matched beside the selection's pairs; the selection itself is unchanged."""
     ordered = sorted(keyframes, key=lambda k: k.id)
     return [pair_of(a.name, b.name) for a, b in zip(ordered, ordered[1:])]
+
+
+class ContinuityChain:
+    """continuity_pairs(keyframes) kept up to date as keyframes are appended: a batch adds the new
+    keyframes' pairs (issue 34: its work is what changed), and the chain is built again only when
+    a keyframe does not come after the last one (another session, or ids out of order)."""
+
+    def __init__(self):
+        self.pairs = set()
+        self.last = None  # the keyframe with the largest id so far
+
+    def rebuild(self, keyframes):
+        ordered = sorted(keyframes, key=lambda k: k.id)
+        self.pairs = set(continuity_pairs(ordered))
+        self.last = ordered[-1] if ordered else None
+
+    def extend(self, new):
+        """Adds the pairs of `new` (appended, in their order); False, changing nothing, when one
+        of them does not come after the one before it."""
+        chain = ([self.last] if self.last is not None else []) + list(new)
+        if any(b.id <= a.id for a, b in zip(chain, chain[1:])):
+            return False
+        self.pairs.update(pair_of(a.name, b.name) for a, b in zip(chain, chain[1:]))
+        if chain:
+            self.last = chain[-1]
+        return True

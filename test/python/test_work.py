@@ -408,3 +408,69 @@ def test_a_waiting_fallback_no_longer_wanted_is_not_matched():
     assert work.fallback_waiting.keys() == {pairs[0]}
     work.match(kfs, pairs[1:], quiet=True)  # the node took the pair back
     assert not fallback_runs(project) and not work.fallback_waiting
+
+
+def test_a_batch_wants_what_a_fresh_look_at_the_whole_list_wants():
+    """wanted_pairs keeps the continuity chain and the loop candidates as keyframes come, moved
+    and in a new session: each batch's answer is the one it gives when made to look at the whole
+    list (its scan forgotten: every keyframe changed), as it did before issue 34's batches."""
+    import random
+    from view_selection.matching.loops import LoopOptions
+    rng = random.Random(5)
+
+    def walk(n, session):  # a lap of a 2 m square, again and again: revisits for the loop pairs
+        out = []
+        for i in range(n):
+            s = (0.05 * i) % 8.0
+            x, y = (s, 0.0) if s < 2 else (2.0, s - 2) if s < 4 else (6 - s, 2.0) if s < 6 else (0.0, 8 - s)
+            out.append(Keyframe(i, "%s%04d.png" % (session, i), i, (x, y, 0), (1, 0, 0, 0), (500, 500, 320, 240),
+                                640, 480))
+        return out
+
+    def pairs_of(kfs):
+        return {(a.name, b.name) for a, b in zip(kfs, kfs[3:]) if rng.random() < 0.5}
+
+    work = LiveWork(FailingProject(), continuity=True, loops=LoopOptions())
+    whole = LiveWork(FailingProject(), continuity=True, loops=LoopOptions())
+    session, n, kfs = "a", 0, []
+    for step in range(60):
+        if step == 40:
+            session, n = "b", 10  # another session: fewer keyframes, other images
+        n += rng.randint(0, 12)
+        kfs = walk(n, session)[:n] if step in (0, 40) else kfs[:] + walk(n, session)[len(kfs):n]
+        for _ in range(rng.randint(0, 2)):  # a keyframe the node moved: a new object
+            if kfs:
+                i = rng.randrange(len(kfs))
+                k = kfs[i]
+                kfs[i] = Keyframe(k.id, k.name, k.stamp, (k.position[0], k.position[1], 0.01), k.orientation,
+                                  k.intrinsics, k.width, k.height)
+        announced = pairs_of(kfs)
+        whole.seen["wanted"].forget()
+        wanted = work.wanted_pairs(kfs, announced)
+        assert wanted == whole.wanted_pairs(kfs, announced), step
+        assert {(a.name, b.name) for a, b in zip(kfs, kfs[1:])} <= wanted  # the chain of this list
+    assert work.loops.pairs  # the walk revisits: loop pairs were proposed and compared
+
+
+def test_a_keyframe_whose_image_comes_later_is_extracted_when_it_comes():
+    kfs = keyframes(6)
+    project = FailingProject()
+    arrived = {k.name for k in kfs} - {"002.png", "004.png"}
+    project.has_image = lambda name: name in arrived
+    work = LiveWork(project, continuity=False)
+    work.extract(kfs)
+    assert project.extracted() == arrived
+    more = keyframes(8)
+    more[:6] = kfs  # the same keyframes, two new ones
+    arrived |= {"004.png", "006.png", "007.png"}
+    work.extract(more)
+    assert project.extracted() == arrived
+    arrived.add("002.png")
+    work.extract(more)
+    assert project.extracted() == {k.name for k in more}
+    shorter = [Keyframe(i, "new%03d.png" % i, i, (i, 0, 0), (1, 0, 0, 0), (500, 500, 320, 240), 640, 480)
+               for i in range(3)]
+    arrived |= {k.name for k in shorter}
+    runs = len(project.runs)
+    work.extract(shorter)  # another session: its images, none of the old ones again
+    assert project.runs[runs:] == [("extract", [k.name for k in shorter])]

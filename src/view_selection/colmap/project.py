@@ -212,13 +212,14 @@ class ColmapProject:
             cat.image_added(name, iid, cid, cameras.get(cid))
 
     def extracted(self, refresh=()):
-        """Names of the images with features; `refresh`: names whose rows are read back first
-        (after a step that extracted them)."""
+        """Names of the images with features, as a live set (not a copy: it grows with the
+        session; the caller must not change it, and copies it to keep it); `refresh`: names whose
+        rows are read back first (after a step that extracted them)."""
         cat = self.catalogue()
         if refresh:
             with self.db() as d:
                 cat.read_features(d, refresh)
-        return set(cat.with_features)
+        return cat.with_features
 
     def matched(self, refresh=()):
         """Pairs (name, name), sorted within, that were matched (verified or not), as a live

@@ -23,6 +23,10 @@ class PairStream:
         # that a batch does not convert the whole set again (issue 34); pairs whose keyframes are
         # not known yet wait in _unnamed (ids).
         self._named, self._unnamed = set(), set()
+        # The keyframes ordered by id, kept as they come (a batch does not sort the session again):
+        # a new id beyond the last is appended, a known one replaced where it is; None when it must
+        # be sorted again (an id that came before the last one).
+        self._ordered, self._position = [], {}
         self.sequence = 0
         self.need_sync = True          # until the first ~get_pairs
         self.messages = 0              # applied
@@ -41,13 +45,14 @@ class PairStream:
             self._named, self._unnamed = set(), set()
             if msg.total_keyframes < len(self.keyframes):
                 self.keyframes = {}  # a new session: fewer keyframes than we hold
+                self._ordered, self._position = [], {}
         new = []
         for k in msg.keyframes:
             kf = Keyframe.from_msg(k)
             if kf.id not in self.keyframes:
                 self.last_keyframe_time = self.clock()
                 new.append(kf.id)
-            self.keyframes[kf.id] = kf
+            self._keep(kf)
         if new and self._unnamed:
             for pair in [p for p in self._unnamed if p[0] in self.keyframes and p[1] in self.keyframes]:
                 self._unnamed.discard(pair)
@@ -110,8 +115,25 @@ class PairStream:
                 return
         self.need_sync = False
 
+    def _keep(self, kf):
+        known = kf.id in self.keyframes
+        self.keyframes[kf.id] = kf
+        if self._ordered is None:
+            return
+        if known:
+            self._ordered[self._position[kf.id]] = kf
+        elif not self._ordered or kf.id > self._ordered[-1].id:
+            self._position[kf.id] = len(self._ordered)
+            self._ordered.append(kf)
+        else:
+            self._ordered = None
+
     def ordered_keyframes(self):
-        return sorted(self.keyframes.values(), key=lambda k: k.id)
+        """The keyframes by id, a list of its own."""
+        if self._ordered is None:
+            self._ordered = sorted(self.keyframes.values(), key=lambda k: k.id)
+            self._position = {k.id: i for i, k in enumerate(self._ordered)}
+        return list(self._ordered)
 
     def _name_of(self, pair):
         return pair_of(self.keyframes[pair[0]].name, self.keyframes[pair[1]].name)

@@ -9,9 +9,10 @@ import time
 from .. import geometry
 from ..colmap import durable
 from ..colmap.project import ColmapProject, ProjectError
-from ..keyframes import continuity_pairs, pair_of
+from ..keyframes import ContinuityChain, continuity_pairs, pair_of
 from ..matching.loops import LoopCandidates
 from .attempts import Attempts
+from .changes import KeyframeChanges
 
 
 # Pairs a run of the finish's matching takes (match_all): large enough that COLMAP's fallback
@@ -57,6 +58,13 @@ class LiveWork:
         self.fed_poses = {}        # name -> the pose the model has for it
         self.unfed_pairs = []      # verified pairs (image ids) the live model does not have yet
         self.fed_keyframes = {}    # name -> the Keyframe object last fed with its keypoints
+        # A batch looks at the keyframes that changed since the one before (live/changes.py), and
+        # at those still waiting for something, never at the whole session (issue 34):
+        self.seen = {"extract": KeyframeChanges(), "wanted": KeyframeChanges(), "model": KeyframeChanges()}
+        self.unregistered = {}     # name -> Keyframe: new or moved, not handed to register() yet
+        self.unextracted = {}      # name -> Keyframe: no features yet (no image, failed, or new)
+        self.unfed = {}            # name -> Keyframe: the live model has not taken its pose or keypoints
+        self.chain = ContinuityChain()  # the continuity pairs of the keyframes so far
         self.backlog_max = 0
         self.backlog_before = 0
         self.status = {}  # the last batch's figures: keyframes, images extracted and waiting, pairs
@@ -187,15 +195,27 @@ class LiveWork:
     def extract(self, keyframes):
         """Features of the keyframes whose images are there, that have none and are due.
         Returns how many were tried."""
-        self.backend.register(keyframes)
+        changes = self.seen["extract"].scan(keyframes)
+        if changes.reset:
+            self.unregistered, self.unextracted = {}, {}
+        for k in changes.keyframes:
+            self.unregistered[k.name] = self.unextracted[k.name] = k
+        self.backend.register(list(self.unregistered.values()))  # the moved ones too: the backend keeps poses
+        self.unregistered = {}
         done = self.backend.extracted()
-        todo = [k for k in keyframes if k.name not in done and self.backend.has_image(k.name) and self.images.due(k.name)]
+        waiting = self.unextracted
+        for name in [n for n in waiting if n in done]:
+            del waiting[name]
+        todo = [k for k in waiting.values() if self.backend.has_image(k.name) and self.images.due(k.name)]
         self.status.update(keyframes=len(keyframes), images_extracted=len(done), images_waiting=len(todo))
         if not todo:
             return 0
         by_name = {k.name: k for k in todo}
         self._attempt([k.name for k in todo], lambda names: self.backend.extract([by_name[n] for n in names]),
                       lambda: self.backend.extracted(refresh=list(by_name)), self.images, "image", "skipped-image")
+        done = self.backend.extracted()
+        for name in [n for n in by_name if n in done]:
+            del waiting[name]
         for warning in getattr(self.backend, "warnings", None) or []:
             self.log("warn", warning)
         return len(todo)
@@ -207,11 +227,18 @@ class LiveWork:
         A set is taken as it is (its pairs sorted within, as PairStream.announced_names gives
         them): a batch does not convert the whole session's pairs again."""
         wanted = set(pairs) if isinstance(pairs, (set, frozenset)) else {pair_of(a, b) for a, b in pairs}
-        if self.continuity:
-            wanted |= set(continuity_pairs(keyframes))
-        if self.loops is not None:
-            self.loops.update(keyframes, wanted)  # the new keyframes' pairs across a revisit
-            wanted |= self.loops.pairs
+        changes = self.seen["wanted"].scan(keyframes)
+        try:
+            if self.continuity:
+                if changes.reset or not self.chain.extend(changes.new):
+                    self.chain.rebuild(keyframes)
+                wanted |= self.chain.pairs
+            if self.loops is not None:
+                self.loops.update(changes.keyframes, wanted)  # the new keyframes' pairs across a revisit
+                wanted |= self.loops.pairs
+        except Exception:
+            self.seen["wanted"].forget()  # the next batch looks at every keyframe again
+            raise
         return wanted
 
     def match(self, keyframes, pairs, limit=None, quiet=False):
@@ -304,10 +331,14 @@ class LiveWork:
         self.unfed_pairs.extend(cat.take_new_verified())
         check = getattr(self.project, "check_deadline", lambda stage: None)
         with self.project.db() as d:
-            fed = self.fed_keyframes
-            for k in keyframes:
-                if fed.get(k.name) is k:
-                    continue  # the same keyframe object as at its last update: nothing changed
+            fed, unfed = self.fed_keyframes, self.unfed
+            changes = self.seen["model"].scan(keyframes)
+            if changes.reset:
+                unfed.clear()
+            for k in changes.keyframes:
+                if fed.get(k.name) is not k:
+                    unfed[k.name] = k  # a keyframe object fed before has not changed: not looked at
+            for k in list(unfed.values()):
                 check("triangulation")
                 iid = ids.get(k.name)
                 if iid is None:
@@ -318,6 +349,7 @@ class LiveWork:
                         len(known.keypoints) or k.name not in with_features):
                     if len(known.keypoints) or k.name in with_features:
                         fed[k.name] = k
+                        del unfed[k.name]
                     continue
                 q, t = self.pose_of(k, iid)
                 mid, w, h, params = cameras[cams[iid]]
@@ -326,6 +358,7 @@ class LiveWork:
                 self.fed_poses[k.name] = pose
                 if len(m.images[iid].keypoints) or k.name in with_features:
                     fed[k.name] = k  # complete: looked at again only when a new object comes (a new pose)
+                    del unfed[k.name]
             # The pairs that verified since the last update; one whose image the model does not
             # have yet (its keyframe not announced, or no features) waits for it.
             waiting = []
