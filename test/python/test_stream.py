@@ -143,3 +143,15 @@ def test_the_names_follow_every_change_as_a_full_conversion_would():
         assert s.receive(m)
         assert s.announced_names() == converted(s), m.sequence
     assert s.announced_names() == {("3.png", "4.png")}
+
+
+def test_pairs_taken_back_are_handed_over_once():
+    s = PairStream()
+    s.receive(msg(1, added=[(0, 1), (1, 2), (0, 2)], keyframes=[0, 1, 2]))
+    s.receive(msg(2, removed=[(0, 2), (5, 6)], total=3))  # (5, 6) was never announced
+    assert s.take_taken_back() == [("0.png", "2.png")]
+    assert s.take_taken_back() == []
+    s.receive(msg(3, added=[(2, 3)], keyframes=[3], total=4))
+    s.receive(msg(4, added=[(0, 1), (2, 3)], keyframes=[0, 1, 2, 3], full=True))  # (1, 2) is not in it
+    assert s.take_taken_back() == [("1.png", "2.png")]
+    assert s.announced_names() == {("0.png", "1.png"), ("2.png", "3.png")}

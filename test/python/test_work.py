@@ -474,3 +474,13 @@ def test_a_keyframe_whose_image_comes_later_is_extracted_when_it_comes():
     runs = len(project.runs)
     work.extract(shorter)  # another session: its images, none of the old ones again
     assert project.runs[runs:] == [("extract", [k.name for k in shorter])]
+
+
+def test_a_matched_pair_taken_back_is_ledgered_one_never_matched_is_not():
+    kfs = keyframes(4)
+    project = FailingProject()
+    work = LiveWork(project, continuity=False)
+    work.extract(kfs)
+    work.match(kfs, [("000.png", "001.png"), ("001.png", "002.png")])
+    assert work.taken_back([("000.png", "001.png"), ("002.png", "003.png")]) == 1
+    assert project.ledger_items("taken-back") == ["000.png 001.png"]

@@ -3,7 +3,8 @@
   DIR/images/       the keyframe images (the node writes them; colmap_from_selection links them)
   DIR/database.db   cameras, images, features, matches, verified two-view geometries
   DIR/sparse/0/     the model (known poses and point_triangulator, or the mapper)
-  DIR/ledger.txt    every image extracted and pair matched, once, in order
+  DIR/ledger.txt    every image extracted and pair matched, once, in order (and what the bridge
+                    gave up, and matched pairs the node took back), each line with its time
   DIR/colmap.log    every COLMAP command and its output
 
 Every step reads the database first, so nothing is extracted or matched twice, also across

@@ -376,6 +376,7 @@ class Bridge:
         with self.lock:
             keyframes = self.stream.ordered_keyframes()
             pairs = self.stream.announced_names()
+            taken_back = self.stream.take_taken_back()
             # No keyframe for half of ~finish_after_idle: the finish may be near, and the fallbacks
             # waiting are matched now, before it is due, not in it. (Waiting for the node's
             # `flushed` message, as the finish does, put that run in the way: a 10-minute walk's
@@ -387,6 +388,7 @@ class Bridge:
             if self.stopping:
                 return False
             try:
+                self.work_state.taken_back(taken_back)
                 self.work_state.extract(keyframes)
                 more = self.work_state.match(keyframes, pairs, quiet=quiet)
                 if self.work_state.model is not None:

@@ -23,6 +23,7 @@ class PairStream:
         # that a batch does not convert the whole set again (issue 34); pairs whose keyframes are
         # not known yet wait in _unnamed (ids).
         self._named, self._unnamed = set(), set()
+        self.taken_back = []  # announced pairs (names) no longer announced, since take_taken_back()
         # The keyframes ordered by id, kept as they come (a batch does not sort the session again):
         # a new id beyond the last is appended, a known one replaced where it is; None when it must
         # be sorted again (an id that came before the last one).
@@ -40,6 +41,7 @@ class PairStream:
 
     def apply(self, msg):
         """Applies one message (in sequence, or `full`)."""
+        before = self._named if msg.full else None  # what a full message does not hold is taken back
         if msg.full:
             self.announced = set()
             self._named, self._unnamed = set(), set()
@@ -62,7 +64,10 @@ class PairStream:
             self.announced.discard(pair)
             self._unnamed.discard(pair)
             if p.first in self.keyframes and p.second in self.keyframes:
-                self._named.discard(self._name_of(pair))
+                name = self._name_of(pair)
+                if name in self._named:
+                    self._named.discard(name)
+                    self.taken_back.append(name)
         for p in msg.added:
             pair = (p.first, p.second)
             self.announced.add(pair)
@@ -70,6 +75,8 @@ class PairStream:
                 self._named.add(self._name_of(pair))
             else:
                 self._unnamed.add(pair)
+        if before is not None:
+            self.taken_back.extend(sorted(before - self._named))
         self.sequence = msg.sequence
         self.messages += 1
         self.pending_pairs = msg.pending_pairs
@@ -137,6 +144,11 @@ class PairStream:
 
     def _name_of(self, pair):
         return pair_of(self.keyframes[pair[0]].name, self.keyframes[pair[1]].name)
+
+    def take_taken_back(self):
+        """The pairs (names) taken back since the last call, in the order they were."""
+        out, self.taken_back = self.taken_back, []
+        return out
 
     def announced_names(self):
         """The announced pairs whose keyframes we know, as image names (sorted within), a set of

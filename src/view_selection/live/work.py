@@ -221,6 +221,15 @@ class LiveWork:
         return len(todo)
 
     # -- matches -----------------------------------------------------------------------------
+    def taken_back(self, pairs):
+        """The node took these announced pairs (names) back: those already matched were matched
+        for nothing, and DIR/ledger.txt says when (`taken-back`, beside when each was `matched`).
+        Returns how many."""
+        matched = self.backend.matched()
+        wasted = [p for p in pairs if p in matched]
+        self.project.ledger("taken-back", ["%s %s" % p for p in wasted])
+        return len(wasted)
+
     def wanted_pairs(self, keyframes, pairs):
         """The announced pairs (names) plus, with continuity, each keyframe with the one before,
         and with loops the pairs across revisits proposed so far (matching/loops.py).
