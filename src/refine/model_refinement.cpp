@@ -1220,6 +1220,28 @@ std::set<int> allImages(const io::ColmapModel& model) {
   return ids;
 }
 
+namespace {
+
+/// The mean reprojection error [px] of a point over its track in `model`; -1 (COLMAP's unknown)
+/// when a camera of its track is not a pinhole one or the point is not in front of it.
+double meanReprojectionError(const io::ColmapModel& model, const io::ColmapPoint3D& p) {
+  double sum = 0.0;
+  for (const io::ColmapTrackElement& e : p.track) {
+    const io::ColmapImage& im = model.images.at(e.image_id);
+    const io::ColmapCamera& camera = model.cameras.at(im.camera_id);
+    if (!((camera.model_id == 0 && camera.params.size() == 3) || (camera.model_id == 1 && camera.params.size() == 4)))
+      return -1.0;
+    const Eigen::Vector4d k = pinhole(camera);
+    const Eigen::Vector3d x = im.rotation * p.xyz + im.translation;
+    if (!(x.z() > 0.0) || static_cast<size_t>(e.point2D_idx) >= im.points2D.size()) return -1.0;
+    const Eigen::Vector2d px(k[0] * x.x() / x.z() + k[2], k[1] * x.y() / x.z() + k[3]);
+    sum += (px - im.points2D[static_cast<size_t>(e.point2D_idx)].xy).norm();
+  }
+  return p.track.empty() ? -1.0 : sum / static_cast<double>(p.track.size());
+}
+
+}  // namespace
+
 io::ColmapModel startedAt(const io::ColmapModel& model, const io::ColmapModel& start) {
   io::ColmapModel out = model;
   std::map<int, std::pair<Eigen::Quaterniond, Eigen::Vector3d>> before;
@@ -1235,10 +1257,16 @@ io::ColmapModel startedAt(const io::ColmapModel& model, const io::ColmapModel& s
   for (auto& [pid, p] : out.points) {
     if (p.track.empty()) continue;
     const auto moved = before.find(p.track.front().image_id);
-    if (moved == before.end()) continue;
-    const io::ColmapImage& now = out.images.at(moved->first);
-    const Eigen::Vector3d in_camera = moved->second.first * p.xyz + moved->second.second;
-    p.xyz = now.rotation.conjugate() * (in_camera - now.translation);
+    if (moved != before.end()) {
+      const io::ColmapImage& now = out.images.at(moved->first);
+      const Eigen::Vector3d in_camera = moved->second.first * p.xyz + moved->second.second;
+      p.xyz = now.rotation.conjugate() * (in_camera - now.translation);
+    }
+    // Its error is of the poses it was triangulated at: measured again where one of its images
+    // moved (the model may be written as it is, out of time, and COLMAP reads the error).
+    if (std::any_of(p.track.begin(), p.track.end(),
+                    [&](const io::ColmapTrackElement& e) { return before.count(e.image_id) > 0; }))
+      p.error = meanReprojectionError(out, p);
   }
   return out;
 }

@@ -857,6 +857,28 @@ TEST_F(Refinement, StartedAtEarlierPosesThePointsKeepTheirPlaceInTheirFirstImage
   }
   EXPECT_GT(carried, 0u);
   EXPECT_GT(kept, 0u);
+  // Each point's error is of the poses it has now (refine_model writes this model as it is when
+  // it runs out of time): measured again where an image of its track moved, kept where none did.
+  size_t measured = 0;
+  for (const auto& [pid, p] : out.points) {
+    bool touched = false;
+    double sum = 0.0;
+    for (const auto& e : p.track) {
+      touched = touched || start.images.count(e.image_id) > 0;
+      const io::ColmapImage& im = out.images.at(e.image_id);
+      const std::vector<double>& k = out.cameras.at(im.camera_id).params;  // PINHOLE: fx fy cx cy
+      const Eigen::Vector3d x = im.rotation * p.xyz + im.translation;
+      const Eigen::Vector2d px(k[0] * x.x() / x.z() + k[2], k[1] * x.y() / x.z() + k[3]);
+      sum += (px - im.points2D[static_cast<size_t>(e.point2D_idx)].xy).norm();
+    }
+    if (!touched) {
+      EXPECT_EQ(p.error, input.points.at(pid).error) << pid;
+      continue;
+    }
+    ++measured;
+    EXPECT_NEAR(p.error, sum / static_cast<double>(p.track.size()), 1e-9) << pid;
+  }
+  EXPECT_GT(measured, 0u);
   start.images.at(11).translation.x() = std::nan("");
   EXPECT_THROW(refine::startedAt(input, start), core::InvalidArgument);
 }

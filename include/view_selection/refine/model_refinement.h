@@ -247,7 +247,10 @@ std::set<int> allImages(const io::ColmapModel& model);
 /// `model` with each image that `start` holds (by id) at start's pose, and each point moved with
 /// the first image of its track (it keeps its place in that image's camera): where a refinement
 /// starts from poses refined earlier (refine_model --start; refinement/background.py), the points
-/// following them without a triangulation. Throws core::InvalidArgument for a non-finite pose.
+/// following them without a triangulation. A point one of whose images moved has its error (the
+/// mean reprojection error COLMAP reads) measured again at the new poses; -1 where it cannot be
+/// (a camera that is not a pinhole one, the point behind a camera). Throws core::InvalidArgument
+/// for a non-finite pose.
 io::ColmapModel startedAt(const io::ColmapModel& model, const io::ColmapModel& start);
 
 }  // namespace view_selection::refine
