@@ -484,3 +484,36 @@ def test_a_matched_pair_taken_back_is_ledgered_one_never_matched_is_not():
     work.match(kfs, [("000.png", "001.png"), ("001.png", "002.png")])
     assert work.taken_back([("000.png", "001.png"), ("002.png", "003.png")]) == 1
     assert project.ledger_items("taken-back") == ["000.png 001.png"]
+
+
+def test_an_announced_pair_waits_match_delay_and_one_taken_back_meanwhile_is_never_matched():
+    kfs = keyframes(6)
+    project = FailingProject()
+    now = [0.0]
+    work = LiveWork(project, continuity=True, match_delay=10.0)
+    work.now = lambda: now[0]
+    work.extract(kfs)
+    stays, leaves, late = ("000.png", "002.png"), ("001.png", "003.png"), ("002.png", "004.png")
+    work.match(kfs, [stays, leaves])
+    assert project.matched() == set(chain(kfs))  # continuity pairs at once, announced ones wait
+    now[0] = 6.0
+    work.match(kfs, [stays, late])  # `leaves` taken back: it is not matched, now or later
+    assert stays not in project.matched()
+    now[0] = 10.0
+    work.match(kfs, [stays, late])
+    assert stays in project.matched() and late not in project.matched()  # `late` came at 6 s
+    now[0] = 12.0
+    work.match(kfs, [stays, late], quiet=True)  # the keyframes paused: everything waiting now
+    assert late in project.matched() and leaves not in project.matched()
+
+
+def test_the_finish_matches_the_pairs_that_wait_for_match_delay():
+    kfs = keyframes(5)
+    project = FailingProject()
+    work = LiveWork(project, continuity=False, match_delay=1e6)
+    work.extract(kfs)
+    pairs = [("000.png", "002.png"), ("001.png", "003.png")]
+    work.match(kfs, pairs)
+    assert not project.matched()
+    work.match_all(kfs, pairs)
+    assert project.matched() == set(pairs)

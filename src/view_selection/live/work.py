@@ -30,7 +30,8 @@ FALLBACK_MAX_WAIT = 10.0
 
 class LiveWork:
     def __init__(self, project: ColmapProject, continuity=True, max_backlog=2000, max_batch_pairs=24,
-                 max_attempts=3, log=None, backend=None, triangulation="live", refinement=None, loops=None):
+                 max_attempts=3, log=None, backend=None, triangulation="live", refinement=None, loops=None,
+                 match_delay=0.0):
         """backend: what extracts and matches (register, extract, match, extracted, matched,
         has_image): the project itself (COLMAP's commands) or matching.backend's pose-guided
         one. triangulation: "live" (live/model.py: points as pairs verify, the finish writes
@@ -38,7 +39,10 @@ class LiveWork:
         refinement: refinement.refiner.ModelRefinement (issue 29: the known-pose model refined,
         DIR/sparse/0 refined, DIR/sparse/unrefined kept), or None. loops: matching.loops.LoopOptions
         (pairs across revisits the poses do not show, wanted beside the announced ones: what lets
-        the refinement see a long session's drift), or None."""
+        the refinement see a long session's drift), or None. match_delay [s]: an announced pair is
+        matched once a batch wanted it this long ago (the node takes some back soon after; the
+        continuity and loop pairs, which stay, and every pair when the keyframes pause or at the
+        finish, at once)."""
         from ..matching.backend import StageClock
         from .model import LiveModel
         self.project = project
@@ -50,6 +54,8 @@ class LiveWork:
         self.clock = StageClock()
         self.continuity = continuity
         self.max_backlog, self.max_batch_pairs = int(max_backlog), max(1, int(max_batch_pairs))
+        self.match_delay = max(0.0, float(match_delay))
+        self.wanted_since = {}  # pair waiting to be matched -> when a batch first wanted it
         self.images = Attempts(max_attempts)
         self.pairs = Attempts(max_attempts)
         self.log = log or (lambda level, text: None)
@@ -273,13 +279,15 @@ class LiveWork:
         backlog = [p for p in backlog if p[0] in have and p[1] in have and not self.pairs.given_up(p)]
         self.backlog_max = max(self.backlog_max, len(backlog))
         self.backlog_before = len(backlog)  # before this run
+        settled = self._settled(backlog, flush)
         self.status.update(backlog_pairs=len(backlog), pairs_matched=len(matched))
         if max_backlog is not None and len(backlog) > max_backlog:
             self.deferred = max(self.deferred, len(backlog) - max_backlog)
             self.log("warn", "more pairs wait than ~max_backlog (%d): the rest are matched at the finish "
                      "(/diagnostics: backlog pairs)" % max_backlog)  # one text: throttled as one
             backlog = backlog[:max_backlog]
-        due = [p for p in backlog if self.pairs.due(p) and p not in self.fallback_waiting]
+        due = [p for p in backlog if self.pairs.due(p) and p not in self.fallback_waiting
+               and (settled is None or p in settled)]
         batch = due[:limit]
         if batch:
             run = self.backend.match
@@ -294,6 +302,21 @@ class LiveWork:
         self.status.update(backlog_pairs=len(backlog) - done, pairs_matched=len(matched) + done,
                            fallback_waiting=len(self.fallback_waiting))
         return len(due) > limit
+
+    def _settled(self, backlog, flush):
+        """The pairs of the backlog that may be matched now, as a set, or None for all of them:
+        an announced pair once a batch wanted it ~match_delay ago, a continuity or loop pair at
+        once, and every one when flushing. Each pair's time is kept while it waits."""
+        if self.match_delay <= 0:
+            return None
+        now = self.now()
+        since = {p: self.wanted_since.get(p, now) for p in backlog}
+        self.wanted_since = since  # a pair matched or taken back is forgotten
+        if flush:
+            return None
+        chain = self.chain.pairs if self.continuity else ()
+        loops = self.loops.pairs if self.loops is not None else ()
+        return {p for p, t in since.items() if now - t >= self.match_delay or p in chain or p in loops}
 
     def _fallback_waits(self, pairs):
         now = self.now()
