@@ -83,9 +83,8 @@ class ContinuityChain:
         self.last = None  # the keyframe with the largest id so far
 
     def rebuild(self, keyframes):
-        ordered = sorted(keyframes, key=lambda k: k.id)
-        self.pairs = set(continuity_pairs(ordered))
-        self.last = ordered[-1] if ordered else None
+        self.pairs = set(continuity_pairs(keyframes))
+        self.last = max(keyframes, key=lambda k: k.id) if keyframes else None
 
     def extend(self, new):
         """Adds the pairs of `new` (appended, in their order); False, changing nothing, when one
