@@ -517,3 +517,23 @@ def test_the_finish_matches_the_pairs_that_wait_for_match_delay():
     assert not project.matched()
     work.match_all(kfs, pairs)
     assert project.matched() == set(pairs)
+
+
+def test_keyframes_a_failed_register_left_out_are_registered_by_the_next_batch():
+    kfs = keyframes(4)
+    project = FailingProject()
+    registered, fail = [], [True]
+
+    def register(given):
+        if fail[0]:
+            fail[0] = False
+            raise ProjectError("database is locked")
+        registered.extend(k.name for k in given)
+    project.register = register
+    work = LiveWork(project, continuity=False)
+    try:
+        work.extract(kfs)
+    except ProjectError:
+        pass
+    work.extract(kfs)
+    assert set(registered) == {k.name for k in kfs}

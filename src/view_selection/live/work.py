@@ -67,7 +67,6 @@ class LiveWork:
         # A batch looks at the keyframes that changed since the one before (live/changes.py), and
         # at those still waiting for something, never at the whole session (issue 34):
         self.seen = {"extract": KeyframeChanges(), "wanted": KeyframeChanges(), "model": KeyframeChanges()}
-        self.unregistered = {}     # name -> Keyframe: new or moved, not handed to register() yet
         self.unextracted = {}      # name -> Keyframe: no features yet (no image, failed, or new)
         self.unfed = {}            # name -> Keyframe: the live model has not taken its pose or keypoints
         self.chain = ContinuityChain()  # the continuity pairs of the keyframes so far
@@ -203,11 +202,14 @@ class LiveWork:
         Returns how many were tried."""
         changes = self.seen["extract"].scan(keyframes)
         if changes.reset:
-            self.unregistered, self.unextracted = {}, {}
+            self.unextracted = {}
         for k in changes.keyframes:
-            self.unregistered[k.name] = self.unextracted[k.name] = k
-        self.backend.register(list(self.unregistered.values()))  # the moved ones too: the backend keeps poses
-        self.unregistered = {}
+            self.unextracted[k.name] = k
+        try:
+            self.backend.register(changes.keyframes)  # the moved ones too: the backend keeps poses
+        except Exception:
+            self.seen["extract"].forget()  # the next batch registers every keyframe again
+            raise
         done = self.backend.extracted()
         waiting = self.unextracted
         for name in [n for n in waiting if n in done]:
