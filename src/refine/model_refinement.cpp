@@ -30,10 +30,15 @@ constexpr double kPi = 3.14159265358979323846;
 
 double degrees(double rad) { return rad * 180.0 / kPi; }
 
+/// A SIMPLE_PINHOLE (f cx cy) or PINHOLE (fx fy cx cy) camera: what pinhole() reads.
+bool isPinhole(const io::ColmapCamera& c) {
+  return (c.model_id == 0 && c.params.size() == 3) || (c.model_id == 1 && c.params.size() == 4);
+}
+
 /// fx, fy, cx, cy of a SIMPLE_PINHOLE (f cx cy) or PINHOLE (fx fy cx cy) camera.
 Eigen::Vector4d pinhole(const io::ColmapCamera& c) {
-  if (c.model_id == 0 && c.params.size() == 3) return {c.params[0], c.params[0], c.params[1], c.params[2]};
-  if (c.model_id == 1 && c.params.size() == 4) return {c.params[0], c.params[1], c.params[2], c.params[3]};
+  if (c.model_id == 0 && isPinhole(c)) return {c.params[0], c.params[0], c.params[1], c.params[2]};
+  if (c.model_id == 1 && isPinhole(c)) return {c.params[0], c.params[1], c.params[2], c.params[3]};
   throw core::InvalidArgument("camera " + std::to_string(c.id) +
                               ": refinement supports SIMPLE_PINHOLE and PINHOLE cameras (model id " +
                               std::to_string(c.model_id) + ")");
@@ -1229,8 +1234,7 @@ double meanReprojectionError(const io::ColmapModel& model, const io::ColmapPoint
   for (const io::ColmapTrackElement& e : p.track) {
     const io::ColmapImage& im = model.images.at(e.image_id);
     const io::ColmapCamera& camera = model.cameras.at(im.camera_id);
-    if (!((camera.model_id == 0 && camera.params.size() == 3) || (camera.model_id == 1 && camera.params.size() == 4)))
-      return -1.0;
+    if (!isPinhole(camera)) return -1.0;
     const Eigen::Vector4d k = pinhole(camera);
     const Eigen::Vector3d x = im.rotation * p.xyz + im.translation;
     if (!(x.z() > 0.0) || static_cast<size_t>(e.point2D_idx) >= im.points2D.size()) return -1.0;
