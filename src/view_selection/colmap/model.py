@@ -317,8 +317,9 @@ def _point_arrays(model):
 
 def _points_bin(model):
     """points3D.bin: the points' records (51 bytes each) and their tracks (8 bytes an
-    observation) made as two arrays, then joined point by point (a 30-minute session's 215,000
-    points: 0.53 -> 0.34 s)."""
+    observation) made as two arrays, then each put at its place in the file's bytes at once (a
+    30-minute session's 200,000 points: 0.53 s point by point, 0.13 s joined point by point,
+    0.07 s so)."""
     table = _point_arrays(model)
     n = len(table)
     lengths = np.diff(table.offsets)
@@ -334,14 +335,18 @@ def _points_bin(model):
     if len(track):
         track["image"] = table.image_ids
         track["idx"] = table.point2D_idxs
-    hb, tb, w = head.tobytes(), track.tobytes(), head.dtype.itemsize
-    ends = (8 * table.offsets[1:]).tolist()
-    parts, at = [struct.pack("<Q", n)], 0
-    for q, end in enumerate(ends):
-        parts.append(hb[w * q:w * q + w])
-        parts.append(tb[at:end])
-        at = end
-    return b"".join(parts)
+    # Point q's record goes after q records and offsets[q] observations; its track right after it.
+    w = head.dtype.itemsize
+    out = np.empty(8 + w * n + 8 * len(track), np.uint8)
+    out[:8] = np.frombuffer(struct.pack("<Q", n), np.uint8)
+    if n:
+        at = 8 + w * np.arange(n, dtype=np.int64) + 8 * table.offsets[:-1]
+        out[(at[:, None] + np.arange(w)).ravel()] = head.view(np.uint8)
+    if len(track):
+        owner = np.repeat(np.arange(n, dtype=np.int64), lengths)
+        at = 8 + w * (owner + 1) + 8 * np.arange(len(track), dtype=np.int64)
+        out[(at[:, None] + np.arange(8)).ravel()] = track.view(np.uint8)
+    return out.tobytes()
 
 
 def _cameras_txt(model):
