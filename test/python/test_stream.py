@@ -102,6 +102,26 @@ def test_the_time_until_the_keyframes_have_paused_long_enough():
     assert s.until_idle(1.0) == 0.0
 
 
+def test_quiet_once_keyframes_paused_or_the_node_said_its_frames_stopped():
+    # colmap_bridge matches what waits when quiet, so that the finish does not have to.
+    now = [10.0]
+    s = PairStream(clock=lambda: now[0])
+    assert not s.quiet(0.5)  # no keyframe yet
+    s.receive(msg(1, added=[(0, 1)], keyframes=[0, 1]))
+    now[0] = 10.4
+    assert not s.quiet(0.5)
+    now[0] = 10.5
+    assert s.quiet(0.5)
+    s.receive(msg(2, keyframes=[2], added=[(1, 2)], total=3))  # the walk goes on
+    assert not s.quiet(0.5)
+    now[0] = 10.6
+    s.receive(msg(3, total=3, flushed=True))  # the node's frames stopped, before the idle time
+    assert s.quiet(0.5)
+    now[0] = 10.7
+    s.receive(msg(4, keyframes=[3], total=4))  # and came again
+    assert not s.quiet(0.5)
+
+
 def test_the_node_s_pauses_are_told_apart_from_pauses_of_keyframes():
     # colmap_bridge finishes once the node says its frames stopped (a flushed message), not
     # whenever keyframes pause: walking where the camera has been makes none.

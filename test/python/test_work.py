@@ -507,6 +507,23 @@ def test_an_announced_pair_waits_match_delay_and_one_taken_back_meanwhile_is_nev
     assert late in project.matched() and leaves not in project.matched()
 
 
+def test_pairs_within_match_delay_wait_through_pauses_of_keyframes_until_the_recording_pauses():
+    kfs = keyframes(6)
+    project = FailingProject()
+    now = [0.0]
+    work = LiveWork(project, continuity=False, match_delay=10.0)
+    work.now = lambda: now[0]
+    work.extract(kfs)
+    pair = ("000.png", "002.png")
+    work.match(kfs, [pair])
+    now[0] = 2.0
+    work.match(kfs, [pair], quiet=True, paused=False)  # keyframes paused, frames go on: a revisit
+    assert not project.matched()
+    now[0] = 3.0
+    work.match(kfs, [pair], quiet=False, paused=True)  # the node said its frames stopped
+    assert project.matched() == {pair}
+
+
 def test_the_finish_matches_the_pairs_that_wait_for_match_delay():
     kfs = keyframes(5)
     project = FailingProject()

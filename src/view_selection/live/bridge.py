@@ -392,11 +392,18 @@ class Bridge:
             keyframes = self.stream.ordered_keyframes()
             pairs = self.stream.announced_names()
             taken_back = self.stream.take_taken_back()
-            # No keyframe for half of ~finish_after_idle: the finish may be near, and the fallbacks
-            # waiting are matched now, before it is due, not in it. (Waiting for the node's
-            # `flushed` message, as the finish does, put that run in the way: a 10-minute walk's
-            # finish began 3.5 s after its last keyframe, not 1.3 s.)
-            quiet = self.stream.until_idle(0.5 * self.finish_after_idle) == 0
+            # No keyframe for half of ~finish_after_idle, or the node said its frames stopped:
+            # the finish may be near, and the fallbacks waiting are matched now, before it is
+            # due, not in it. (Waiting for the node's `flushed` message alone, as the finish
+            # does, put that run in the way: a 10-minute walk's finish began 3.5 s after its
+            # last keyframe, not 1.3 s.)
+            quiet = self.stream.quiet(0.5 * self.finish_after_idle)
+            # The pairs within ~match_delay: once the node said its frames stopped (a node that
+            # does not tell its pauses: when quiet). On the idle time alone they were matched at
+            # every pause of keyframes walking where the camera had been, and at the end the
+            # batch that would have matched them came after the finish had begun: a 30-minute
+            # walk's finish matched 229 delayed pairs, 1.6 s.
+            paused = self.stream.frames_paused() if self.node_tells_pauses or self.stream.pauses_told else quiet
         if not keyframes:
             return False
         with self.work:
@@ -405,7 +412,7 @@ class Bridge:
             try:
                 self.work_state.taken_back(taken_back)
                 self.work_state.extract(keyframes)
-                more = self.work_state.match(keyframes, pairs, quiet=quiet)
+                more = self.work_state.match(keyframes, pairs, quiet=quiet, paused=paused)
                 if self.work_state.model is not None:
                     with self.work_state.clock.measure("triangulation", 1):
                         self.work_state.feed_model(keyframes)

@@ -91,6 +91,12 @@ class PairStream:
         return self.last_pause_time is not None and (self.last_keyframe_time is None
                                                      or self.last_pause_time >= self.last_keyframe_time)
 
+    def quiet(self, seconds):
+        """Whether the session may be about to end, so that what waits is best done now: no
+        keyframe new to us for `seconds`, or the node said its frames stopped (its `flushed`
+        message, at its ~pair_flush_idle, which may come sooner)."""
+        return self.until_idle(seconds) == 0 or self.frames_paused()
+
     def until_idle(self, seconds):
         """How long until no keyframe new to us has come for `seconds` (0 once it has; None
         without keyframes): the bridge waits no longer than that to see whether its finish is
