@@ -58,7 +58,7 @@ PARAMETERS = """Parameters (private, ~name):
   match_delay        [s] an announced pair is matched this long after it came (10): the
                      node takes some back soon after (a later keyframe is a better partner), and
                      those are then never matched; continuity and loop pairs at once, and every
-                     pair once the keyframes pause (0: at once)
+                     pair once the node says its frames stopped (0: at once)
   max_attempts       tries of an image or pair that fails before it is skipped (3)
   finish_after_idle  [s] build the model once no keyframe came for this long and the node said its
                      frames stopped (its ~pair_flush_idle), again after more
