@@ -269,9 +269,9 @@ class LiveWork:
         (FALLBACK_RUN_PAIRS, FALLBACK_MAX_WAIT), for `quiet` (no keyframe for a while: the
         finish may be near) or for the finish. The announced pairs within ~match_delay wait for
         `paused` (the recording paused or ended; `quiet` when not given) or for the finish:
-        keyframes alone pause whenever the camera walks where it has been, and a pair the node
-        takes back comes from there as often as not (a 30-minute walk on odometry had 1,004
-        pauses of keyframes of 0.5 s or more)."""
+        keyframes alone pause whenever the camera walks where it has been, while the node goes on
+        taking pairs back (a 30-minute walk on odometry had 1,004 pauses of keyframes of 0.5 s or
+        more)."""
         return self._match(keyframes, pairs, self.max_batch_pairs if limit is None else limit, self.max_backlog,
                            flush=quiet, flush_delayed=quiet if paused is None else paused)
 
