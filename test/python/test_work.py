@@ -486,13 +486,19 @@ def test_a_matched_pair_taken_back_is_ledgered_one_never_matched_is_not():
     assert project.ledger_items("taken-back") == ["000.png 001.png"]
 
 
-def test_an_announced_pair_waits_match_delay_and_one_taken_back_meanwhile_is_never_matched():
-    kfs = keyframes(6)
+def delayed_work(kfs, continuity):
+    """A LiveWork with ~match_delay 10 s on a clock the test sets (now[0]), its keyframes extracted."""
     project = FailingProject()
     now = [0.0]
-    work = LiveWork(project, continuity=True, match_delay=10.0)
+    work = LiveWork(project, continuity=continuity, match_delay=10.0)
     work.now = lambda: now[0]
     work.extract(kfs)
+    return project, work, now
+
+
+def test_an_announced_pair_waits_match_delay_and_one_taken_back_meanwhile_is_never_matched():
+    kfs = keyframes(6)
+    project, work, now = delayed_work(kfs, continuity=True)
     stays, leaves, late = ("000.png", "002.png"), ("001.png", "003.png"), ("002.png", "004.png")
     work.match(kfs, [stays, leaves])
     assert project.matched() == set(chain(kfs))  # continuity pairs at once, announced ones wait
@@ -509,11 +515,7 @@ def test_an_announced_pair_waits_match_delay_and_one_taken_back_meanwhile_is_nev
 
 def test_pairs_within_match_delay_wait_through_pauses_of_keyframes_until_the_recording_pauses():
     kfs = keyframes(6)
-    project = FailingProject()
-    now = [0.0]
-    work = LiveWork(project, continuity=False, match_delay=10.0)
-    work.now = lambda: now[0]
-    work.extract(kfs)
+    project, work, now = delayed_work(kfs, continuity=False)
     pair = ("000.png", "002.png")
     work.match(kfs, [pair])
     now[0] = 2.0
