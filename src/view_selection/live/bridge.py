@@ -341,6 +341,11 @@ class Bridge:
                 rospy.logerr_throttle(10.0, "colmap_bridge: cannot ask the node to write images: %s" % e)
         return True
 
+    def pauses_told(self):
+        """Whether the node tells when its frames stop (its ~pair_flush_idle, or a `flushed`
+        message seen). The caller holds `lock`."""
+        return self.node_tells_pauses or self.stream.pauses_told
+
     # -- the work --------------------------------------------------------------------------
     def loop(self):
         last_poll = 0.0
@@ -362,7 +367,7 @@ class Bridge:
             with self.lock:
                 s = self.stream
                 idle = time.monotonic() - (s.last_keyframe_time or time.monotonic())
-                if self.node_tells_pauses or s.pauses_told:
+                if self.pauses_told():
                     stopped = s.frames_paused() or idle >= FINISH_WITHOUT_PAUSE
                 else:
                     stopped = s.pending_pairs == 0 or idle >= 3 * self.finish_after_idle
@@ -403,7 +408,7 @@ class Bridge:
             # every pause of keyframes walking where the camera had been, and at the end the
             # batch that would have matched them came after the finish had begun: a 30-minute
             # walk's finish matched 229 delayed pairs, 1.6 s.
-            paused = self.stream.frames_paused() if self.node_tells_pauses or self.stream.pauses_told else quiet
+            paused = self.stream.frames_paused() if self.pauses_told() else quiet
         if not keyframes:
             return False
         with self.work:
