@@ -319,7 +319,7 @@ def _points_bin(model):
     """points3D.bin: the points' records (51 bytes each) and their tracks (8 bytes an
     observation) made as two arrays, then each put at its place in the file's bytes at once (a
     30-minute session's 200,000 points: 0.53 s point by point, 0.13 s joined point by point,
-    0.07 s so)."""
+    0.09 s so)."""
     table = _point_arrays(model)
     n = len(table)
     lengths = np.diff(table.offsets)
@@ -339,13 +339,19 @@ def _points_bin(model):
     w = head.dtype.itemsize
     out = np.empty(8 + w * n + 8 * len(track), np.uint8)
     out[:8] = np.frombuffer(struct.pack("<Q", n), np.uint8)
+    # Byte column by byte column: the index arrays stay one entry a point (or an observation),
+    # not one a byte (51 a point: 80 MB for a 30-minute session's 200,000 points).
     if n:
         at = 8 + w * np.arange(n, dtype=np.int64) + 8 * table.offsets[:-1]
-        out[(at[:, None] + np.arange(w)).ravel()] = head.view(np.uint8)
+        head_bytes = head.view(np.uint8).reshape(n, w)
+        for j in range(w):
+            out[at + j] = head_bytes[:, j]
     if len(track):
         owner = np.repeat(np.arange(n, dtype=np.int64), lengths)
         at = 8 + w * (owner + 1) + 8 * np.arange(len(track), dtype=np.int64)
-        out[(at[:, None] + np.arange(8)).ravel()] = track.view(np.uint8)
+        track_bytes = track.view(np.uint8).reshape(len(track), 8)
+        for j in range(8):
+            out[at + j] = track_bytes[:, j]
     return out.tobytes()
 
 
