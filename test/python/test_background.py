@@ -207,3 +207,35 @@ def test_the_finish_starts_from_the_runs_poses_only_where_they_took_half_the_key
     # a keyframe the node moved since is not one the runs took
     work.fed_poses["k5"] = ((5.3, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0))
     assert runs.apply(project, "model", matched=700000)["background"]["started_from"] is False
+
+
+def test_while_the_matching_is_behind_the_run_under_way_yields_the_cpu_and_none_starts(tmp_path):
+    import os
+    import subprocess
+    now = [0.0]
+    runs = background.BackgroundPoses(Finish(), clock=lambda: now[0])
+    live = types.SimpleNamespace(matched_pairs={(1, 2), (2, 3), (1, 3)}, images={1: 0, 2: 0, 3: 0},
+                                 by_image={1: [0], 2: [0], 3: [0]}, parent=dict.fromkeys(range(200000)))
+    runs.attach(types.SimpleNamespace(model=live))
+    started = []
+    runs._start = lambda: started.append(len(live.matched_pairs))
+    runs.step()  # the first step starts the session's clock
+    now[0] = 100.0
+    assert not runs.step(behind=True) and started == []  # a run is due, but the matching comes first
+    runs.step()
+    assert started == [3]  # caught up: it starts
+
+    # A run under way (a real child): made 10 nicer once, every thread of it, while behind.
+    child = subprocess.Popen(["sleep", "30"])
+    try:
+        runs.running = local._Run("poses", [1, 2, 3], [], str(tmp_path), child, {}, set(), 0.0, 60.0, 120.0)
+        nice = os.getpriority(os.PRIO_PROCESS, child.pid)
+        assert runs.step() and os.getpriority(os.PRIO_PROCESS, child.pid) == nice  # not behind: as it was
+        assert runs.step(behind=True)  # still under way
+        assert os.getpriority(os.PRIO_PROCESS, child.pid) == min(19, nice + local.YIELD_NICE)
+        assert runs.step(behind=True) and os.getpriority(os.PRIO_PROCESS, child.pid) == min(19, nice + local.YIELD_NICE)
+        assert runs.yielded == 1 and runs.summary()["yielded"] == 1
+    finally:
+        child.kill()
+        child.wait()
+

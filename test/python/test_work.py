@@ -1,6 +1,7 @@
 """The bridge's work on its project, with a project that fails the way COLMAP does: a run over a
 list fails as a whole when one item in it is bad. The real COLMAP is in the rostests."""
 import math
+import types
 
 from view_selection.colmap.project import ProjectError
 from view_selection.keyframes import Keyframe
@@ -556,3 +557,29 @@ def test_keyframes_a_failed_register_left_out_are_registered_by_the_next_batch()
         pass
     work.extract(kfs)
     assert set(registered) == {k.name for k in kfs}
+
+
+def test_the_matching_is_behind_once_a_batch_left_several_batches_of_due_pairs_and_the_refinement_hears_it():
+    import itertools
+    from view_selection.live import work as live_work
+    kfs = keyframes(40)
+    names = [k.name for k in kfs]
+    steps = []
+    project = FailingProject()
+    work = LiveWork(project, continuity=False, refinement=types.SimpleNamespace(
+        step=lambda behind=False: steps.append(behind)))
+    work.extract(kfs)
+    limit = work.max_batch_pairs * live_work.BEHIND_BATCHES
+    pairs = list(itertools.combinations(names, 2))[:work.max_batch_pairs + limit]
+    work.match(kfs, pairs)  # a batch's worth matched, exactly BEHIND_BATCHES' worth left: not behind
+    assert work.due_left == limit and not work.behind()
+    work.refine_in_background()
+    assert steps == [False]
+    more = list(itertools.combinations(names, 2))[:2 * work.max_batch_pairs + limit + 1]
+    work.match(kfs, more)  # one more pair left than that: behind
+    assert work.due_left == limit + 1 and work.behind()
+    work.refine_in_background()
+    assert steps == [False, True]
+    while work.match(kfs, more):
+        pass
+    assert work.due_left == 0 and not work.behind()  # caught up

@@ -26,6 +26,11 @@ FINISH_BATCH_PAIRS = 256
 # 10-minute walk: 557 runs for 2,092 pairs).
 FALLBACK_RUN_PAIRS = 16
 FALLBACK_MAX_WAIT = 10.0
+# The matching is behind (LiveWork.behind) once a batch left more than this many batches' worth
+# of due pairs for later: a refinement that runs beside it yields the CPU then (issue 34: a run
+# at the end of a 30-minute walk held the bridge's batches to one every 2.5 s for its last 30 s,
+# and the finish had 379 pairs left to match).
+BEHIND_BATCHES = 4
 
 
 class LiveWork:
@@ -72,6 +77,7 @@ class LiveWork:
         self.chain = ContinuityChain()  # the continuity pairs of the keyframes so far
         self.backlog_max = 0
         self.backlog_before = 0
+        self.due_left = 0  # pairs the last batch found due and left for the next (behind)
         self.status = {}  # the last batch's figures: keyframes, images extracted and waiting, pairs
         self.deferred = 0  # pairs beyond ~max_backlog at some point, left for the finish
         # pair -> when it fell back: waiting for a run of COLMAP's matcher with others (backends
@@ -305,6 +311,7 @@ class LiveWork:
             self._attempt(fallback_run, self.backend.match_fallback, lambda: self.backend.matched(refresh=fallback_run),
                           self.pairs, "pair", "skipped-pair")
         done = len((set(batch) | set(fallback_run)) & self.backend.matched()) if batch or fallback_run else 0
+        self.due_left = max(0, len(due) - len(batch))
         self.status.update(backlog_pairs=len(backlog) - done, pairs_matched=len(matched) + done,
                            fallback_waiting=len(self.fallback_waiting))
         return len(due) > limit
@@ -418,11 +425,18 @@ class LiveWork:
         self.status.update(points=len(m.points), tracks=len(m.members))
         return changed
 
+    def behind(self):
+        """Whether the matching fell behind: more than BEHIND_BATCHES batches' worth of pairs were
+        due and left for later by the last batch (a burst of continuity and loop pairs is less;
+        the pairs within ~match_delay are not due yet)."""
+        return self.due_left > BEHIND_BATCHES * self.max_batch_pairs
+
     def refine_in_background(self):
         """The bridge's worker loop, after a batch: a refinement that runs beside the matching
-        (refinement/local.py) polls its run and starts the next; True while one runs."""
+        (refinement/local.py) polls its run and starts the next; True while one runs. While the
+        matching is behind (behind()) the run under way yields the CPU and none starts."""
         step = getattr(self.refinement, "step", None)
-        return bool(step()) if step is not None and self.model is not None else False
+        return bool(step(behind=self.behind())) if step is not None and self.model is not None else False
 
     def skipped(self, all_failed=False):
         """What was given up (with all_failed: also what failed and was not retried yet)."""

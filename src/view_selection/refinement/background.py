@@ -134,6 +134,7 @@ class BackgroundPoses:
         self.cpu_seconds = 0.0
         self.runs = 0
         self.failures = 0
+        self.yielded = 0         # runs made nicer while the matching was behind (step)
         self.pairs_then = 0      # verified pairs when the last run started
         self.moved = 0           # of the images a run took, those the node moved since (start_poses)
         self.history = []        # per run: keyframes, iterations, status, cpu, seconds, Sampson before/after
@@ -179,9 +180,11 @@ class BackgroundPoses:
             left = min(left, self.process_share * elapsed - (process_cpu() - self.process_cpu_then))
         return left
 
-    def step(self):
+    def step(self, behind=False):
         """Polls the run under way (its poses taken once it ended) and starts the next when the
-        verified pairs grew and the budget allows; returns quickly. True while a run is under way."""
+        verified pairs grew and the budget allows; returns quickly. True while a run is under way.
+        behind: the bridge's matching fell behind (LiveWork.behind): the run under way is made
+        nicer (local.YIELD_NICE) and none starts, so that the matching catches up first."""
         if self.work is None or self.work.model is None:
             return False
         if self.running is not None:
@@ -193,9 +196,13 @@ class BackgroundPoses:
                          % run.timeout)
                 return False
             if not run.poll():
+                if behind and run.yield_cpu():
+                    self.yielded += 1
                 return True
             self._finish_run(run)
             self.running = None
+        if behind:
+            return False
         live = self.work.model
         pairs = len(live.matched_pairs)
         if pairs <= self.pairs_then or pairs < 2 or self.allowance() <= 0:
@@ -300,7 +307,8 @@ class BackgroundPoses:
         self.running = None
 
     def summary(self):
-        return {"runs": self.runs, "failures": self.failures, "cpu_seconds": round(self.cpu_seconds, 3),
+        return {"runs": self.runs, "failures": self.failures, "yielded": self.yielded,
+                "cpu_seconds": round(self.cpu_seconds, 3),
                 "cpu_share": self.cpu_share, "process_share": self.process_share, "iterations": self.iterations,
                 "keyframes_with_poses": len(self.poses), "keyframes_moved_since": self.moved,
                 "last_runs": self.history[-5:]}
