@@ -1,6 +1,8 @@
 """The whole model's poses refined while the recording goes on (refinement/background.py), without
 refine_model: where the next run and the finish start from, and when the finish takes them.
 test/python_colmap/test_background_poses.py runs it with refine_model and COLMAP's database."""
+import os
+import subprocess
 import types
 
 import numpy as np
@@ -155,16 +157,24 @@ def test_a_finish_that_converges_by_itself_starts_from_the_node_poses():
     assert background.finish_converges(0.0, 10 ** 9)  # no limit
 
 
-def test_no_run_starts_while_the_finish_would_refine_the_model_to_convergence_by_itself():
+def clocked_runs(observations):
+    """BackgroundPoses on a clock at 100 s after its first step, over a live model of three images
+    with `observations` matched observations; `started` records the live model's observations at
+    each run started (its _start)."""
     now = [0.0]
     runs = background.BackgroundPoses(Finish(), clock=lambda: now[0])
     live = types.SimpleNamespace(matched_pairs={(1, 2), (2, 3), (1, 3)}, images={1: 0, 2: 0, 3: 0},
-                                 by_image={1: [0], 2: [0], 3: [0]}, parent=dict.fromkeys(range(1000)))
+                                 by_image={1: [0], 2: [0], 3: [0]}, parent=dict.fromkeys(range(observations)))
     runs.attach(types.SimpleNamespace(model=live))
     started = []
     runs._start = lambda: started.append(len(live.parent))
     runs.step()  # the first step starts the session's clock
     now[0] = 100.0
+    return runs, live, started
+
+
+def test_no_run_starts_while_the_finish_would_refine_the_model_to_convergence_by_itself():
+    runs, live, started = clocked_runs(1000)
     assert not runs.step() and started == []  # 1,000 matched observations: the finish converges
     live.parent = dict.fromkeys(range(200000))  # past what 5 s refine to convergence (167,000)
     runs.step()
@@ -210,20 +220,10 @@ def test_the_finish_starts_from_the_runs_poses_only_where_they_took_half_the_key
 
 
 def test_while_the_matching_is_behind_the_run_under_way_yields_the_cpu_and_none_starts(tmp_path):
-    import os
-    import subprocess
-    now = [0.0]
-    runs = background.BackgroundPoses(Finish(), clock=lambda: now[0])
-    live = types.SimpleNamespace(matched_pairs={(1, 2), (2, 3), (1, 3)}, images={1: 0, 2: 0, 3: 0},
-                                 by_image={1: [0], 2: [0], 3: [0]}, parent=dict.fromkeys(range(200000)))
-    runs.attach(types.SimpleNamespace(model=live))
-    started = []
-    runs._start = lambda: started.append(len(live.matched_pairs))
-    runs.step()  # the first step starts the session's clock
-    now[0] = 100.0
+    runs, live, started = clocked_runs(200000)  # past what the finish refines to convergence
     assert not runs.step(behind=True) and started == []  # a run is due, but the matching comes first
     runs.step()
-    assert started == [3]  # caught up: it starts
+    assert started == [200000]  # caught up: it starts
 
     # A run under way (a real child): made 10 nicer once, every thread of it, while behind.
     child = subprocess.Popen(["sleep", "30"])
@@ -238,4 +238,3 @@ def test_while_the_matching_is_behind_the_run_under_way_yields_the_cpu_and_none_
     finally:
         child.kill()
         child.wait()
-
