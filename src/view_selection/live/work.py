@@ -311,10 +311,10 @@ class LiveWork:
             self._attempt(fallback_run, self.backend.match_fallback, lambda: self.backend.matched(refresh=fallback_run),
                           self.pairs, "pair", "skipped-pair")
         done = len((set(batch) | set(fallback_run)) & self.backend.matched()) if batch or fallback_run else 0
-        self.due_left = max(0, len(due) - len(batch))
+        self.due_left = len(due) - len(batch)
         self.status.update(backlog_pairs=len(backlog) - done, pairs_matched=len(matched) + done,
                            fallback_waiting=len(self.fallback_waiting))
-        return len(due) > limit
+        return self.due_left > 0
 
     def _settled(self, backlog, flush):
         """The pairs of the backlog that may be matched now, as a set, or None for all of them:
