@@ -163,6 +163,7 @@ void KeyframeWorker::applyResetLocked(uint64_t generation) {
   selector_->reset();
   images_.newSession();  // selections shared before keep the old images
   last_stamp_.reset();
+  later_corrections_.clear();  // the old session's world
   applied_generation_ = generation;
   unshared_ = false;
   if (pairs_) {
@@ -239,6 +240,9 @@ size_t KeyframeWorker::correctPoses(
     keyframes.push_back({k.stamp, k.pose, sourcePose(k.stamp).value_or(k.pose)});
   }
   const auto moves = core::matchCorrections(keyframes, corrections, config);
+  // The frames still to come are in the source's frame, as the keyframes' source poses are: a
+  // later path's corrections are measured against the source's history, so they replace these.
+  if (config_.correct_later_frames && !corrections.empty()) later_corrections_ = corrections;
   if (moves.empty()) return 0;
   selector_->correctPoses(moves);
   shareSelectionLocked();
@@ -393,7 +397,11 @@ void KeyframeWorker::process(const QueuedFrame& queued) {
   core_frame.stamp = stamp.toSec();
   core_frame.image_name = keyframeImageName(core_frame.stamp);
   core_frame.intrinsics = camera.intrinsics;
-  core_frame.pose = *lookup.pose;
+  // The pose source's history keeps the pose as the source gave it (a later path's corrections
+  // are measured against that); the core gets it corrected as the keyframes around it are.
+  core_frame.pose = later_corrections_.empty()
+                        ? *lookup.pose
+                        : core::correctedPose(later_corrections_, core_frame.stamp, *lookup.pose);
   core_frame.external_keyframe = external;
   // Normalised here as the TUM reader normalises groundtruth.txt, so that for the same frames the
   // point source sees bit-identical rotations and the matrix equals select_views' exactly.

@@ -90,6 +90,13 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
                   "subscribe to `path` (nav_msgs/Path: the corrected trajectory of ~body_frame in "
                   "world_frame, e.g. VINS pose_graph_path, RTAB-Map mapPath) and move keyframes "
                   "to it");
+  core::visitFlag(v, "correct_later_frames", correct_later_frames,
+                  "with use_path_corrections: every frame after a path takes the path's "
+                  "corrections as the keyframes do (after its last pose, the last one's), as "
+                  "VINS' loop_fusion corrects the odometry that follows a loop closure. For a "
+                  "pose source that is not corrected itself (VINS' /vins_estimator/odometry, an "
+                  "odometry beside colmap_bridge's ~refined_path); leave it off for one that is "
+                  "(RTAB-Map's tf map -> camera), which would be corrected twice");
   core::visitReal(v, "correction_max_source_gap", corrections.max_source_gap, 0.0, 10.0,
                   "a path pose gives a correction (path pose * the pose the node had at its "
                   "stamp^-1) when the node has poses of its frames on either side of its stamp "

@@ -16,6 +16,10 @@ NodeConfig loadAndCheck(const ros::NodeHandle& private_nh) {
         "view_selection: ~use_path_corrections with ~point_source features: corrected "
         "keyframes keep their triangulated points (moved with them), but later keyframes "
         "are triangulated against the feature tracks' uncorrected poses");
+  if (config.correct_later_frames && !config.use_path_corrections)
+    ROS_WARN(
+        "view_selection: ~correct_later_frames without ~use_path_corrections: no path is read, "
+        "so no frame is corrected");
   return config;
 }
 

@@ -106,7 +106,9 @@ class KeyframeWorker {
   /// core::pathCorrections) applied to the pose the source gave it (`sourcePose` at its stamp;
   /// its current pose when the history has none, e.g. continued from ~state_file), when that
   /// moves it more than the thresholds (core::matchCorrections); their rows and columns are
-  /// recomputed and a new snapshot published. Returns how many moved.
+  /// recomputed and a new snapshot published. With ~correct_later_frames the frames that come
+  /// next take the same corrections (after the path's last stamp, its last one), until the next
+  /// path or reset. Returns how many moved.
   size_t correctPoses(const std::vector<core::TimedPose>& corrections,
                       const std::function<std::optional<core::CameraPose>(double)>& sourcePose,
                       const core::PoseCorrectionConfig& config);
@@ -162,6 +164,9 @@ class KeyframeWorker {
   mutable std::timed_mutex state_mutex_;
   std::unique_ptr<core::ViewSelector> selector_;  // made first: bad parameters throw here
   std::optional<double> last_stamp_;  // of the last frame offered to the core
+  // ~correct_later_frames: the corrections of the newest path (ascending stamp; empty before one,
+  // and after a reset); each frame's pose takes them as a keyframe's does (core::correctedPose).
+  std::vector<core::TimedPose> later_corrections_;
   std::string camera_frame_;          // the images' frame_id, normalised
   uint64_t applied_generation_ = 0;   // the generation selector_ belongs to
   std::atomic<bool> unshared_{false};      // keyframes inserted and not yet shared

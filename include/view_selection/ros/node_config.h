@@ -80,6 +80,8 @@ struct NodeConfig {
   double keyframe_verdict_timeout = 1.0;  ///< [s, wall] external policy: longest wait for a verdict
   double keyframe_stamp_tolerance = 0.001;  ///< [s] external policy: stamp match
   bool use_path_corrections = false;        ///< subscribe to `path` (nav_msgs/Path, loop closures)
+  /// Frames after a path take its newest correction (a pose source that is not corrected itself).
+  bool correct_later_frames = false;
   core::PoseCorrectionConfig corrections;   ///< matching a path to keyframes, thresholds
 
   core::ViewSelectorConfig selector;       ///< keyframe policy, matrix gates, selection

@@ -16,6 +16,12 @@ the truth (the drift is 3 cm/s and 1.5 deg/s; the interpolation between path pos
 leaves tens of micrometres), E within 1% relative, next view sets equal up to near-ties (a view
 in one set and not the other is within 1% of the set's worst, by select_views's E), pairs at
 least 95% shared.
+
+With ~later_frames N (corrections_later_frames.test, ~correct_later_frames set on the node) the
+odometry goes on drifting after the path, as VINS' does after loop_fusion closed a loop, for N more
+frames. Each keyframe among them must lie where the path's last correction puts its drifted pose
+(the drift since the path's last stamp only) to 1e-6 m and 1e-6 of a quaternion, and so not where
+the source put it (off by the whole drift, centimetres).
 """
 import json
 import math
@@ -70,6 +76,7 @@ class Corrections(unittest.TestCase):
         cls.frames = int(rospy.get_param('~frames', 60))
         cls.path_every = int(rospy.get_param('~path_every', 0))
         cls.path_shift = float(rospy.get_param('~path_shift', 0.0))
+        cls.later_frames = int(rospy.get_param('~later_frames', 0))
         cls.timeout = float(rospy.get_param('~timeout', 60.0))
         cls.tmp = tempfile.mkdtemp(prefix='view_selection_corrections_')
         cls.skip_reason = None
@@ -95,7 +102,8 @@ class Corrections(unittest.TestCase):
     @classmethod
     def run_sequence(cls):
         import cv2
-        rgb, depth = tum_rows(cls.dataset, 'rgb.txt')[:cls.frames], tum_rows(cls.dataset, 'depth.txt')[:cls.frames]
+        total = cls.frames + cls.later_frames
+        rgb, depth = tum_rows(cls.dataset, 'rgb.txt')[:total], tum_rows(cls.dataset, 'depth.txt')[:total]
         truth = {round(float(r[0]), 6): (numpy.array([float(x) for x in r[1:4]]),
                                          numpy.array([float(x) for x in r[4:8]])) for r in tum_rows(cls.dataset, 'groundtruth.txt')}
         with open(os.path.join(cls.dataset, 'camera.yaml')) as f:
@@ -117,16 +125,15 @@ class Corrections(unittest.TestCase):
         time.sleep(0.5)
         body_in_optical = inverse((EXTRINSIC_T, EXTRINSIC_Q))
         cls.true_body = []
-        t0 = float(rgb[0][0])
-        for q, ((s, rgb_path), (_, depth_path)) in enumerate(zip(rgb, depth)):
+        cls.t0 = float(rgb[0][0])
+
+        def send(q, s, rgb_path, depth_path):
             stamp = ros_time(float(s))
             optical = truth[round(float(s), 6)]
             optical = (optical[0], optical[1] / numpy.linalg.norm(optical[1]))
             body = compose(optical, body_in_optical)
             cls.true_body.append((stamp, body))
-            # Drift in the world: 3 cm/s and 1.5 deg/s, as odometry accumulates before a loop closes.
-            dt = float(s) - t0
-            drifted = compose((numpy.array([0.03 * dt, 0.0, -0.01 * dt]), yaw(math.radians(1.5 * dt))), body)
+            drifted = compose(cls.drift(float(s)), body)
             pubs['pose'].publish(pose_msg(drifted[0], drifted[1], stamp))
             info = camera_info_msg(stamp, 'openni_rgb_optical_frame', width, height, fx, fy, cx, cy)
             bgr = cv2.imread(os.path.join(cls.dataset, rgb_path), cv2.IMREAD_COLOR)
@@ -142,6 +149,10 @@ class Corrections(unittest.TestCase):
                 pubs[name].publish(m)
             pubs['camera_info'].publish(info)
             time.sleep(0.05)
+
+        rows = list(enumerate(zip(rgb, depth)))
+        for q, ((s, rgb_path), (_, depth_path)) in rows[:cls.frames]:
+            send(q, s, rgb_path, depth_path)
         cls.wait_stats(lambda s: s.frames_offered + s.frames_dropped >= cls.frames and s.images_in_synchroniser == 0,
                        'every frame handled')
         cls.before = rospy.ServiceProxy(cls.node + '/get_selection', GetSelection)().selection
@@ -163,6 +174,38 @@ class Corrections(unittest.TestCase):
         # Applied: the corrected selection is shared before the path is counted.
         cls.stats = cls.wait_stats(lambda s: s.paths_applied >= 1, 'the path applied')
         cls.after = rospy.ServiceProxy(cls.node + '/get_selection', GetSelection)().selection
+        cls.later = None
+        if cls.later_frames:
+            # test_3 reads the selection published for the path: it must be out before more come.
+            cls.wait_republished()
+            cls.path_last = max(p.header.stamp for p in path.poses)
+            for q, ((s, rgb_path), (_, depth_path)) in rows[cls.frames:]:
+                send(q, s, rgb_path, depth_path)
+            total = cls.frames + cls.later_frames
+            cls.wait_stats(lambda s: s.frames_offered + s.frames_dropped >= total and s.images_in_synchroniser == 0,
+                           'every later frame handled')
+            cls.later = rospy.ServiceProxy(cls.node + '/get_selection', GetSelection)().selection
+
+    @classmethod
+    def drift(cls, stamp):
+        """The drift in the world at `stamp`: 3 cm/s and 1.5 deg/s, as odometry accumulates
+        before a loop closes (and after it, for a source that is not corrected itself)."""
+        dt = stamp - cls.t0
+        return numpy.array([0.03 * dt, 0.0, -0.01 * dt]), yaw(math.radians(1.5 * dt))
+
+    @classmethod
+    def wait_republished(cls):
+        """Waits for a ~selection whose last keyframe is at the corrected (the true) position."""
+        x = cls.expected['keyframes'][-1]['position']
+        deadline = time.time() + cls.timeout
+        while time.time() < deadline and not cls.republished(x):
+            time.sleep(0.1)
+
+    @classmethod
+    def republished(cls, x):
+        return [m for m in list(cls.selections)
+                if len(m.keyframes) == len(cls.expected['keyframes']) and
+                abs(m.keyframes[-1].pose.position.x - x[0]) < 1e-3]
 
     @classmethod
     def wait_stats(cls, predicate, what):
@@ -252,12 +295,11 @@ class Corrections(unittest.TestCase):
     def test_3_selection_was_republished(self):
         # Within ~publish_period (0.5 s by default) of the correction.
         x = self.expected['keyframes'][-1]['position']
-        deadline = time.time() + self.timeout
-        while time.time() < deadline and not (
-                self.selections and abs(self.selections[-1].keyframes[-1].pose.position.x - x[0]) < 1e-3):
-            time.sleep(0.1)
+        self.wait_republished()
         self.assertTrue(self.selections, 'no ~selection message')
-        last = self.selections[-1]
+        republished = self.republished(x)
+        self.assertTrue(republished, 'no ~selection with the corrected keyframes')
+        last = republished[-1]
         if self.path_every:
             self.assertAlmostEqual(last.keyframes[-1].pose.position.x, x[0], delta=KEYFRAME_ONLY_POSITION)
             return
@@ -265,6 +307,37 @@ class Corrections(unittest.TestCase):
         self.assertAlmostEqual(last.keyframes[-1].pose.position.x, x[0], delta=1e-9)
 
 
+class LaterFrames(Corrections):
+    """Corrections' tests, and the frames after the path (~later_frames > 0)."""
+
+    def test_4_later_frames_take_the_last_correction(self):
+        self.assertIsNotNone(self.later)
+        before = len(self.after.keyframes)
+        later = self.later.keyframes[before:]
+        self.assertEqual([msg_stamp_ns(k.stamp) for k in self.later.keyframes[:before]],
+                         [msg_stamp_ns(k.stamp) for k in self.after.keyframes])
+        self.assertGreaterEqual(len(later), self.later_frames // 5 - 1, 'keyframes every 5th frame')
+        # The path's last correction: its pose times the source's pose there, inverted. The path
+        # is the truth, so the correction is the drift at the path's last stamp, undone.
+        undo = inverse(self.drift(self.path_last.to_sec()))
+        truth = {msg_stamp_ns(stamp): body for stamp, body in self.true_body}
+        extrinsic = (EXTRINSIC_T, EXTRINSIC_Q)
+        worst = 0.0
+        for k in later:
+            self.assertGreater(k.stamp, self.path_last)
+            body = truth[msg_stamp_ns(k.stamp)]
+            source = compose(compose(self.drift(k.stamp.to_sec()), body), extrinsic)
+            expected = compose(undo, source)
+            p, q = k.pose.position, k.pose.orientation
+            position = numpy.array([p.x, p.y, p.z])
+            self.assertLess(numpy.linalg.norm(position - expected[0]), 1e-6, 'keyframe %d' % k.id)
+            dot = abs(float(numpy.dot([q.x, q.y, q.z, q.w], expected[1])))
+            self.assertGreater(dot, 1.0 - 1e-6, 'keyframe %d' % k.id)
+            worst = max(worst, numpy.linalg.norm(position - source[0]))
+        # What the source alone would have given is off by the drift before the path's end.
+        self.assertGreater(worst, 0.02, 'the correction should have moved the later keyframes by centimetres')
+
+
 if __name__ == '__main__':
     rospy.init_node('corrections_tester')
-    rostest.rosrun(PKG, 'corrections', Corrections, sys.argv)
+    rostest.rosrun(PKG, 'corrections', LaterFrames if rospy.get_param('~later_frames', 0) else Corrections, sys.argv)
