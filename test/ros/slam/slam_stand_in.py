@@ -8,14 +8,17 @@ system would track the image). ~role (slam_systems.py has the table):
   orb_slam3         /orb_slam3/camera_pose: PoseStamped in world of the optical frame, 30 ms after
   rtabmap_odometry  tf odom -> base_link at each frame (drifting)
   rtabmap           tf map -> odom at each frame; /rtabmap/mapPath (latched) on /stand_in/close_loop:
-                    its map nodes only, one a second (every 30th image it received) and the last
+                    its map nodes only, one a second (every 30th image it received) and the last;
+                    from then on map -> odom is the loop's correction, as RTAB-Map's is
   vins_estimator    /vins_estimator/odometry: Odometry in world of body (drifting) at 15 Hz on a
                     clock of its own (13 ms off the frames'), each pose once the frames around it
                     were tracked
   loop_fusion       /loop_fusion/pose_graph_path (latched) on /stand_in/close_loop: its keyframes
                     only, every 4th of VINS' own stamps
 
-~convention names the system. The drifting systems drift 4 cm/s and 2 deg/s until their path.
+~convention names the system. The drifting systems' odometry drifts 4 cm/s and 2 deg/s all along,
+as an odometry does after a loop closure too: VINS' /vins_estimator/odometry is not corrected by
+loop_fusion, RTAB-Map's odom -> base_link is corrected by map -> odom.
 """
 import os
 import sys
@@ -64,6 +67,7 @@ class StandIn:
         self.t0 = None
         self.next_odometry = 0  # index of the next VINS stamp to publish
         self.drifting = self.c['path'] is not None
+        self.map_odom = (systems.numpy.zeros(3), systems.numpy.array([0.0, 0.0, 0.0, 1.0]))  # rtabmap
         if self.role in ('orb_slam2', 'orb_slam3'):
             self.pub = rospy.Publisher(self.topic, PoseStamped, queue_size=100)
         elif self.role == 'vins_estimator':
@@ -106,8 +110,9 @@ class StandIn:
             self.pub.publish(TFMessage(transforms=[transform('odom', self.body_frame, self.odometry_of(t, body),
                                                              stamp)]))
         elif self.role == 'rtabmap':
-            identity = (systems.numpy.zeros(3), systems.numpy.array([0.0, 0.0, 0.0, 1.0]))
-            self.pub.publish(TFMessage(transforms=[transform(self.world, 'odom', identity, stamp)]))
+            with self.lock:
+                map_odom = self.map_odom
+            self.pub.publish(TFMessage(transforms=[transform(self.world, 'odom', map_odom, stamp)]))
         elif self.role == 'vins_estimator':
             self.publish_vins_odometry()
 
@@ -143,6 +148,10 @@ class StandIn:
                 nodes.append(images[-1])
             for t in nodes:
                 path.poses.append(pose_msg(systems.interpolate(truth, t), stamp_of(t), self.world))
+            # The frames that follow are in map at the corrected pose: the last node's true pose
+            # times its odometry pose^-1, which undoes the drift up to it.
+            with self.lock:
+                self.map_odom = systems.inverse(systems.drift(nodes[-1] - self.t0))
         else:  # loop_fusion: VINS keyframes, on VINS' clock
             n = 0
             while self.vins_stamp(n) <= truth[-1][0]:
