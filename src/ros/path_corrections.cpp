@@ -65,6 +65,25 @@ void PathCorrections::onPath(const nav_msgs::PathConstPtr& path) {
   sources.reserve(trajectory.size());
   for (const core::TimedPose& p : trajectory) sources.push_back(poses_.historyAt(p.stamp, gap));
   const std::vector<core::TimedPose> corrections = core::pathCorrections(trajectory, sources);
+  // A SLAM system publishes its path from its first keyframes on (VINS' loop_fusion with each
+  // one it adds): its first paths may end just before the node's first frame, or lie just beyond
+  // the frames looked up so far. With no pose among the node's frames and its stamps next to
+  // them, such a path is nothing to correct yet, not a wrong one; far from them it is wrong.
+  if (corrections.empty() && !trajectory.empty()) {
+    const std::optional<std::pair<double, double>> span = poses_.historySpan();
+    const bool overlaps = span && std::any_of(trajectory.begin(), trajectory.end(),
+                                              [&](const core::TimedPose& p) {
+                                                return p.stamp >= span->first &&
+                                                       p.stamp <= span->second;
+                                              });
+    const bool next_to = !span || (trajectory.back().stamp >= span->first - kNotYetSeconds &&
+                                   trajectory.front().stamp <= span->second + kNotYetSeconds);
+    if (!overlaps && next_to) {
+      ROS_DEBUG_STREAM("view_selection: a path of " << trajectory.size()
+                                                    << " poses, none among the node's frames yet");
+      return;
+    }
+  }
   if (corrections.empty() && !trajectory.empty())
     return reject("none of its " + std::to_string(trajectory.size()) +
                   " poses lies among the node's own poses (within " + std::to_string(gap) +

@@ -27,6 +27,11 @@ void PoseProvider::clearHistory() {
   history_.clear();
 }
 
+std::optional<std::pair<double, double>> PoseProvider::historySpan() const {
+  std::lock_guard<std::mutex> lock(history_mutex_);
+  return history_.span();
+}
+
 std::optional<core::CameraPose> PoseProvider::historyAt(double stamp, double max_gap) const {
   std::lock_guard<std::mutex> lock(history_mutex_);
   return history_.at(stamp, max_gap);

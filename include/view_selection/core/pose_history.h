@@ -10,6 +10,7 @@
 #include <cstddef>
 #include <deque>
 #include <optional>
+#include <utility>
 
 namespace view_selection::core {
 
@@ -25,6 +26,11 @@ class PoseHistory {
   /// when each is within `max_gap` [s] of it; nothing otherwise (never extrapolated).
   std::optional<CameraPose> at(double stamp, double max_gap) const;
   void clear() { poses_.clear(); }
+  /// The stamps of the oldest and the newest pose kept, if any.
+  std::optional<std::pair<double, double>> span() const {
+    if (poses_.empty()) return std::nullopt;
+    return std::make_pair(poses_.front().stamp, poses_.back().stamp);
+  }
   size_t size() const { return poses_.size(); }
   bool empty() const { return poses_.empty(); }
 

@@ -32,6 +32,10 @@ class PathCorrections {
 
  private:
   static constexpr uint32_t kQueue = 2;  ///< each path replaces the last: keep few
+  /// [s] A path with no pose among the node's frames, ending at most this long before the first
+  /// one or starting at most this long after the last one looked up, is nothing to correct yet
+  /// (a SLAM system's first paths); further off it is a wrong one (bad_path).
+  static constexpr double kNotYetSeconds = 5.0;
 
   void onPath(const nav_msgs::PathConstPtr& path);
 

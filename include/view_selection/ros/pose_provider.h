@@ -57,6 +57,8 @@ class PoseProvider {
   /// is within `max_gap` [s]: the pose source's history over the session, for loop-closure
   /// corrections (core::PoseHistory). Thread-safe.
   std::optional<core::CameraPose> historyAt(double stamp, double max_gap) const;
+  /// The stamps of the history's first and last poses (the frames looked up), if any.
+  std::optional<std::pair<double, double>> historySpan() const;
   /// Wakes every waiting lookup and makes later ones return at once (shutdown).
   virtual void stop() = 0;
   /// For the start-up log line, e.g. "tf (world <- image frame_id)".

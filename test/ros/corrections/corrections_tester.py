@@ -117,7 +117,8 @@ class Corrections(unittest.TestCase):
 
         pubs = {n: rospy.Publisher('/drift/' + n, m, queue_size=100)
                 for n, m in (('image', Image), ('camera_info', CameraInfo), ('depth', Image), ('pose', PoseStamped))}
-        path_pub = rospy.Publisher('/drift/path', Path, queue_size=1, latch=True)
+        path_pub = rospy.Publisher('/drift/path', Path, queue_size=10, latch=True)
+        cls.path_pub = path_pub
         deadline = time.time() + cls.timeout
         while time.time() < deadline and not all(p.get_num_connections() > 0 for p in pubs.values()):
             time.sleep(0.1)
@@ -305,6 +306,37 @@ class Corrections(unittest.TestCase):
             return
         self.assertEqual([[p.first, p.second] for p in last.pairs], self.expected['pairs'])
         self.assertAlmostEqual(last.keyframes[-1].pose.position.x, x[0], delta=1e-9)
+
+    def test_5_paths_that_correct_nothing(self):
+        # A path that ends just before the node's first frame (a SLAM system's first paths) is
+        # nothing to correct yet: no drop. One of another session (its stamps far from every
+        # frame) and one in another frame are wrong: each is a bad_path drop. None moves a keyframe.
+        def bad_paths(s):
+            return dict(zip(s.drop_reasons, s.drop_counts)).get('bad_path', 0)
+
+        before = self.wait_stats(lambda s: True, 'the statistics')
+        kept = rospy.ServiceProxy(self.node + '/get_selection', GetSelection)().selection
+        first = self.true_body[0][0]
+
+        def path(shift, frame='world'):
+            p = Path()
+            p.header.stamp, p.header.frame_id = rospy.Time.now(), frame
+            for stamp, (t, q) in self.true_body[:10]:
+                p.poses.append(pose_msg(t + 0.5, q, stamp + rospy.Duration.from_sec(shift), frame))
+            return p
+
+        span = (self.true_body[9][0] - first).to_sec()
+        self.path_pub.publish(path(1000.0))        # another session
+        self.wait_stats(lambda s: bad_paths(s) >= bad_paths(before) + 1, 'the path of another session dropped')
+        self.path_pub.publish(path(-span - 1.0))   # ends 1 s before the first frame
+        self.path_pub.publish(path(0.0, 'map'))    # another frame, taken after the one before
+        after = self.wait_stats(lambda s: "'map'" in s.last_error, 'the path in map dropped')
+        self.assertEqual(bad_paths(after), bad_paths(before) + 2, after.last_error)
+        self.assertEqual(after.paths_applied, before.paths_applied)
+        self.assertEqual(after.keyframes_corrected, before.keyframes_corrected)
+        now = rospy.ServiceProxy(self.node + '/get_selection', GetSelection)().selection
+        self.assertEqual([(k.pose.position.x, k.pose.position.y, k.pose.position.z) for k in now.keyframes],
+                         [(k.pose.position.x, k.pose.position.y, k.pose.position.z) for k in kept.keyframes])
 
 
 class LaterFrames(Corrections):
