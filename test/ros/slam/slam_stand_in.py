@@ -13,8 +13,10 @@ system would track the image). ~role (slam_systems.py has the table):
   vins_estimator    /vins_estimator/odometry: Odometry in world of body (drifting) at 15 Hz on a
                     clock of its own (13 ms off the frames'), each pose once the frames around it
                     were tracked
-  loop_fusion       /loop_fusion/pose_graph_path (latched) on /stand_in/close_loop: its keyframes
-                    only, every 4th of VINS' own stamps
+  loop_fusion       /loop_fusion/pose_graph_path (latched): its keyframes only, every 4th of VINS'
+                    own stamps, republished as each one is added (as loop_fusion's addKeyFrame
+                    does): at the VIO's drifting poses until /stand_in/close_loop, then at the true
+                    ones up to the loop and the VIO's corrected by the loop's drift after it
 
 ~convention names the system. The drifting systems' odometry drifts 4 cm/s and 2 deg/s all along,
 as an odometry does after a loop closure too: VINS' /vins_estimator/odometry is not corrected by
@@ -68,6 +70,9 @@ class StandIn:
         self.next_odometry = 0  # index of the next VINS stamp to publish
         self.drifting = self.c['path'] is not None
         self.map_odom = (systems.numpy.zeros(3), systems.numpy.array([0.0, 0.0, 0.0, 1.0]))  # rtabmap
+        # loop_fusion: the stamp of the keyframe that closed the loop (None before), the VIO's
+        # correction from then on, and the keyframes added to its path so far (VINS stamp indices)
+        self.loop_at, self.loop_correction, self.keyframes_added = None, None, 0
         if self.role in ('orb_slam2', 'orb_slam3'):
             self.pub = rospy.Publisher(self.topic, PoseStamped, queue_size=100)
         elif self.role == 'vins_estimator':
@@ -115,6 +120,8 @@ class StandIn:
             self.pub.publish(TFMessage(transforms=[transform(self.world, 'odom', map_odom, stamp)]))
         elif self.role == 'vins_estimator':
             self.publish_vins_odometry()
+        elif self.role == 'loop_fusion':
+            self.add_vins_keyframes()
 
     def vins_stamp(self, n):
         return self.t0 + systems.VINS_CLOCK_OFFSET + n / systems.VINS_RATE
@@ -135,32 +142,67 @@ class StandIn:
             m.pose.pose = pose_msg(pose, m.header.stamp, self.world).pose
             self.pub.publish(m)
 
-    def on_close_loop(self, _):
+    def add_vins_keyframes(self):
+        """Every VINS keyframe stamp the frames so far surround, added; the path published again
+        when one was."""
+        with self.lock:
+            added = False
+            while self.vins_stamp(self.keyframes_added * systems.VINS_KEYFRAME_EVERY) <= self.truth[-1][0]:
+                self.keyframes_added += 1
+                added = True
+        if added:
+            self.publish_pose_graph_path()
+
+    def pose_graph_pose(self, t, truth):
+        """loop_fusion's pose of its keyframe at VINS stamp t: the VIO's before the loop closed;
+        after, the truth up to the loop and the VIO's corrected by the loop's drift after it."""
+        body = systems.interpolate(truth, t)
+        if self.loop_at is not None and t <= self.loop_at:
+            return body
+        vio = self.odometry_of(t, body)
+        return vio if self.loop_at is None else systems.compose(self.loop_correction, vio)
+
+    def publish_pose_graph_path(self):
         with self.lock:
             truth = list(self.truth)
+            stamps = [self.vins_stamp(n * systems.VINS_KEYFRAME_EVERY) for n in range(self.keyframes_added)]
+            poses = [(t, self.pose_graph_pose(t, truth)) for t in stamps]
         path = Path()
         path.header.stamp, path.header.frame_id = rospy.Time.now(), self.world
-        if self.role == 'rtabmap':
-            with self.lock:
-                images = list(self.image_stamps)
-            nodes = images[::systems.RTABMAP_NODE_EVERY]
-            if nodes[-1] != images[-1]:
-                nodes.append(images[-1])
-            for t in nodes:
-                path.poses.append(pose_msg(systems.interpolate(truth, t), stamp_of(t), self.world))
-            # The frames that follow are in map at the corrected pose: the last node's true pose
-            # times its odometry pose^-1, which undoes the drift up to it.
-            with self.lock:
-                self.map_odom = systems.inverse(systems.drift(nodes[-1] - self.t0))
-        else:  # loop_fusion: VINS keyframes, on VINS' clock
-            n = 0
-            while self.vins_stamp(n) <= truth[-1][0]:
-                t = self.vins_stamp(n)
-                path.poses.append(pose_msg(systems.interpolate(truth, t), stamp_of(t), self.world))
-                n += systems.VINS_KEYFRAME_EVERY
+        path.poses = [pose_msg(pose, stamp_of(t), self.world) for t, pose in poses]
+        self.path_pub.publish(path)
+
+    def on_close_loop(self, _):
+        if self.role == 'loop_fusion':
+            return self.close_vins_loop()
+        with self.lock:
+            truth = list(self.truth)
+            images = list(self.image_stamps)
+        path = Path()
+        path.header.stamp, path.header.frame_id = rospy.Time.now(), self.world
+        nodes = images[::systems.RTABMAP_NODE_EVERY]
+        if nodes[-1] != images[-1]:
+            nodes.append(images[-1])
+        for t in nodes:
+            path.poses.append(pose_msg(systems.interpolate(truth, t), stamp_of(t), self.world))
+        # The frames that follow are in map at the corrected pose: the last node's true pose
+        # times its odometry pose^-1, which undoes the drift up to it.
+        with self.lock:
+            self.map_odom = systems.inverse(systems.drift(nodes[-1] - self.t0))
         rospy.loginfo('%s: %s with %d poses', rospy.get_name(), self.c['path'], len(path.poses))
         self.path_pub.publish(path)
 
+    def close_vins_loop(self):
+        """loop_fusion's last keyframe closes the loop: its path at the truth up to it, and the
+        VIO's drift there known from then on."""
+        with self.lock:
+            if not self.keyframes_added:
+                return
+            self.loop_at = self.vins_stamp((self.keyframes_added - 1) * systems.VINS_KEYFRAME_EVERY)
+            self.loop_correction = systems.inverse(systems.drift(self.loop_at - self.t0))
+            n = self.keyframes_added
+        rospy.loginfo('%s: %s with %d poses, the loop closed', rospy.get_name(), self.c['path'], n)
+        self.publish_pose_graph_path()
 
 if __name__ == '__main__':
     rospy.init_node('slam_stand_in')  # the launch file gives the real system's name
