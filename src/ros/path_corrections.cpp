@@ -83,12 +83,11 @@ void PathCorrections::onPath(const nav_msgs::PathConstPtr& path) {
                                                     << " poses, none among the node's frames yet");
       return;
     }
-  }
-  if (corrections.empty() && !trajectory.empty())
     return reject("none of its " + std::to_string(trajectory.size()) +
                   " poses lies among the node's own poses (within " + std::to_string(gap) +
                   " s, ~correction_max_source_gap), so no correction is known: a path of another "
                   "session, or of stamps the node never had frames at");
+  }
   try {
     const size_t moved = worker_.correctPoses(
         corrections, [&](double stamp) { return poses_.historyAt(stamp, 0.0); },
