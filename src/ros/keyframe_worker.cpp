@@ -11,6 +11,7 @@
 
 #include <ros/console.h>
 
+#include <algorithm>
 #include <sstream>
 
 #if VS_THREAD_SANITIZER
@@ -235,11 +236,20 @@ size_t KeyframeWorker::correctPoses(
   const core::ErrorResistanceMatrix& m = selector_->matrix();
   std::vector<core::CorrectableKeyframe> keyframes;
   keyframes.reserve(m.size());
+  // Corrections measured in ~odom_frame apply to poses in it: a keyframe without one (continued
+  // from ~state_file) keeps its pose, where one in world_frame takes the correction applied to it.
+  const bool own_frame = config_.correctionFrame().empty();
+  std::vector<bool> without_source(m.size(), false);
   for (size_t i = 0; i < m.size(); ++i) {
     const core::Keyframe& k = m.keyframe(static_cast<core::ViewId>(i));
-    keyframes.push_back({k.stamp, k.pose, sourcePose(k.stamp).value_or(k.pose)});
+    const std::optional<core::CameraPose> source = sourcePose(k.stamp);
+    without_source[i] = !source && !own_frame;
+    keyframes.push_back({k.stamp, k.pose, source.value_or(k.pose)});
   }
-  const auto moves = core::matchCorrections(keyframes, corrections, config);
+  auto moves = core::matchCorrections(keyframes, corrections, config);
+  moves.erase(std::remove_if(moves.begin(), moves.end(),
+                             [&](const auto& move) { return without_source[move.first]; }),
+              moves.end());
   // The frames still to come are in the source's frame, as the keyframes' source poses are: a
   // later path's corrections are measured against the source's history, so they replace these.
   if (config_.correct_later_frames && !corrections.empty()) later_corrections_ = corrections;
@@ -401,7 +411,8 @@ void KeyframeWorker::process(const QueuedFrame& queued) {
   // are measured against that); the core gets it corrected as the keyframes around it are.
   core_frame.pose = later_corrections_.empty()
                         ? *lookup.pose
-                        : core::correctedPose(later_corrections_, core_frame.stamp, *lookup.pose);
+                        : core::correctedPose(later_corrections_, core_frame.stamp,
+                                              lookup.uncorrected.value_or(*lookup.pose));
   core_frame.external_keyframe = external;
   // Normalised here as the TUM reader normalises groundtruth.txt, so that for the same frames the
   // point source sees bit-identical rotations and the matrix equals select_views' exactly.

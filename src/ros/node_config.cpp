@@ -97,6 +97,15 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
                   "pose source that is not corrected itself (VINS' /vins_estimator/odometry, an "
                   "odometry beside colmap_bridge's ~refined_path); leave it off for one that is "
                   "(RTAB-Map's tf map -> camera), which would be corrected twice");
+  core::visitText(v, "odom_frame", odom_frame, {},
+                  "with use_path_corrections and pose_source tf: the SLAM system's odometry "
+                  "frame (RTAB-Map: odom) when its link to world_frame is the system's own loop "
+                  "correction (map -> odom). Corrections are then measured against the camera's "
+                  "poses in this frame, which a loop closure does not change: the frames looked "
+                  "up after a loop closure, already corrected through map -> odom, are not "
+                  "corrected again. Every frame needs odom_frame <- camera on tf too; \"\": "
+                  "measured against the world_frame poses (a source that is never corrected "
+                  "itself)");
   core::visitReal(v, "correction_max_source_gap", corrections.max_source_gap, 0.0, 10.0,
                   "a path pose gives a correction (path pose * the pose the node had at its "
                   "stamp^-1) when the node has poses of its frames on either side of its stamp "
@@ -219,6 +228,7 @@ NodeConfig loadNodeConfig(const ros::NodeHandle& nh) {
                                 " must name a frame");
   c.camera_frame = normaliseFrameId(c.camera_frame);
   c.body_frame = normaliseFrameId(c.body_frame);
+  c.odom_frame = normaliseFrameId(c.odom_frame);
   // As select_views: auto is depth when there is depth, features otherwise.
   if (c.point_source == "auto") c.point_source = c.use_depth ? "depth" : "features";
   if (c.point_source == "depth" && !c.use_depth)

@@ -55,7 +55,10 @@ bool jumpsBack(const ros::Time& stamp, const ros::Time& newest, double threshold
 }  // namespace
 
 TfPoseProvider::TfPoseProvider(const NodeConfig& config, ros::NodeHandle nh)
-    : config_(config), buffer_(ros::Duration(kCacheSeconds)), tf_spinner_(1, &tf_queue_) {
+    : config_(config),
+      correction_frame_(config.correctionFrame()),
+      buffer_(ros::Duration(kCacheSeconds)),
+      tf_spinner_(1, &tf_queue_) {
   nh.setCallbackQueue(&tf_queue_);
   tf_sub_ = nh.subscribe<tf2_msgs::TFMessage>(
       "/tf", kTfQueue,
@@ -189,14 +192,23 @@ PoseLookup TfPoseProvider::lookup(const std::string& image_frame, const ros::Tim
     }
     ros::WallDuration(kPollPeriod).sleep();
   }
+  std::string target = config_.world_frame;
   try {
-    out.pose =
-        poseFromTransform(buffer_.lookupTransform(config_.world_frame, camera, stamp).transform);
-    record(stamp, *out.pose);
+    const core::CameraPose pose =
+        poseFromTransform(buffer_.lookupTransform(target, camera, stamp).transform);
+    if (!correction_frame_.empty()) {
+      // Part of the chain world <- camera (odom <- ... <- camera) when ~odom_frame is on it, so
+      // no further wait; a frame off it fails here and the frame is dropped (no_pose).
+      target = correction_frame_;
+      out.uncorrected =
+          poseFromTransform(buffer_.lookupTransform(target, camera, stamp).transform);
+    }
+    out.pose = pose;
+    record(stamp, out.uncorrected.value_or(pose));
   } catch (const tf2::TransformException& e) {
     out.reason = "no_pose";
-    out.message = "no transform " + config_.world_frame + " <- " + camera + " at " +
-                  stampText(stamp) + ": " + e.what();
+    out.message = "no transform " + target + " <- " + camera + " at " + stampText(stamp) +
+                  (target == config_.world_frame ? "" : " (~odom_frame)") + ": " + e.what();
   }
   return out;
 }

@@ -20,6 +20,10 @@ NodeConfig loadAndCheck(const ros::NodeHandle& private_nh) {
     ROS_WARN(
         "view_selection: ~correct_later_frames without ~use_path_corrections: no path is read, "
         "so no frame is corrected");
+  if (!config.odom_frame.empty() && config.correctionFrame().empty())
+    ROS_WARN(
+        "view_selection: ~odom_frame is ignored: it is read with ~use_path_corrections and "
+        "~pose_source tf only");
   return config;
 }
 

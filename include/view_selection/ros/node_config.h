@@ -82,10 +82,20 @@ struct NodeConfig {
   bool use_path_corrections = false;        ///< subscribe to `path` (nav_msgs/Path, loop closures)
   /// Frames after a path take its newest correction (a pose source that is not corrected itself).
   bool correct_later_frames = false;
+  /// tf pose source: the SLAM system's odometry frame (RTAB-Map: odom), whose link to
+  /// world_frame is its own loop correction; corrections are measured against the camera's poses
+  /// in it. "" = against the world_frame poses.
+  std::string odom_frame;
   core::PoseCorrectionConfig corrections;   ///< matching a path to keyframes, thresholds
 
   core::ViewSelectorConfig selector;       ///< keyframe policy, matrix gates, selection
   points::PointSourceParams point_params;  ///< each point source's parameters
+
+  /// The frame path corrections are measured in: ~odom_frame with a tf source and
+  /// ~use_path_corrections, else "" (the poses the source gives, in world_frame).
+  std::string correctionFrame() const {
+    return use_path_corrections && pose_source == PoseSource::kTf ? odom_frame : std::string();
+  }
 
   /// The node's own parameters, then the method's, then the point sources'.
   void visitParameters(core::ParameterVisitor& v);

@@ -33,6 +33,9 @@ namespace view_selection::ros_node {
 /// The answer to one lookup: a pose, or the drop reason ("no_pose", "bad_pose") and why.
 struct PoseLookup {
   std::optional<core::CameraPose> pose;
+  /// With NodeConfig::correctionFrame() (tf, ~odom_frame): the pose in that frame, which path
+  /// corrections are measured against (the history keeps it instead of `pose`).
+  std::optional<core::CameraPose> uncorrected;
   std::string reason;
   std::string message;
 };
@@ -53,7 +56,7 @@ class PoseProvider {
   virtual void newTimeline(const ros::Time& /*stamp*/) {}
   /// Forgets the history (a new session; called by the worker, which records it).
   void clearHistory();
-  /// The pose a lookup returned at `stamp`, or interpolated between the two around it when each
+  /// The pose a lookup returned at `stamp` (its `uncorrected` pose, when it has one), or interpolated between the two around it when each
   /// is within `max_gap` [s]: the pose source's history over the session, for loop-closure
   /// corrections (core::PoseHistory). Thread-safe.
   std::optional<core::CameraPose> historyAt(double stamp, double max_gap) const;
@@ -74,7 +77,9 @@ class PoseProvider {
 };
 
 /// tf2: lookupTransform(world_frame, camera frame, stamp), camera frame = ~camera_frame or the
-/// image's frame_id. /tf and /tf_static go into the buffer as tf2_ros::TransformListener puts
+/// image's frame_id; with NodeConfig::correctionFrame() also (that frame, camera frame, stamp),
+/// the pose corrections are measured against (RTAB-Map: odom <- camera, which its loop closures
+/// do not change, where map <- camera takes them through map -> odom). /tf and /tf_static go into the buffer as tf2_ros::TransformListener puts
 /// them (on a thread of their own; the buffer cleared when ROS time goes back), and besides: a
 /// transform stamped more than ~time_jump_threshold before the newest of its child frame starts
 /// a new timeline (the buffer is cleared first), also without simulated time (a bag played
@@ -105,6 +110,7 @@ class TfPoseProvider : public PoseProvider {
   void clearLocked();
 
   const NodeConfig& config_;
+  const std::string correction_frame_;  ///< NodeConfig::correctionFrame()
   std::atomic<bool> stopping_{false};
   tf2_ros::Buffer buffer_;
   std::mutex tf_mutex_;  // the timeline below; held while a transform is added

@@ -7,9 +7,12 @@ system would track the image). ~role (slam_systems.py has the table):
   orb_slam2         /orb_slam2_rgbd/pose: PoseStamped in map of camera_link, 30 ms after the frame
   orb_slam3         /orb_slam3/camera_pose: PoseStamped in world of the optical frame, 30 ms after
   rtabmap_odometry  tf odom -> base_link at each frame (drifting)
-  rtabmap           tf map -> odom at each frame; /rtabmap/mapPath (latched) on /stand_in/close_loop:
-                    its map nodes only, one a second (every 30th image it received) and the last;
-                    from then on map -> odom is the loop's correction, as RTAB-Map's is
+  rtabmap           tf map -> odom at each frame; /rtabmap/mapPath (latched): its map nodes only, one
+                    a second (every 30th image it received), republished as each one is added (as
+                    RTAB-Map republishes it with every map update): at the odometry's drifting
+                    poses until /stand_in/close_loop, which adds the last image as the loop's node;
+                    then at the true poses up to it and, after it, the odometry's corrected by
+                    map -> odom, which from then on is the loop's correction, as RTAB-Map's is
   vins_estimator    /vins_estimator/odometry: Odometry in world of body (drifting) at 15 Hz on a
                     clock of its own (13 ms off the frames'), each pose once the frames around it
                     were tracked
@@ -70,6 +73,9 @@ class StandIn:
         self.next_odometry = 0  # index of the next VINS stamp to publish
         self.drifting = self.c['path'] is not None
         self.map_odom = (systems.numpy.zeros(3), systems.numpy.array([0.0, 0.0, 0.0, 1.0]))  # rtabmap
+        # rtabmap: its map nodes' stamps (the images it took as nodes), how many of them its path
+        # had when last published, the loop's node's stamp (None before the loop closed)
+        self.nodes, self.nodes_published, self.map_loop_at = [], 0, None
         # loop_fusion: the stamp of the keyframe that closed the loop (None before), the VIO's
         # correction from then on, and the keyframes added to its path so far (VINS stamp indices)
         self.loop_at, self.loop_correction, self.keyframes_added = None, None, 0
@@ -90,6 +96,35 @@ class StandIn:
     def on_image(self, msg):
         with self.lock:
             self.image_stamps.append(msg.header.stamp.to_sec())
+            if (len(self.image_stamps) - 1) % systems.RTABMAP_NODE_EVERY == 0:
+                self.nodes.append(self.image_stamps[-1])
+        self.publish_map_path()
+
+    def map_node_pose(self, t, truth):
+        """RTAB-Map's pose of its map node at t: map -> odom times the odometry, at the truth up to
+        the loop's node once the loop closed."""
+        body = systems.interpolate(truth, t)
+        if self.map_loop_at is not None and t <= self.map_loop_at:
+            return body
+        return systems.compose(self.map_odom, self.odometry_of(t, body))
+
+    def publish_map_path(self, force=False):
+        """mapPath with the map nodes whose true pose has come (the images and the truth come on
+        two connections), when that is more of them than last time (or `force`)."""
+        with self.lock:
+            if not self.truth:
+                return
+            truth = list(self.truth)
+            nodes = [t for t in self.nodes if t <= truth[-1][0]]
+            if len(nodes) <= self.nodes_published and not force:
+                return
+            self.nodes_published = len(nodes)
+            poses = [(t, self.map_node_pose(t, truth)) for t in nodes]
+        path = Path()
+        path.header.stamp, path.header.frame_id = rospy.Time.now(), self.world
+        path.poses = [pose_msg(pose, stamp_of(t), self.world) for t, pose in poses]
+        self.path_pub.publish(path)
+        return len(path.poses)
 
     def body_at(self, optical):
         return systems.compose(optical, self.to_body)
@@ -118,6 +153,7 @@ class StandIn:
             with self.lock:
                 map_odom = self.map_odom
             self.pub.publish(TFMessage(transforms=[transform(self.world, 'odom', map_odom, stamp)]))
+            self.publish_map_path()  # a node whose image came before its truth
         elif self.role == 'vins_estimator':
             self.publish_vins_odometry()
         elif self.role == 'loop_fusion':
@@ -175,22 +211,15 @@ class StandIn:
     def on_close_loop(self, _):
         if self.role == 'loop_fusion':
             return self.close_vins_loop()
+        # The last image is the loop's node. The frames that follow are in map at the corrected
+        # pose: the loop node's true pose times its odometry pose^-1, which undoes the drift up to it.
         with self.lock:
-            truth = list(self.truth)
-            images = list(self.image_stamps)
-        path = Path()
-        path.header.stamp, path.header.frame_id = rospy.Time.now(), self.world
-        nodes = images[::systems.RTABMAP_NODE_EVERY]
-        if nodes[-1] != images[-1]:
-            nodes.append(images[-1])
-        for t in nodes:
-            path.poses.append(pose_msg(systems.interpolate(truth, t), stamp_of(t), self.world))
-        # The frames that follow are in map at the corrected pose: the last node's true pose
-        # times its odometry pose^-1, which undoes the drift up to it.
-        with self.lock:
-            self.map_odom = systems.inverse(systems.drift(nodes[-1] - self.t0))
-        rospy.loginfo('%s: %s with %d poses', rospy.get_name(), self.c['path'], len(path.poses))
-        self.path_pub.publish(path)
+            if self.nodes[-1] != self.image_stamps[-1]:
+                self.nodes.append(self.image_stamps[-1])
+            self.map_loop_at = self.nodes[-1]
+            self.map_odom = systems.inverse(systems.drift(self.map_loop_at - self.t0))
+        n = self.publish_map_path(force=True)
+        rospy.loginfo('%s: %s with %d poses, the loop closed', rospy.get_name(), self.c['path'], n)
 
     def close_vins_loop(self):
         """loop_fusion's last keyframe closes the loop: its path at the truth up to it, and the
