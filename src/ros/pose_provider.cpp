@@ -200,8 +200,7 @@ PoseLookup TfPoseProvider::lookup(const std::string& image_frame, const ros::Tim
       // Part of the chain world <- camera (odom <- ... <- camera) when ~odom_frame is on it, so
       // no further wait; a frame off it fails here and the frame is dropped (no_pose).
       target = correction_frame_;
-      out.uncorrected =
-          poseFromTransform(buffer_.lookupTransform(target, camera, stamp).transform);
+      out.uncorrected = poseFromTransform(buffer_.lookupTransform(target, camera, stamp).transform);
     }
     out.pose = pose;
     record(stamp, out.uncorrected.value_or(pose));

@@ -56,9 +56,9 @@ class PoseProvider {
   virtual void newTimeline(const ros::Time& /*stamp*/) {}
   /// Forgets the history (a new session; called by the worker, which records it).
   void clearHistory();
-  /// The pose a lookup returned at `stamp` (its `uncorrected` pose, when it has one), or interpolated between the two around it when each
-  /// is within `max_gap` [s]: the pose source's history over the session, for loop-closure
-  /// corrections (core::PoseHistory). Thread-safe.
+  /// The pose a lookup returned at `stamp` (its `uncorrected` pose, when it has one), or
+  /// interpolated between the two around it when each is within `max_gap` [s]: the pose source's
+  /// history over the session, for loop-closure corrections (core::PoseHistory). Thread-safe.
   std::optional<core::CameraPose> historyAt(double stamp, double max_gap) const;
   /// The stamps of the history's first and last poses (the frames looked up), if any.
   std::optional<std::pair<double, double>> historySpan() const;
@@ -79,12 +79,12 @@ class PoseProvider {
 /// tf2: lookupTransform(world_frame, camera frame, stamp), camera frame = ~camera_frame or the
 /// image's frame_id; with NodeConfig::correctionFrame() also (that frame, camera frame, stamp),
 /// the pose corrections are measured against (RTAB-Map: odom <- camera, which its loop closures
-/// do not change, where map <- camera takes them through map -> odom). /tf and /tf_static go into the buffer as tf2_ros::TransformListener puts
-/// them (on a thread of their own; the buffer cleared when ROS time goes back), and besides: a
-/// transform stamped more than ~time_jump_threshold before the newest of its child frame starts
-/// a new timeline (the buffer is cleared first), also without simulated time (a bag played
-/// again without --clock, whose transforms tf2 would otherwise mix with the old ones or refuse
-/// as too old).
+/// do not change, where map <- camera takes them through map -> odom). /tf and /tf_static go into
+/// the buffer as tf2_ros::TransformListener puts them (on a thread of their own; the buffer cleared
+/// when ROS time goes back), and besides: a transform stamped more than ~time_jump_threshold before
+/// the newest of its child frame starts a new timeline (the buffer is cleared first), also without
+/// simulated time (a bag played again without --clock, whose transforms tf2 would otherwise mix
+/// with the old ones or refuse as too old).
 class TfPoseProvider : public PoseProvider {
  public:
   TfPoseProvider(const NodeConfig& config, ros::NodeHandle nh);
