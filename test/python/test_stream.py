@@ -1,18 +1,21 @@
-"""The pair stream's consumer: in-order application, gaps, catch-up, restarts of the node."""
+"""The pair stream's consumer: in-order application, gaps, catch-up, restarts of the node, and
+the changes of the announced pairs handed to the bridge's worker (take_changes)."""
+import random
 from types import SimpleNamespace as NS
 
 from view_selection.live.stream import PairStream
 
 
-def keyframe(i):
-    pose = NS(position=NS(x=float(i), y=0.0, z=0.0), orientation=NS(w=1.0, x=0.0, y=0.0, z=0.0))
-    return NS(id=i, image_name="%d.png" % i, stamp=NS(to_sec=lambda i=i: 100.0 + i), pose=pose,
+def keyframe(i, session="", x=None):
+    pose = NS(position=NS(x=float(i if x is None else x), y=0.0, z=0.0), orientation=NS(w=1.0, x=0.0, y=0.0, z=0.0))
+    return NS(id=i, image_name="%s%d.png" % (session, i), stamp=NS(to_sec=lambda i=i: 100.0 + i), pose=pose,
               intrinsics=[500.0, 500.0, 320.0, 240.0], width=640, height=480)
 
 
 def msg(seq, added=(), removed=(), keyframes=(), full=False, total=None, pending=0, flushed=False):
     return NS(sequence=seq, full=full, flushed=flushed, added=[NS(first=a, second=b) for a, b in added],
-              removed=[NS(first=a, second=b) for a, b in removed], keyframes=[keyframe(i) for i in keyframes],
+              removed=[NS(first=a, second=b) for a, b in removed],
+              keyframes=[keyframe(k) if isinstance(k, int) else k for k in keyframes],
               total_keyframes=total if total is not None else len(keyframes), pending_pairs=pending)
 
 
@@ -175,3 +178,66 @@ def test_pairs_taken_back_are_handed_over_once():
     s.receive(msg(4, added=[(0, 1), (2, 3)], keyframes=[0, 1, 2, 3], full=True))  # (1, 2) is not in it
     assert s.take_taken_back() == [("1.png", "2.png")]
     assert s.announced_names() == {("0.png", "1.png"), ("2.png", "3.png")}
+
+
+def names(*pairs):
+    return {("%d.png" % a, "%d.png" % b) for a, b in pairs}
+
+
+def test_a_pair_taken_back_and_announced_again_between_two_takes_is_no_change():
+    s = PairStream()
+    s.apply(msg(1, added=[(0, 1), (1, 2)], keyframes=[0, 1, 2]))
+    assert s.take_changes() == (names((0, 1), (1, 2)), set())
+    s.apply(msg(2, removed=[(0, 1)], total=3))
+    s.apply(msg(3, added=[(0, 1), (0, 2)], total=3))  # (0, 1) back again; (0, 2) new
+    s.apply(msg(4, removed=[(0, 2)], total=3))         # and (0, 2) gone before anyone took it
+    assert s.take_changes() == (set(), set())
+    s.apply(msg(5, removed=[(1, 2)], total=3))
+    assert s.take_changes() == (set(), names((1, 2)))
+    assert s.take_changes() == (set(), set())
+    # The taken-back pairs for the ledger are every take-back, as before.
+    assert s.take_taken_back() == sorted(names((0, 1))) + sorted(names((0, 2))) + sorted(names((1, 2)))
+
+
+def test_a_full_message_gives_the_changes_against_the_set_before_it():
+    s = PairStream()
+    s.apply(msg(1, added=[(0, 1), (1, 2), (2, 3)], keyframes=[0, 1, 2, 3]))
+    s.take_changes()
+    s.apply(msg(2, removed=[(2, 3)], added=[(0, 3)], total=4))  # not taken yet when the full one comes
+    s.apply(msg(9, added=[(1, 2), (2, 3), (0, 2)], keyframes=[0, 1, 2, 3], full=True))
+    assert s.take_changes() == (names((0, 2)), names((0, 1)))  # (2, 3) went and came back
+    # A new session: fewer keyframes, other images; every pair of the old one goes.
+    s.apply(msg(1, added=[(0, 1)], keyframes=[keyframe(0, "b"), keyframe(1, "b")], full=True, total=2))
+    assert s.take_changes() == ({("b0.png", "b1.png")}, names((1, 2), (2, 3), (0, 2)))
+
+
+def test_the_changes_taken_follow_the_announced_names_through_every_kind_of_message():
+    rng = random.Random(11)
+    s = PairStream()
+    mine = set()  # the consumer's copy, changed only by what it takes
+    seq, known, session = 0, 0, ""
+    for step in range(400):
+        seq += 1
+        if rng.random() < 0.04:  # a catch-up's full message (sometimes a new session: fewer keyframes)
+            if rng.random() < 0.5:
+                session, known = "s%d" % step, rng.randint(0, 5)
+            total = known
+            ids = list(range(total))
+            pairs = {tuple(sorted(rng.sample(range(total + 3), 2))) for _ in range(rng.randint(0, 2 * total + 1))}
+            s.apply(msg(seq, added=pairs, keyframes=[keyframe(i, session) for i in ids], full=True, total=total))
+        else:
+            new = list(range(known, known + rng.randint(0, 3)))
+            moved = [rng.randrange(known)] if known and rng.random() < 0.3 else []
+            known += len(new)
+            # pairs of known keyframes, of keyframes not known yet (named when they come), and
+            # pairs taken back (some announced, some never announced)
+            added = [tuple(sorted(rng.sample(range(known + 3), 2))) for _ in range(rng.randint(0, 4))]
+            removed = [tuple(sorted(rng.sample(range(known + 3), 2))) for _ in range(rng.randint(0, 3))]
+            removed += rng.sample(sorted(s.announced), min(len(s.announced), rng.randint(0, 2)))
+            s.apply(msg(seq, added=added, removed=removed, total=known,
+                        keyframes=[keyframe(i, session, x=rng.random() if i in moved else None) for i in moved + new]))
+        if rng.random() < 0.5:
+            changes = s.take_changes()
+            assert not (changes.added & mine) and changes.removed <= mine, step
+            mine = (mine - changes.removed) | changes.added
+            assert mine == s.announced_names(), step

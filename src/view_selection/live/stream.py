@@ -5,10 +5,45 @@ skips one (a gap), or one from before (the node started over), means the consume
 something and must catch up through ~get_pairs(since = the last sequence applied), which answers
 the messages after it or one `full` message with the whole announced set. Messages are duck-typed:
 anything with the fields of view_selection/PairChanges works (tests pass plain objects).
+
+The announced pairs go to the bridge's worker as what changed since it last took them
+(take_changes), so that a batch's work on them is that of what changed, not of the session
+(issue 34).
 """
+import collections
 import time
 
 from ..keyframes import Keyframe, pair_of
+
+AnnouncedChanges = collections.namedtuple("AnnouncedChanges", "added removed")
+AnnouncedChanges.__doc__ = """The announced pairs (names, sorted within) that a consumer's copy of the
+set gains and loses: `added` were not in it and are now, `removed` were and are not (a pair taken
+back and announced again in between is in neither). Two sets."""
+
+
+class NetChanges:
+    """What a set gained and lost since the last take(), net: told each item that enters the set
+    (added) and each that leaves it (removed), never one that was in it already or was not."""
+
+    def __init__(self):
+        self.added, self.removed = set(), set()
+
+    def add(self, item):
+        if item in self.removed:
+            self.removed.discard(item)  # back where it was at the last take
+        else:
+            self.added.add(item)
+
+    def remove(self, item):
+        if item in self.added:
+            self.added.discard(item)
+        else:
+            self.removed.add(item)
+
+    def take(self):
+        out = AnnouncedChanges(self.added, self.removed)
+        self.added, self.removed = set(), set()
+        return out
 
 
 class PairStream:
@@ -23,6 +58,7 @@ class PairStream:
         # that a batch does not convert the whole set again (issue 34); pairs whose keyframes are
         # not known yet wait in _unnamed (ids).
         self._named, self._unnamed = set(), set()
+        self._changes = NetChanges()  # of _named, since take_changes()
         self.taken_back = []  # announced pairs (names) no longer announced, since take_taken_back()
         # The keyframes ordered by id, kept as they come (a batch does not sort the session again):
         # a new id beyond the last is appended, a known one replaced where it is; None when it must
@@ -41,8 +77,9 @@ class PairStream:
 
     def apply(self, msg):
         """Applies one message (in sequence, or `full`)."""
-        before = self._named if msg.full else None  # what a full message does not hold is taken back
-        if msg.full:
+        full = msg.full
+        if full:
+            before = self._named  # what a full message does not hold is taken back
             self.announced = set()
             self._named, self._unnamed = set(), set()
             if msg.total_keyframes < len(self.keyframes):
@@ -58,7 +95,7 @@ class PairStream:
         if new and self._unnamed:
             for pair in [p for p in self._unnamed if p[0] in self.keyframes and p[1] in self.keyframes]:
                 self._unnamed.discard(pair)
-                self._named.add(self._name_of(pair))
+                self._announce(self._name_of(pair), full)
         for p in msg.removed:
             pair = (p.first, p.second)
             self.announced.discard(pair)
@@ -68,15 +105,24 @@ class PairStream:
                 if name in self._named:
                     self._named.discard(name)
                     self.taken_back.append(name)
+                    if not full:
+                        self._changes.remove(name)
         for p in msg.added:
             pair = (p.first, p.second)
             self.announced.add(pair)
             if p.first in self.keyframes and p.second in self.keyframes:
-                self._named.add(self._name_of(pair))
+                self._announce(self._name_of(pair), full)
             else:
                 self._unnamed.add(pair)
-        if before is not None:
-            self.taken_back.extend(sorted(before - self._named))
+        if full:
+            # The changes against the set before it (the whole set compared: full messages are
+            # rare, a catch-up or a new session).
+            gone = before - self._named
+            self.taken_back.extend(sorted(gone))
+            for name in gone:
+                self._changes.remove(name)
+            for name in self._named - before:
+                self._changes.add(name)
         self.sequence = msg.sequence
         self.messages += 1
         self.pending_pairs = msg.pending_pairs
@@ -151,12 +197,26 @@ class PairStream:
     def _name_of(self, pair):
         return pair_of(self.keyframes[pair[0]].name, self.keyframes[pair[1]].name)
 
+    def _announce(self, name, full):
+        """A pair announced under its names (a full message's changes are found at its end)."""
+        if name not in self._named:
+            self._named.add(name)
+            if not full:
+                self._changes.add(name)
+
     def take_taken_back(self):
         """The pairs (names) taken back since the last call, in the order they were."""
         out, self.taken_back = self.taken_back, []
         return out
 
+    def take_changes(self):
+        """AnnouncedChanges: how the announced pairs whose keyframes we know (names, sorted
+        within) changed since the last call (the first call: every one of them). A consumer that
+        applies each in turn to a set that began empty holds announced_names()."""
+        return self._changes.take()
+
     def announced_names(self):
         """The announced pairs whose keyframes we know, as image names (sorted within), a set of
-        its own (the caller may keep it outside the lock)."""
+        its own (the caller may keep it outside the lock). A copy of the whole set: for a finish,
+        not for every batch (take_changes)."""
         return set(self._named)
