@@ -87,12 +87,13 @@ class ContinuityChain:
         self.last = max(keyframes, key=lambda k: k.id) if keyframes else None
 
     def extend(self, new):
-        """Adds the pairs of `new` (appended, in their order); False, changing nothing, when one
-        of them does not come after the one before it."""
+        """Adds the pairs of `new` (appended, in their order) and returns them (a list); None,
+        changing nothing, when one of them does not come after the one before it."""
         chain = ([self.last] if self.last is not None else []) + list(new)
         if any(b.id <= a.id for a, b in zip(chain, chain[1:])):
-            return False
-        self.pairs.update(pair_of(a.name, b.name) for a, b in zip(chain, chain[1:]))
+            return None
+        added = [pair_of(a.name, b.name) for a, b in zip(chain, chain[1:])]
+        self.pairs.update(added)
         if chain:
             self.last = chain[-1]
-        return True
+        return added

@@ -60,16 +60,17 @@ def test_the_chain_kept_as_keyframes_come_is_the_chain_of_all_of_them():
                 new.append(kf(next_id))
                 next_id += 1
         have += new
-        if not chain.extend(new):
+        if chain.extend(new) is None:
             chain.rebuild(have)
         assert chain.pairs == set(continuity_pairs(have)), step
 
 
 def test_extend_refuses_a_keyframe_before_the_last_and_changes_nothing():
     chain = ContinuityChain()
-    assert chain.extend([kf(0), kf(1)])
+    assert chain.extend([kf(0), kf(1)]) == [("0000.png", "0001.png")]
+    assert chain.extend([]) == []  # nothing new: nothing added, nothing refused
     before = set(chain.pairs)
-    assert not chain.extend([kf(3), kf(2)])
+    assert chain.extend([kf(3), kf(2)]) is None
     assert chain.pairs == before and chain.last.id == 1
 
 

@@ -7,7 +7,8 @@ keyframe came for ~finish_after_idle, and at shutdown within ~shutdown_budget se
 sends SIGINT, then SIGTERM 15 s later and SIGKILL 2 s after that: the finish must be done by then).
 
 Threads: rospy's for ~pairs and ~finish; one worker (`loop`) for the batches. `lock` guards the
-stream's state; `work` serialises COLMAP's work on the project (a batch, or the finish).
+stream's state; `work` serialises COLMAP's work on the project (a batch, or the finish). `lock` is
+taken inside `work` (a batch takes the stream's changes there), never `work` inside `lock`.
 """
 import os
 import signal
@@ -393,31 +394,34 @@ class Bridge:
     def batch(self):
         """Features of new keyframes, then matches of announced pairs not matched yet; True when
         pairs are left for the next batch."""
-        with self.lock:
-            keyframes = self.stream.ordered_keyframes()
-            pairs = self.stream.announced_names()
-            taken_back = self.stream.take_taken_back()
-            # No keyframe for half of ~finish_after_idle, or the node said its frames stopped:
-            # the finish may be near, and the fallbacks waiting are matched now, before it is
-            # due, not in it. (Waiting for the node's `flushed` message alone, as the finish
-            # does, put that run in the way: a 10-minute walk's finish began 3.5 s after its
-            # last keyframe, not 1.3 s.)
-            quiet = self.stream.quiet(0.5 * self.finish_after_idle)
-            # The pairs within ~match_delay: once the node said its frames stopped (a node that
-            # does not tell its pauses: when quiet). On the idle time alone they were matched at
-            # every pause of keyframes walking where the camera had been, and at the end the
-            # batch that would have matched them came after the finish had begun: a 30-minute
-            # walk's finish matched 229 delayed pairs, 1.6 s.
-            paused = self.stream.frames_paused() if self.pauses_told() else quiet
-        if not keyframes:
-            return False
         with self.work:
             if self.stopping:
+                return False
+            with self.lock:
+                keyframes = self.stream.ordered_keyframes()
+                changes = self.stream.take_changes()  # taken once: handed to the work below, whatever follows
+                taken_back = self.stream.take_taken_back()
+                # No keyframe for half of ~finish_after_idle, or the node said its frames stopped:
+                # the finish may be near, and the fallbacks waiting are matched now, before it is
+                # due, not in it. (Waiting for the node's `flushed` message alone, as the finish
+                # does, put that run in the way: a 10-minute walk's finish began 3.5 s after its
+                # last keyframe, not 1.3 s.)
+                quiet = self.stream.quiet(0.5 * self.finish_after_idle)
+                # The pairs within ~match_delay: once the node said its frames stopped (a node that
+                # does not tell its pauses: when quiet). On the idle time alone they were matched at
+                # every pause of keyframes walking where the camera had been, and at the end the
+                # batch that would have matched them came after the finish had begun: a 30-minute
+                # walk's finish matched 229 delayed pairs, 1.6 s.
+                paused = self.stream.frames_paused() if self.pauses_told() else quiet
+            # The announced pairs' changes since the last batch (issue 34: not the whole set),
+            # kept by the work before anything that may fail.
+            self.work_state.announce(changes)
+            if not keyframes:
                 return False
             try:
                 self.work_state.taken_back(taken_back)
                 self.work_state.extract(keyframes)
-                more = self.work_state.match(keyframes, pairs, quiet=quiet, paused=paused)
+                more = self.work_state.match(keyframes, quiet=quiet, paused=paused)
                 if self.work_state.model is not None:
                     with self.work_state.clock.measure("triangulation", 1):
                         self.work_state.feed_model(keyframes)

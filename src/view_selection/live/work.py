@@ -13,6 +13,8 @@ from ..keyframes import ContinuityChain, continuity_pairs, pair_of
 from ..matching.loops import LoopCandidates
 from .attempts import Attempts
 from .changes import KeyframeChanges
+from .stream import AnnouncedChanges
+from .wanted import WantedPairs
 
 
 # Pairs a run of the finish's matching takes (match_all): large enough that COLMAP's fallback
@@ -75,6 +77,12 @@ class LiveWork:
         self.unextracted = {}      # name -> Keyframe: no features yet (no image, failed, or new)
         self.unfed = {}            # name -> Keyframe: the live model has not taken its pose or keypoints
         self.chain = ContinuityChain()  # the continuity pairs of the keyframes so far
+        # The wanted pairs and the backlog of those not matched, kept from what changes
+        # (live/wanted.py): the announced pairs as the caller gives them, the chain's and the
+        # loops' as they grow. `_rebuild_wanted`: a batch failed while it brought them up to
+        # date; the next one builds the backlog again from everything wanted.
+        self.wanted = WantedPairs(self._wanted_beside)
+        self._rebuild_wanted = False
         self.backlog_max = 0
         self.backlog_before = 0
         self.due_left = 0  # pairs the last batch found due and left for the next (behind)
@@ -244,29 +252,75 @@ class LiveWork:
         self.project.ledger("taken-back", ["%s %s" % p for p in wasted])
         return len(wasted)
 
-    def wanted_pairs(self, keyframes, pairs):
-        """The announced pairs (names) plus, with continuity, each keyframe with the one before,
-        and with loops the pairs across revisits proposed so far (matching/loops.py).
-        A set is taken as it is (its pairs sorted within, as PairStream.announced_names gives
-        them): a batch does not convert the whole session's pairs again."""
-        wanted = set(pairs) if isinstance(pairs, (set, frozenset)) else {pair_of(a, b) for a, b in pairs}
+    def announce(self, changes):
+        """The announced pairs (names, sorted within) changed: stream.AnnouncedChanges, against
+        what this was told before (PairStream.take_changes, each in turn). Only sets change: a
+        caller that takes the changes from the stream hands them over here first, so that a
+        batch that fails afterwards loses none of them."""
+        self.wanted.apply(changes)
+
+    def _announced(self, pairs):
+        """match()'s and wanted_pairs()'s `pairs`: None (no change), AnnouncedChanges (the
+        changes), or any other collection of pairs (names): the announced set, whole."""
+        if pairs is None:
+            return
+        if isinstance(pairs, AnnouncedChanges):
+            self.wanted.apply(pairs)
+        else:
+            self.wanted.replace(pairs)
+
+    def _wanted_beside(self, pair):
+        """Whether a pair is wanted besides being announced: a continuity or loop pair."""
+        return (self.continuity and pair in self.chain.pairs) or (self.loops is not None and pair in self.loops.pairs)
+
+    def _beside(self):
+        """The sets of pairs wanted beside the announced ones, whole."""
+        return ([self.chain.pairs] if self.continuity else []) + ([self.loops.pairs] if self.loops is not None else [])
+
+    def _refresh_wanted(self, keyframes, wanted):
+        """The continuity chain and the loop candidates brought up to date with the keyframes
+        that changed since the last call; their new pairs join the backlog of `wanted` and of
+        the batches' own (self.wanted), which are built again from everything wanted when the
+        chain is (another session)."""
+        states = [self.wanted] if wanted is self.wanted else [self.wanted, wanted]
         changes = self.seen["wanted"].scan(keyframes)
         try:
+            new, rebuild = [], changes.reset or self._rebuild_wanted
             if self.continuity:
-                if changes.reset or not self.chain.extend(changes.new):
+                added = None if changes.reset else self.chain.extend(changes.new)
+                if added is None:
                     self.chain.rebuild(keyframes)
-                wanted |= self.chain.pairs
+                    rebuild = True
+                else:
+                    new += added
             if self.loops is not None:
-                self.loops.update(changes.keyframes, wanted)  # the new keyframes' pairs across a revisit
-                wanted |= self.loops.pairs
+                new += self.loops.update(changes.keyframes, wanted)  # the new keyframes' pairs across a revisit
+            for state in states:
+                if rebuild:
+                    state.rebuild(self._beside())
+                else:
+                    state.want(new)
+            self._rebuild_wanted = False
         except Exception:
             self.seen["wanted"].forget()  # the next batch looks at every keyframe again
+            self._rebuild_wanted = True   # and builds the backlog again from everything wanted
             raise
-        return wanted
 
-    def match(self, keyframes, pairs, limit=None, quiet=False, paused=None):
+    def wanted_pairs(self, keyframes, pairs=None):
+        """Every wanted pair (names), a set of its own: the announced pairs (`pairs` as match()
+        takes them) plus, with continuity, each keyframe with the one before, and with loops the
+        pairs across revisits proposed so far (matching/loops.py). The whole session: a batch
+        does not ask for it (match() keeps the backlog from what changed)."""
+        self._announced(pairs)
+        self._refresh_wanted(keyframes, self.wanted)
+        return self.wanted.everything(self._beside())
+
+    def match(self, keyframes, pairs=None, limit=None, quiet=False, paused=None):
         """Matches at most `limit` (~max_batch_pairs) of the wanted pairs not matched yet whose
-        images have features and that are due; True when more are waiting.
+        images have features and that are due; True when more are waiting. `pairs`: the
+        announced pairs (names): their changes since the last call (stream.AnnouncedChanges, as
+        announce() takes them), None when they did not change (or were handed to announce()),
+        or the whole announced set (any other collection of pairs: compared with the one held).
 
         While the recording goes on, at most ~max_backlog of the waiting pairs are considered
         (the oldest by name; the rest are counted in `deferred`); the finish (match_all) takes
@@ -278,17 +332,20 @@ class LiveWork:
         keyframes alone pause whenever the camera walks where it has been, while the node goes on
         taking pairs back (a 30-minute walk on odometry had 1,004 pauses of keyframes of 0.5 s or
         more)."""
-        return self._match(keyframes, pairs, self.max_batch_pairs if limit is None else limit, self.max_backlog,
-                           flush=quiet, flush_delayed=quiet if paused is None else paused)
+        self._announced(pairs)
+        return self._match(keyframes, self.wanted, self.max_batch_pairs if limit is None else limit,
+                           self.max_backlog, flush=quiet, flush_delayed=quiet if paused is None else paused)
 
-    def _match(self, keyframes, pairs, limit, max_backlog=None, flush=True, flush_delayed=True):
+    def _match(self, keyframes, wanted, limit, max_backlog=None, flush=True, flush_delayed=True):
+        """One run over `wanted` (a WantedPairs: the batches' own, or the finish's): its work is
+        that of the keyframes and pairs that changed and of the backlog, not of the session."""
         matched = self.backend.matched()
-        wanted = self.wanted_pairs(keyframes, pairs)
+        self._refresh_wanted(keyframes, wanted)
         for p in [p for p in self.fallback_waiting if p not in wanted or p in matched]:
             del self.fallback_waiting[p]  # no longer wanted (or matched meanwhile): not matched for nothing
-        backlog = sorted(wanted - matched)
         have = self.backend.extracted()
-        backlog = [p for p in backlog if p[0] in have and p[1] in have and not self.pairs.given_up(p)]
+        backlog = [p for p in wanted.waiting(matched)
+                   if p[0] in have and p[1] in have and not self.pairs.given_up(p)]
         self.backlog_max = max(self.backlog_max, len(backlog))
         self.backlog_before = len(backlog)  # before this run
         settled = self._settled(backlog, flush_delayed)
@@ -350,11 +407,16 @@ class LiveWork:
         """Every wanted pair that is due and whose images have features, in runs of `batch` pairs
         (each halved where it fails, as in a batch), until none is left: the finish's matching,
         whatever ~max_backlog is. A pair that fails is not due again until its wait is over, so
-        this ends. progress(done, total): after each run. Returns how many runs were made."""
+        this ends. progress(done, total): after each run. Returns how many runs were made.
+        `pairs`: the announced pairs (names), whole: the finish's, kept apart from the batches'
+        (the pair stream's changes go on from where the batches took them)."""
+        wanted = WantedPairs(self._wanted_beside)
+        wanted.replace(pairs)
+        wanted.rebuild(self._beside())  # the chain and loops so far; _match adds what the keyframes bring
         runs = 0
         total = None
         while not self.project.cancelled:
-            more = self._match(keyframes, pairs, batch)
+            more = self._match(keyframes, wanted, batch)
             if total is None:
                 total = self.backlog_before
             runs += 1
@@ -490,7 +552,7 @@ class LiveWork:
         extra = sorted(set(continuity_pairs(keyframes)) - set(final)) if self.continuity else []
         loops = set()
         if self.loops is not None:
-            self.loops.update(keyframes, set(final) | set(extra))
+            self.wanted.want(self.loops.update(keyframes, set(final) | set(extra)))  # batches after it want them too
             loops = self.loops.pairs - set(final) - set(extra)
         durable.write_atomically(os.path.join(project.root, "pairs.txt"),  # COLMAP's match list
                                  "".join("%s %s\n" % p for p in final))
