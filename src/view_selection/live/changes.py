@@ -5,7 +5,8 @@ work of what changed, not of the session).
 The bridge gives each batch the stream's keyframes ordered by id: a list that grows at its end,
 whose entries are replaced by new objects when the node moves a keyframe (a Keyframe is never
 changed in place). A reader compares the new list with its last one by object identity, in C
-(`map(operator.is_not, ...)`): what was appended and what was replaced is what changed. A list
+(`==`, then `map(operator.is_not, ...)` where something was replaced): what was appended and what
+was replaced is what changed. A list
 that shrank, or a place that now holds another image, is another session: then everything
 changed and the reader starts over (`reset`).
 """
@@ -37,7 +38,13 @@ class KeyframeChanges:
         n = len(previous)
         if len(keyframes) < n:
             return Changes(keyframes, keyframes, True)
-        replaced = list(itertools.compress(range(n), map(operator.is_not, keyframes, previous)))
+        # Most batches replace nothing: the lists compared whole first (a Keyframe has no __eq__,
+        # so == is identity, in one C loop: 10,000 keyframes in ~0.06 ms, slice included, against
+        # ~0.2 ms for the places found one by one).
+        if keyframes[:n] == previous:
+            replaced = []
+        else:
+            replaced = list(itertools.compress(range(n), map(operator.is_not, keyframes, previous)))
         if any(keyframes[i].name != previous[i].name for i in replaced):
             return Changes(keyframes, keyframes, True)
         new = keyframes[n:]
