@@ -10,6 +10,7 @@
 #include <view_selection/InputStatistics.h>
 #include <view_selection/ViewSelection.h>
 
+#include "view_selection/core/pose_interpolation.h"
 #include "view_selection/core/view_selector.h"
 #include "view_selection/io/tum_dataset.h"
 #include "view_selection/io/tum_frames.h"
@@ -563,6 +564,65 @@ TEST_F(BadInputTest, MapPointsReplaceAndUpdateRows) {
   }
 }
 
+// bad_input_odom_frame.test: ~use_path_corrections with ~odom_frame "odom" (as rtabmap.launch).
+// A frame whose world <- camera is on tf but not odom <- camera (odom is not on its chain) is a
+// no_pose drop whose message names ~odom_frame, and the node goes on: the next frame, looked up
+// through world -> odom -> camera, is a keyframe at the composed pose.
+TEST_F(BadInputTest, OdomFrameOffTheChainIsANoPoseNamingIt) {
+  std::string odom;
+  if (!ros::NodeHandle("~").getParam("odom_frame", odom))
+    GTEST_SKIP() << "bad_input_odom_frame.test runs it";
+  const std::vector<GoodFrame> good = syntheticFrames(2);
+  ASSERT_TRUE(waitForSubscribers()) << "the node under test did not subscribe within 20 s";
+  Send off = makeSend(good[0], ros::Time(1000.1), "cam_off");  // world -> cam_off only
+  ASSERT_TRUE(publish(off, 1));
+  auto s = stats();
+  ASSERT_TRUE(s);
+  EXPECT_EQ(s->frames_offered, 0u);
+  EXPECT_EQ(s->frames_dropped, 1u);
+  ASSERT_EQ(s->drop_reasons.size(), s->drop_counts.size());
+  const auto reason = std::find(s->drop_reasons.begin(), s->drop_reasons.end(), "no_pose");
+  ASSERT_NE(reason, s->drop_reasons.end());
+  EXPECT_EQ(s->drop_counts[static_cast<size_t>(reason - s->drop_reasons.begin())], 1u);
+  EXPECT_NE(s->last_error.find("~odom_frame"), std::string::npos) << s->last_error;
+  EXPECT_NE(s->last_error.find(odom + " <- cam_off"), std::string::npos) << s->last_error;
+
+  // world -> odom -> cam_on: a keyframe at world <- odom * odom <- cam_on.
+  core::CameraPose world_odom;
+  world_odom.position = {0.3, -0.2, 0.1};
+  world_odom.orientation = Eigen::Quaterniond(Eigen::AngleAxisd(0.2, Eigen::Vector3d::UnitZ()));
+  const ros::Time stamp(1000.2);
+  geometry_msgs::TransformStamped link;
+  link.header.stamp = stamp;
+  link.header.frame_id = "world";
+  link.child_frame_id = odom;
+  link.transform = ros_node::transformToMsg(world_odom);
+  tf2_msgs::TFMessage m;
+  m.transforms.push_back(link);
+  tf_pub_.publish(m);
+  Send on = makeSend(good[1], stamp, "cam_on");
+  on.camera_frame.clear();  // published below, as a child of odom
+  const core::CameraPose odom_camera =
+      core::composePoses(core::inversePose(world_odom), good[1].pose);
+  geometry_msgs::TransformStamped camera_link;
+  camera_link.header.stamp = stamp;
+  camera_link.header.frame_id = odom;
+  camera_link.child_frame_id = "cam_on";
+  camera_link.transform = ros_node::transformToMsg(odom_camera);
+  tf2_msgs::TFMessage c;
+  c.transforms.push_back(camera_link);
+  tf_pub_.publish(c);
+  ASSERT_TRUE(publish(on, 2));
+  s = stats();
+  EXPECT_EQ(s->frames_offered, 1u) << s->last_error;
+  view_selection::GetSelection srv;
+  ASSERT_TRUE(ros::service::call(node_ + "/get_selection", srv));
+  ASSERT_EQ(srv.response.selection.keyframes.size(), 1u);
+  const auto& p = srv.response.selection.keyframes[0].pose.position;
+  EXPECT_NEAR(p.x, good[1].pose.position.x(), 1e-6);
+  EXPECT_NEAR(p.y, good[1].pose.position.y(), 1e-6);
+  EXPECT_NEAR(p.z, good[1].pose.position.z(), 1e-6);
+}
 
 // bounded_outputs.test: ~publish_max_views 3. Every message on ~selection stays within 3 views
 // once the map is larger, the updates applied in order rebuild exactly what ~get_selection
