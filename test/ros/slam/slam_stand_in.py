@@ -40,6 +40,9 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import slam_systems as systems  # noqa: E402
 
 
+IDENTITY = (systems.numpy.zeros(3), systems.numpy.array([0.0, 0.0, 0.0, 1.0]))  # translation, xyzw
+
+
 def stamp_of(seconds):
     ns = int(round(seconds * 1e9))
     return rospy.Time(ns // 1000000000, ns % 1000000000)
@@ -72,13 +75,14 @@ class StandIn:
         self.t0 = None
         self.next_odometry = 0  # index of the next VINS stamp to publish
         self.drifting = self.c['path'] is not None
-        self.map_odom = (systems.numpy.zeros(3), systems.numpy.array([0.0, 0.0, 0.0, 1.0]))  # rtabmap
+        # rtabmap and loop_fusion: the stamp of the keyframe (map node) that closed the loop (None
+        # before) and the odometry's correction from then on (RTAB-Map's map -> odom)
+        self.loop_at, self.loop_correction = None, None
         # rtabmap: its map nodes' stamps (the images it took as nodes), how many of them its path
-        # had when last published, the loop's node's stamp (None before the loop closed)
-        self.nodes, self.nodes_published, self.map_loop_at = [], 0, None
-        # loop_fusion: the stamp of the keyframe that closed the loop (None before), the VIO's
-        # correction from then on, and the keyframes added to its path so far (VINS stamp indices)
-        self.loop_at, self.loop_correction, self.keyframes_added = None, None, 0
+        # had when last published
+        self.nodes, self.nodes_published = [], 0
+        # loop_fusion: the keyframes added to its path so far (VINS stamp indices)
+        self.keyframes_added = 0
         if self.role in ('orb_slam2', 'orb_slam3'):
             self.pub = rospy.Publisher(self.topic, PoseStamped, queue_size=100)
         elif self.role == 'vins_estimator':
@@ -100,13 +104,30 @@ class StandIn:
                 self.nodes.append(self.image_stamps[-1])
         self.publish_map_path()
 
-    def map_node_pose(self, t, truth):
-        """RTAB-Map's pose of its map node at t: map -> odom times the odometry, at the truth up to
-        the loop's node once the loop closed."""
+    def graph_pose(self, t, truth):
+        """The system's pose of its own keyframe (RTAB-Map's map node) at t, under the lock: the
+        odometry's before the loop closed; after, the truth up to the loop's keyframe and the
+        odometry corrected by the loop's drift after it."""
         body = systems.interpolate(truth, t)
-        if self.map_loop_at is not None and t <= self.map_loop_at:
+        if self.loop_at is not None and t <= self.loop_at:
             return body
-        return systems.compose(self.map_odom, self.odometry_of(t, body))
+        odometry = self.odometry_of(t, body)
+        return odometry if self.loop_at is None else systems.compose(self.loop_correction, odometry)
+
+    def close_loop_at(self, t):
+        """Under the lock: the keyframe at t closes the loop, the odometry's drift up to it known
+        from then on."""
+        self.loop_at = t
+        self.loop_correction = systems.inverse(systems.drift(t - self.t0))
+
+    def publish_path(self, poses):
+        """The loop-closure path of `poses` ((stamp, pose) of the system's keyframes); returns how
+        many."""
+        path = Path()
+        path.header.stamp, path.header.frame_id = rospy.Time.now(), self.world
+        path.poses = [pose_msg(pose, stamp_of(t), self.world) for t, pose in poses]
+        self.path_pub.publish(path)
+        return len(path.poses)
 
     def publish_map_path(self, force=False):
         """mapPath with the map nodes whose true pose has come (the images and the truth come on
@@ -119,12 +140,8 @@ class StandIn:
             if len(nodes) <= self.nodes_published and not force:
                 return
             self.nodes_published = len(nodes)
-            poses = [(t, self.map_node_pose(t, truth)) for t in nodes]
-        path = Path()
-        path.header.stamp, path.header.frame_id = rospy.Time.now(), self.world
-        path.poses = [pose_msg(pose, stamp_of(t), self.world) for t, pose in poses]
-        self.path_pub.publish(path)
-        return len(path.poses)
+            poses = [(t, self.graph_pose(t, truth)) for t in nodes]
+        return self.publish_path(poses)
 
     def body_at(self, optical):
         return systems.compose(optical, self.to_body)
@@ -151,7 +168,7 @@ class StandIn:
                                                              stamp)]))
         elif self.role == 'rtabmap':
             with self.lock:
-                map_odom = self.map_odom
+                map_odom = self.loop_correction if self.loop_at is not None else IDENTITY
             self.pub.publish(TFMessage(transforms=[transform(self.world, 'odom', map_odom, stamp)]))
             self.publish_map_path()  # a node whose image came before its truth
         elif self.role == 'vins_estimator':
@@ -189,24 +206,12 @@ class StandIn:
         if added:
             self.publish_pose_graph_path()
 
-    def pose_graph_pose(self, t, truth):
-        """loop_fusion's pose of its keyframe at VINS stamp t: the VIO's before the loop closed;
-        after, the truth up to the loop and the VIO's corrected by the loop's drift after it."""
-        body = systems.interpolate(truth, t)
-        if self.loop_at is not None and t <= self.loop_at:
-            return body
-        vio = self.odometry_of(t, body)
-        return vio if self.loop_at is None else systems.compose(self.loop_correction, vio)
-
     def publish_pose_graph_path(self):
         with self.lock:
             truth = list(self.truth)
             stamps = [self.vins_stamp(n * systems.VINS_KEYFRAME_EVERY) for n in range(self.keyframes_added)]
-            poses = [(t, self.pose_graph_pose(t, truth)) for t in stamps]
-        path = Path()
-        path.header.stamp, path.header.frame_id = rospy.Time.now(), self.world
-        path.poses = [pose_msg(pose, stamp_of(t), self.world) for t, pose in poses]
-        self.path_pub.publish(path)
+            poses = [(t, self.graph_pose(t, truth)) for t in stamps]
+        self.publish_path(poses)
 
     def on_close_loop(self, _):
         if self.role == 'loop_fusion':
@@ -216,8 +221,7 @@ class StandIn:
         with self.lock:
             if self.nodes[-1] != self.image_stamps[-1]:
                 self.nodes.append(self.image_stamps[-1])
-            self.map_loop_at = self.nodes[-1]
-            self.map_odom = systems.inverse(systems.drift(self.map_loop_at - self.t0))
+            self.close_loop_at(self.nodes[-1])
         n = self.publish_map_path(force=True)
         rospy.loginfo('%s: %s with %d poses, the loop closed', rospy.get_name(), self.c['path'], n)
 
@@ -227,8 +231,7 @@ class StandIn:
         with self.lock:
             if not self.keyframes_added:
                 return
-            self.loop_at = self.vins_stamp((self.keyframes_added - 1) * systems.VINS_KEYFRAME_EVERY)
-            self.loop_correction = systems.inverse(systems.drift(self.loop_at - self.t0))
+            self.close_loop_at(self.vins_stamp((self.keyframes_added - 1) * systems.VINS_KEYFRAME_EVERY))
             n = self.keyframes_added
         rospy.loginfo('%s: %s with %d poses, the loop closed', rospy.get_name(), self.c['path'], n)
         self.publish_pose_graph_path()
