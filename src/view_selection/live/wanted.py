@@ -12,6 +12,7 @@ bookkeeping costs the changes and the backlog, never the whole session. Pairs ar
 within (keyframes.pair_of).
 """
 from ..keyframes import pair_of
+from .stream import AnnouncedChanges
 
 
 class WantedPairs:
@@ -45,13 +46,7 @@ class WantedPairs:
             new = pairs
         else:
             new = {pair_of(a, b) for a, b in pairs}
-        removed = self.announced - new
-        added = new - self.announced
-        self.announced = set(new)
-        for pair in removed:
-            if not self.beside(pair):
-                self.backlog.discard(pair)
-        self.backlog.update(added)
+        self.apply(AnnouncedChanges(added=new - self.announced, removed=self.announced - new))
 
     def want(self, pairs):
         """Pairs wanted beside the announced ones since the last call (new continuity or loop
@@ -62,9 +57,7 @@ class WantedPairs:
         """The backlog again from everything wanted: the announced pairs and `beside` (the sets
         of pairs wanted beside them, whole), after the chain was built again (another session)
         or after a batch failed while it brought the pairs beside up to date."""
-        self.backlog = set(self.announced)
-        for pairs in beside:
-            self.backlog.update(pairs)
+        self.backlog = self.everything(beside)
 
     def waiting(self, matched):
         """The backlog, sorted (oldest first by name); what `matched` holds leaves it first.
