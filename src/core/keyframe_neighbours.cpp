@@ -62,7 +62,7 @@ void KeyframeNeighbours::clear() {
 }
 
 void KeyframeNeighbours::query(const CameraPose& pose, double focal, double max_scale_ratio,
-                               size_t max, std::vector<ViewId>& out) {
+                               size_t max, std::vector<ViewId>& out, ViewId below) {
   out.clear();
   if (entries_.empty() || !(min_focal_ > 0.0) || max == 0) return;
   const double slack = 1.0 + 1e-9;
@@ -73,6 +73,7 @@ void KeyframeNeighbours::query(const CameraPose& pose, double focal, double max_
   const Eigen::Vector3d axis = pose.rotation().col(2);
   ranked_.clear();
   for (const ViewId id : found_) {
+    if (id >= below) continue;
     const Entry& e = entries_[static_cast<size_t>(id)];
     if (!e.usable) continue;
     const double distance = (e.centre - pose.position).norm();

@@ -21,6 +21,11 @@ void KeyframePolicyConfig::visitParameters(ParameterVisitor& v) {
   visitReal(v, "keyframe_parallax_deg", keyframe_parallax_deg, 0.0, 180.0,
             "... or when the parallax at the nearer of them (90th percentile) reaches this "
             "[deg]; 0 = off");
+  visitFlag(v, "revisit_registration", revisit_registration,
+            "scale_free: a frame the poses place on no earlier keyframe's view is registered "
+            "from its image (ORB, PnP) to the most alike earlier keyframes and measured again at "
+            "the registered pose, so that a revisit is recognised under drift; needs images and "
+            "keyframes with depth");
   visitInteger(v, "every_n", every_n, 1, 1000000, "every_nth: one keyframe every N valid frames");
   visitReal(v, "min_translation", min_translation, 0.0, 1e9,
             "motion: a new keyframe after this much translation [scene units: m when the poses "

@@ -135,6 +135,74 @@ ViewId ViewSelector::coveringKeyframe(const CameraPose& pose,
   return -1;
 }
 
+ViewId ViewSelector::registeredCoveringKeyframe(const Frame& frame, const CameraPose& pose) {
+  if (!registration_ || !config_.keyframes.revisit_registration) return -1;
+  // Keyframes below this id may be asked: those made kRecentSeconds or more before the frame
+  // (the stamps grow with the ids).
+  ViewId older = static_cast<ViewId>(matrix_.size());
+  while (older > 0 && matrix_.keyframe(older - 1).stamp > frame.stamp - kRecentSeconds) --older;
+  if (older <= 0) return -1;
+  const double focal = std::sqrt(frame.intrinsics.fx * frame.intrinsics.fy);
+  // The candidates, each list the kRegisteredCandidates most alike: by pose where the last
+  // registration placed the frame before it (consecutive frames share their drift against an
+  // earlier pass), by the images (which drift does not move), by pose where the frame's own pose
+  // places it.
+  std::vector<ViewId> candidates;
+  if (revisit_offset_) {
+    CameraPose moved;
+    moved.orientation = (revisit_offset_->orientation * pose.orientation).normalized();
+    moved.position = revisit_offset_->position + revisit_offset_->rotation() * pose.position;
+    neighbours_.query(moved, focal, kOverlapMaxScaleRatio, kRegisteredCandidates, near_, older);
+    candidates = near_;
+  }
+  neighbours_.query(pose, focal, kOverlapMaxScaleRatio, kRegisteredCandidates, near_, older);
+  std::vector<ViewId> alike = registration_->alikeKeyframes(frame, older, kRegisteredCandidates);
+  for (const std::vector<ViewId>* list : {&alike, &near_})
+    for (const ViewId id : *list)
+      if (std::find(candidates.begin(), candidates.end(), id) == candidates.end())
+        candidates.push_back(id);
+  KeyframeReference r;
+  r.max_parallax_deg = kOverlapMaxParallaxDeg;
+  r.max_scale_ratio = kOverlapMaxScaleRatio;
+  for (const ViewId id : candidates) {
+    const std::optional<CameraPose> relative = registration_->relativePose(frame, id);
+    if (!relative || !relative->isValid()) continue;
+    const Keyframe& registered_to = matrix_.keyframe(id);
+    // Where the images put the frame in that keyframe's world: its pose composed with the
+    // frame's pose relative to it.
+    CameraPose registered;
+    registered.orientation = (registered_to.pose.orientation * relative->orientation).normalized();
+    registered.position =
+        registered_to.pose.position + registered_to.pose.rotation() * relative->position;
+    // The offset from the frame's pose to the registered one (world to world) for the next frames.
+    CameraPose offset;
+    offset.orientation = (registered.orientation * pose.orientation.conjugate()).normalized();
+    offset.position = registered.position - offset.rotation() * pose.position;
+    revisit_offset_ = offset;
+    // The keyframes made just before and after it share its drift: the frame is measured
+    // against them at the registered pose, nearest in id first (the keyframe itself first).
+    const ViewId lo = std::max<ViewId>(0, id - kRegisteredWindow);
+    const ViewId hi = std::min<ViewId>(older - 1, id + kRegisteredWindow);
+    for (ViewId step = 0; id - step >= lo || id + step <= hi; ++step) {
+      for (const ViewId c : {id - step, id + step}) {
+        if (c < lo || c > hi) continue;
+        const Keyframe& k = matrix_.keyframe(c);
+        r.pose = k.pose;
+        r.intrinsics = k.intrinsics;
+        r.points = &k.points;
+        r.stamp = k.stamp;
+        if (policy_.covers(r, registered, frame.intrinsics)) return c;
+        if (step == 0) break;  // id - 0 and id + 0 are the same keyframe
+      }
+    }
+  }
+  return -1;
+}
+
+void ViewSelector::setRegistration(std::unique_ptr<FrameRegistration> registration) {
+  registration_ = std::move(registration);
+}
+
 void ViewSelector::indexNeighbours() {
   neighbours_.clear();
   for (size_t i = 0; i < matrix_.size(); ++i)
@@ -150,6 +218,10 @@ FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
   if (!take) return result;
   if (revisitRuleApplies(policy_)) {
     result.covered_by = coveringKeyframe(pose, frame.intrinsics);
+    if (result.covered_by < 0) {
+      result.covered_by = registeredCoveringKeyframe(frame, pose);
+      if (result.covered_by >= 0) ++revisits_registered_;
+    }
     if (result.covered_by >= 0) {
       ++revisits_skipped_;
       return result;
@@ -195,6 +267,10 @@ FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
   }
   result.matrix_seconds = secondsSince(t_matrix);
   policy_.keyframeAccepted(pose);
+  // Only the revisit rule registers frames: a policy without it keeps nothing for it.
+  if (registration_ && config_.keyframes.revisit_registration &&
+      config_.keyframes.mode == KeyframeMode::kScaleFree)
+    registration_->keyframeAdded(result.id, normalised);
   result.outcome = FrameOutcome::kKeyframe;
   return result;
 }
@@ -227,6 +303,7 @@ std::vector<ViewId> ViewSelector::applyPointUpdates() {
 
 void ViewSelector::correctPoses(const std::vector<std::pair<ViewId, CameraPose>>& poses) {
   matrix_.setPoses(poses);
+  revisit_offset_.reset();  // measured against the poses as they were
   const ViewId last = static_cast<ViewId>(matrix_.size()) - 1;
   for (const auto& [id, pose] : poses) {
     neighbours_.update(id, matrix_.keyframe(id), config_.keyframes.keyframe_overlap);
@@ -264,7 +341,9 @@ void ViewSelector::setConfig(const ViewSelectorConfig& requested) {
 void ViewSelector::reset() {
   matrix_.clear();
   neighbours_.clear();
-  revisits_skipped_ = 0;
+  revisits_skipped_ = revisits_registered_ = 0;
+  revisit_offset_.reset();
+  if (registration_) registration_->clear();
   policy_.reset();
   points_->reset();
   last_stamp_.reset();
@@ -296,6 +375,9 @@ void ViewSelector::restore(const ViewSelectorState& state) {
   matrix_ = std::move(matrix);
   policy_ = std::move(policy);
   last_stamp_ = state.last_stamp;
+  // The saved keyframes have no images: later frames register to the new keyframes only.
+  if (registration_) registration_->clear();
+  revisit_offset_.reset();
   indexNeighbours();
   params_.reset();
 }

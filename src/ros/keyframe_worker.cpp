@@ -6,6 +6,7 @@
 #include "view_selection/images/image_conversion.h"
 #include "view_selection/points/map_point_source.h"
 #include "view_selection/points/point_source_factory.h"
+#include "view_selection/registration/orb_registration.h"
 #include "view_selection/ros/conversions.h"
 #include "view_selection/ros/frame_checks.h"
 
@@ -48,6 +49,9 @@ KeyframeWorker::KeyframeWorker(const NodeConfig& config, PoseProvider& poses,
       handoff_(config_, keeper_, statistics_, pairs_),
       images_(config_, image_writer) {
   selector_->trackPairChanges(pairs_ != nullptr);
+  // The revisit rule under drift registers frames from their images (scale_free with
+  // ~revisit_registration only; docs/design.md, "Revisits under drift").
+  selector_->setRegistration(std::make_unique<registration::OrbRegistration>());
   {
     std::lock_guard<std::timed_mutex> lock(state_mutex_);
     restoreLoaded();

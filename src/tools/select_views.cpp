@@ -13,6 +13,7 @@
 #include "view_selection/io/selection_io.h"
 #include "view_selection/io/tum_frames.h"
 #include "view_selection/points/point_source_factory.h"
+#include "view_selection/registration/orb_registration.h"
 #include "view_selection/session/capture.h"
 #include "view_selection/session/journal.h"
 
@@ -385,6 +386,12 @@ struct StreamReplay {
 void addFrames(const Options& o, const TumDataset& dataset, ViewSelector& selector, Timings& t,
                StreamReplay* stream) {
   const bool features = selector.pointSource().name() == "features";
+  // The revisit rule registers frames from their images, as the node does (docs/design.md,
+  // "Revisits under drift"): frames that may become keyframes are read with their image.
+  const KeyframePolicyConfig& keyframes = selector.config().keyframes;
+  const bool registers =
+      keyframes.revisit_registration && keyframes.mode == KeyframeMode::kScaleFree;
+  if (registers) selector.setRegistration(std::make_unique<view_selection::registration::OrbRegistration>());
   const size_t total = framesToUse(o, dataset);
   Progress progress = Progress::toStderr(!o.quiet);
   for (size_t q = 0; q < total; ++q) {
@@ -396,7 +403,7 @@ void addFrames(const Options& o, const TumDataset& dataset, ViewSelector& select
     probe.stamp = dataset.frames[q].stamp;
     const bool wanted = selector.wantsFrame(probe);
     const Frame frame =
-        loadTumFrame(dataset, dataset.frames[q], {wanted && !features, wanted && features});
+        loadTumFrame(dataset, dataset.frames[q], {wanted && !features, wanted && (features || registers)});
     t.read += seconds(t0);
     FrameResult r;
     try {
@@ -475,8 +482,9 @@ void printSummary(const Options& o, const TumDataset& dataset, const ViewSelecto
               selector.pointSource().name().c_str());
   if (o.config.keyframes.mode == KeyframeMode::kScaleFree)
     std::printf("revisits    %zu frames a new view against the last keyframe, not against an "
-                "earlier one near them: no keyframe\n",
-                selector.revisitsSkipped());
+                "earlier one near them: no keyframe (%zu of them recognised by registering "
+                "their image)\n",
+                selector.revisitsSkipped(), selector.revisitsRegistered());
   // The feature source's own line: --points features (auto takes most keyframes from depth).
   if (selector.pointSource().name() == "features")
     if (const FeaturePointSource* fs = featureSourceOf(selector.pointSource()))

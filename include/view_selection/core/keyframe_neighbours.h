@@ -11,6 +11,7 @@
 
 #include <cstddef>
 #include <utility>
+#include <limits>
 #include <vector>
 
 namespace view_selection::core {
@@ -31,8 +32,9 @@ class KeyframeNeighbours {
   /// Alike: the distance between the centres over the keyframe's median depth plus the angle
   /// between the optical axes [rad] (a sideways step of 1/10 of the depth is worth a turn of
   /// 0.1 rad: both move the image by about a tenth of a focal length).
+  /// Only keyframes with an id below `below` are looked at (default: all).
   void query(const CameraPose& pose, double focal, double max_scale_ratio, size_t max,
-             std::vector<ViewId>& out);
+             std::vector<ViewId>& out, ViewId below = std::numeric_limits<ViewId>::max());
 
  private:
   struct Entry {

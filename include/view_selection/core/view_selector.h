@@ -5,6 +5,7 @@
 
 #include "view_selection/core/error_resistance_matrix.h"
 #include "view_selection/core/frame.h"
+#include "view_selection/core/frame_registration.h"
 #include "view_selection/core/keyframe_neighbours.h"
 #include "view_selection/core/keyframe_policy.h"
 #include "view_selection/core/pair_buckets.h"
@@ -86,8 +87,28 @@ class ViewSelector {
   /// Measured on the built-in walk round one room (docs/design.md, "Revisits").
   ViewId coveringKeyframe(const CameraPose& pose, const PinholeIntrinsics& intrinsics) const;
   static constexpr size_t kRevisitCandidates = 8;
-  /// Frames the revisit rule kept from becoming keyframes so far (since reset()).
+  /// The revisit rule under drift (keyframe_policy's revisit_registration, with a registration
+  /// set): when coveringKeyframe finds none, `frame` is registered from its image to keyframes
+  /// made at least kRecentSeconds before it (the poses judge the others: little drift lies
+  /// between them and the frame). The candidates are the kRegisteredCandidates most alike by pose where
+  /// the last registration placed the frame before, by the images
+  /// (FrameRegistration::alikeKeyframes) and by the frame's own pose. Where it registers, the
+  /// frame is measured again (KeyframePolicy::covers) at the registered pose (the keyframe's
+  /// pose composed with the frame's relative to it) against that keyframe and the
+  /// kRegisteredWindow made before and after it, which share its drift. The keyframe that
+  /// covers it there, or -1. docs/design.md, "Revisits under drift".
+  ViewId registeredCoveringKeyframe(const Frame& frame, const CameraPose& pose);
+  static constexpr size_t kRegisteredCandidates = 3;
+  static constexpr double kRecentSeconds = 2.0;
+  static constexpr ViewId kRegisteredWindow = 16;
+  /// Measures frames against earlier keyframes from their images (for
+  /// registeredCoveringKeyframe); null: the poses alone. Keyframes made before it was set are
+  /// never registered to; reset() and restore() clear it.
+  void setRegistration(std::unique_ptr<FrameRegistration> registration);
+  /// Frames the revisit rule kept from becoming keyframes so far (since reset()), and of them
+  /// those recognised by registration (registeredCoveringKeyframe).
   size_t revisitsSkipped() const { return revisits_skipped_; }
+  size_t revisitsRegistered() const { return revisits_registered_; }
   /// The selection for the keyframes so far (selectViews, kept current incrementally), as a
   /// plain Selection (O(n): for tools and tests; outputs take output()).
   Selection select() const;
@@ -148,6 +169,10 @@ class ViewSelector {
   mutable KeyframeNeighbours neighbours_;
   mutable std::vector<ViewId> near_;  // coveringKeyframe()'s, reused
   size_t revisits_skipped_ = 0;
+  size_t revisits_registered_ = 0;
+  // World to world: where the last registration placed a frame against its pose
+  std::optional<CameraPose> revisit_offset_;
+  std::unique_ptr<FrameRegistration> registration_;
   // What select() last returned, updated from the rows that changed since. Not shared between
   // threads: like every other member, one thread at a time drives a ViewSelector.
   mutable SelectionCache selection_;
