@@ -14,6 +14,8 @@ namespace view_selection::registration {
 
 namespace {
 
+constexpr int kMinOrbWidth = 320;
+
 cv::Mat greyOf(const core::ColourImage& image) {
   const cv::Mat m = images::matOf(image);
   if (m.channels() == 1) return m;
@@ -34,7 +36,21 @@ const OrbRegistration::Features* OrbRegistration::frameFeatures(const core::Fram
   cached_ = Features{};
   if (frame.image.empty()) return nullptr;
   const cv::Mat grey = greyOf(frame.image);
-  orb_->detectAndCompute(grey, cv::noArray(), cached_.keypoints, cached_.descriptors);
+  // ORB's 31-pixel patches leave little of a small image: one narrower than kMinOrbWidth is
+  // enlarged for the detection, and the keypoints are scaled back to its pixels.
+  if (grey.cols < kMinOrbWidth) {
+    const double scale = static_cast<double>(kMinOrbWidth) / grey.cols;
+    cv::Mat larger;
+    cv::resize(grey, larger, cv::Size(), scale, scale, cv::INTER_LINEAR);
+    orb_->detectAndCompute(larger, cv::noArray(), cached_.keypoints, cached_.descriptors);
+    for (cv::KeyPoint& k : cached_.keypoints) {
+      // pixel centres: x_small = (x_large + 0.5) / scale - 0.5
+      k.pt.x = static_cast<float>((k.pt.x + 0.5) / scale - 0.5);
+      k.pt.y = static_cast<float>((k.pt.y + 0.5) / scale - 0.5);
+    }
+  } else {
+    orb_->detectAndCompute(grey, cv::noArray(), cached_.keypoints, cached_.descriptors);
+  }
   // The thumbnail: the image shrunk (area average), blurred, zero mean, unit norm.
   cv::Mat small;
   cv::resize(grey, small, cv::Size(kThumbnailWidth, kThumbnailHeight), 0, 0, cv::INTER_AREA);
