@@ -114,7 +114,8 @@ std::vector<core::ViewId> OrbRegistration::alikeKeyframes(const core::Frame& fra
     if (!kept_[static_cast<size_t>(id)].points.empty())
       ranked.emplace_back(-scores.at<float>(id, 0), id);
   const size_t keep = std::min(max, ranked.size());
-  std::partial_sort(ranked.begin(), ranked.begin() + static_cast<std::ptrdiff_t>(keep), ranked.end());
+  std::partial_sort(ranked.begin(), ranked.begin() + static_cast<std::ptrdiff_t>(keep),
+                    ranked.end());
   for (size_t q = 0; q < keep; ++q) out.push_back(ranked[q].second);
   return out;
 }
@@ -146,9 +147,9 @@ std::optional<core::CameraPose> OrbRegistration::relativePose(const core::Frame&
   // RANSAC draws from OpenCV's global generator: seeded per call, so the same frame and keyframe
   // register the same way in the node and in select_views, whatever was drawn before.
   cv::theRNG().state = 0x5eed;
-  if (!cv::solvePnPRansac(object, image, camera, cv::noArray(), rvec, tvec, false,
-                          config_.ransac_iterations, static_cast<float>(config_.max_reprojection_px),
-                          0.999, inliers, cv::SOLVEPNP_EPNP))
+  if (!cv::solvePnPRansac(
+          object, image, camera, cv::noArray(), rvec, tvec, false, config_.ransac_iterations,
+          static_cast<float>(config_.max_reprojection_px), 0.999, inliers, cv::SOLVEPNP_EPNP))
     return std::nullopt;
   if (static_cast<int>(inliers.size()) < config_.min_inliers ||
       static_cast<double>(inliers.size()) < config_.min_inlier_share * object.size())

@@ -391,7 +391,8 @@ void addFrames(const Options& o, const TumDataset& dataset, ViewSelector& select
   const KeyframePolicyConfig& keyframes = selector.config().keyframes;
   const bool registers =
       keyframes.revisit_registration && keyframes.mode == KeyframeMode::kScaleFree;
-  if (registers) selector.setRegistration(std::make_unique<view_selection::registration::OrbRegistration>());
+  if (registers)
+    selector.setRegistration(std::make_unique<view_selection::registration::OrbRegistration>());
   const size_t total = framesToUse(o, dataset);
   Progress progress = Progress::toStderr(!o.quiet);
   for (size_t q = 0; q < total; ++q) {
@@ -402,8 +403,8 @@ void addFrames(const Options& o, const TumDataset& dataset, ViewSelector& select
     probe.intrinsics = dataset.intrinsics;
     probe.stamp = dataset.frames[q].stamp;
     const bool wanted = selector.wantsFrame(probe);
-    const Frame frame =
-        loadTumFrame(dataset, dataset.frames[q], {wanted && !features, wanted && (features || registers)});
+    const Frame frame = loadTumFrame(dataset, dataset.frames[q],
+                                     {wanted && !features, wanted && (features || registers)});
     t.read += seconds(t0);
     FrameResult r;
     try {
@@ -481,10 +482,11 @@ void printSummary(const Options& o, const TumDataset& dataset, const ViewSelecto
               describeKeyframeRule(o.config.keyframes).c_str(), median_points,
               selector.pointSource().name().c_str());
   if (o.config.keyframes.mode == KeyframeMode::kScaleFree)
-    std::printf("revisits    %zu frames a new view against the last keyframe, not against an "
-                "earlier one near them: no keyframe (%zu of them recognised by registering "
-                "their image)\n",
-                selector.revisitsSkipped(), selector.revisitsRegistered());
+    std::printf(
+        "revisits    %zu frames a new view against the last keyframe, not against an "
+        "earlier one near them: no keyframe (%zu of them recognised by registering "
+        "their image)\n",
+        selector.revisitsSkipped(), selector.revisitsRegistered());
   // The feature source's own line: --points features (auto takes most keyframes from depth).
   if (selector.pointSource().name() == "features")
     if (const FeaturePointSource* fs = featureSourceOf(selector.pointSource()))

@@ -77,26 +77,38 @@ const std::map<std::string, std::string>& includeRules() {
       {"core",
        R"((opencv2|ceres|nlohmann|yaml-cpp|view_selection/(images|points|io|session|sim|eval|refine|odometry|registration|ros)/)|)" +
            kRosHeaders},
-      {"images", R"((ceres|nlohmann|yaml-cpp|opencv2/(features2d|calib3d|imgcodecs)|)"
-                 R"(view_selection/(points|io|session|sim|eval|refine|odometry|registration|ros)/)|)" +
-                     kRosHeaders},
-      {"points", R"((nlohmann|yaml-cpp|view_selection/(io|session|sim|eval|refine|odometry|registration|ros)/)|)" + kRosHeaders},
+      {"images",
+       R"((ceres|nlohmann|yaml-cpp|opencv2/(features2d|calib3d|imgcodecs)|)"
+       R"(view_selection/(points|io|session|sim|eval|refine|odometry|registration|ros)/)|)" +
+           kRosHeaders},
+      {"points",
+       R"((nlohmann|yaml-cpp|view_selection/(io|session|sim|eval|refine|odometry|registration|ros)/)|)" +
+           kRosHeaders},
       // The file formats need neither the point sources nor Ceres: the point sources' state in
       // the state file is session's.
-      {"io", R"((ceres|opencv2/features2d|view_selection/(points|session|sim|eval|refine|odometry|registration|ros)/)|)" +
-                 kRosHeaders},
-      {"session", R"((view_selection/(sim|eval|refine|odometry|registration|ros)/)|)" + kRosHeaders},
-      {"sim", R"((view_selection/(session|eval|refine|odometry|registration|ros)/)|)" + kRosHeaders},
-      {"eval", R"((view_selection/(session|sim|refine|odometry|registration|ros)/)|)" + kRosHeaders},
-      // refine: a known-pose COLMAP model bundle-adjusted (Ceres) on io's model files, for the tools
-      {"refine", R"((opencv2|view_selection/(images|points|session|sim|odometry|registration|ros)/)|)" + kRosHeaders},
+      {"io",
+       R"((ceres|opencv2/features2d|view_selection/(points|session|sim|eval|refine|odometry|registration|ros)/)|)" +
+           kRosHeaders},
+      {"session",
+       R"((view_selection/(sim|eval|refine|odometry|registration|ros)/)|)" + kRosHeaders},
+      {"sim",
+       R"((view_selection/(session|eval|refine|odometry|registration|ros)/)|)" + kRosHeaders},
+      {"eval",
+       R"((view_selection/(session|sim|refine|odometry|registration|ros)/)|)" + kRosHeaders},
+      // refine: a known-pose COLMAP model bundle-adjusted (Ceres) on io's model files, for the
+      // tools
+      {"refine",
+       R"((opencv2|view_selection/(images|points|session|sim|odometry|registration|ros)/)|)" +
+           kRosHeaders},
       // odometry: OpenCV's RGB-D odometry as a drifting SLAM stand-in, on the core's types
-      {"odometry", R"((ceres|nlohmann|yaml-cpp|view_selection/(points|io|session|sim|eval|refine|registration|ros)/)|)" +
-                       kRosHeaders},
+      {"odometry",
+       R"((ceres|nlohmann|yaml-cpp|view_selection/(points|io|session|sim|eval|refine|registration|ros)/)|)" +
+           kRosHeaders},
       // registration: a frame registered to an earlier keyframe from the images (ORB, PnP), on
       // the core's interface; the node and select_views give it to the selector
-      {"registration", R"((ceres|nlohmann|yaml-cpp|view_selection/(points|io|session|sim|eval|refine|odometry|ros)/)|)" +
-                           kRosHeaders},
+      {"registration",
+       R"((ceres|nlohmann|yaml-cpp|view_selection/(points|io|session|sim|eval|refine|odometry|ros)/)|)" +
+           kRosHeaders},
   };
   return rules;
 }

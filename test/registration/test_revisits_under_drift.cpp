@@ -57,7 +57,8 @@ struct Skip {
 /// frames the policy may take. The keyframes' frames and drifts, and the registered skips, are
 /// recorded.
 struct Walk {
-  core::ViewSelector selector{core::ViewSelectorConfig{}, std::make_unique<points::DepthPointSource>()};
+  core::ViewSelector selector{core::ViewSelectorConfig{},
+                              std::make_unique<points::DepthPointSource>()};
   std::vector<size_t> keyframe_frames;  // by keyframe id: the frame it was made from
   std::vector<Drift> keyframe_drifts;   // ... and its pass's drift
   std::vector<Skip> registered;         // frames the registration covered
@@ -65,12 +66,11 @@ struct Walk {
   double stamp = 0.0;
 
   explicit Walk(bool registration) {
-    if (registration)
-      selector.setRegistration(std::make_unique<registration::OrbRegistration>());
+    if (registration) selector.setRegistration(std::make_unique<registration::OrbRegistration>());
   }
   /// A pass over frames first, first + step, ... below `end`; returns the keyframes it made.
-  size_t pass(const sim::SyntheticSequence& sequence, const Drift& drift, size_t first,
-              size_t end, size_t step) {
+  size_t pass(const sim::SyntheticSequence& sequence, const Drift& drift, size_t first, size_t end,
+              size_t step) {
     const size_t before = selector.matrix().size();
     for (size_t q = first; q < end; q += step) {
       const io::TumPoseEntry& entry = sequence.path()[q];
@@ -94,7 +94,8 @@ struct Walk {
         keyframe_frames.push_back(q);
         keyframe_drifts.push_back(drift);
       }
-      if (selector.revisitsRegistered() > registered_before) registered.push_back({q, r.covered_by});
+      if (selector.revisitsRegistered() > registered_before)
+        registered.push_back({q, r.covered_by});
     }
     return selector.matrix().size() - before;
   }
@@ -126,10 +127,11 @@ TEST_F(RevisitsUnderDrift, DriftedPassesAreRecognisedFromTheImages) {
     l += w->pass(*sequence_, drifts ? second : Drift{}, 1, kRound, 2);
     l += w->pass(*sequence_, drifts ? third : Drift{}, 1, kRound, 2);
   }
-  std::printf("keyframes of the first pass: %zu; of the two later passes: exact poses %zu, drifted "
-              "%zu, drifted with registration %zu (%zu frames recognised by registration)\n",
-              exact.keyframe_frames.size() - later[0], later[0], later[1], later[2],
-              registered.registered.size());
+  std::printf(
+      "keyframes of the first pass: %zu; of the two later passes: exact poses %zu, drifted "
+      "%zu, drifted with registration %zu (%zu frames recognised by registration)\n",
+      exact.keyframe_frames.size() - later[0], later[0], later[1], later[2],
+      registered.registered.size());
   // With exact poses the later passes have the first pass's views: the poses' own rule.
   EXPECT_LE(later[0], 3u);
   // Drifted, the poses place them off the first pass: each pass costs keyframes ...
@@ -155,9 +157,9 @@ TEST_F(RevisitsUnderDrift, DriftedPassesAreRecognisedFromTheImages) {
     for (Eigen::Index q = 0; q < k.points.cols(); ++q) points.col(q) = undo * k.points.col(q);
     const core::CameraPose& truth_k = sequence_->path()[source].pose;
     const core::CameraPose& truth_f = sequence_->path()[skip.frame].pose;
-    const core::ViewChange c = core::measureViewChange(
-        points, truth_k.position, std::sqrt(in.fx * in.fy), truth_f, in,
-        core::kOverlapMaxParallaxDeg, core::kOverlapMaxScaleRatio);
+    const core::ViewChange c =
+        core::measureViewChange(points, truth_k.position, std::sqrt(in.fx * in.fy), truth_f, in,
+                                core::kOverlapMaxParallaxDeg, core::kOverlapMaxScaleRatio);
     EXPECT_GE(c.overlap, 0.7) << "frame " << skip.frame << " covered by keyframe "
                               << skip.covered_by << " (frame " << source << ")";
     EXPECT_LT(c.parallax_deg, 6.0) << "frame " << skip.frame;

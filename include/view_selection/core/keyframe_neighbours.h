@@ -10,8 +10,8 @@
 #include <Eigen/Core>
 
 #include <cstddef>
-#include <utility>
 #include <limits>
+#include <utility>
 #include <vector>
 
 namespace view_selection::core {

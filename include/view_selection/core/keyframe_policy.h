@@ -55,9 +55,10 @@ struct KeyframePolicyConfig {
   double keyframe_parallax_deg = 5.0;
   /// kScaleFree's revisit rule: when the poses find no earlier keyframe that has the frame's
   /// view, the frame is registered from its image to the most alike earlier keyframes (not the
-  /// last ViewSelector::kRecentSeconds) and measured again at the registered pose, so that a revisit is
-  /// recognised where drift put it off its first pass (ViewSelector::registeredCoveringKeyframe;
-  /// only where the caller gave the selector a FrameRegistration: the node, select_views).
+  /// last ViewSelector::kRecentSeconds) and measured again at the registered pose, so that a
+  /// revisit is recognised where drift put it off its first pass
+  /// (ViewSelector::registeredCoveringKeyframe; only where the caller gave the selector a
+  /// FrameRegistration: the node, select_views).
   bool revisit_registration = true;
 
   void visitParameters(ParameterVisitor& v);

@@ -90,8 +90,8 @@ class ViewSelector {
   /// The revisit rule under drift (keyframe_policy's revisit_registration, with a registration
   /// set): when coveringKeyframe finds none, `frame` is registered from its image to keyframes
   /// made at least kRecentSeconds before it (the poses judge the others: little drift lies
-  /// between them and the frame). The candidates are the kRegisteredCandidates most alike by pose where
-  /// the last registration placed the frame before, by the images
+  /// between them and the frame). The candidates are the kRegisteredCandidates most alike by pose
+  /// where the last registration placed the frame before, by the images
   /// (FrameRegistration::alikeKeyframes) and by the frame's own pose. Where it registers, the
   /// frame is measured again (KeyframePolicy::covers) at the registered pose (the keyframe's
   /// pose composed with the frame's relative to it) against that keyframe and the

@@ -16,11 +16,11 @@
 namespace view_selection::registration {
 
 struct OrbRegistrationConfig {
-  int features = 500;               ///< ORB features detected per image
-  double ratio = 0.8;               ///< nearest / second-nearest Hamming distance, at most
-  int min_inliers = 40;             ///< PnP inliers for a registration
-  double min_inlier_share = 0.4;    ///< of the ratio test's matches
-  double max_reprojection_px = 2.0; ///< RANSAC threshold; the inliers' RMS must be under half
+  int features = 500;                ///< ORB features detected per image
+  double ratio = 0.8;                ///< nearest / second-nearest Hamming distance, at most
+  int min_inliers = 40;              ///< PnP inliers for a registration
+  double min_inlier_share = 0.4;     ///< of the ratio test's matches
+  double max_reprojection_px = 2.0;  ///< RANSAC threshold; the inliers' RMS must be under half
   int ransac_iterations = 200;
 };
 
@@ -52,8 +52,8 @@ class OrbRegistration : public core::FrameRegistration {
     cv::Mat thumbnail;    // CV_32F, one row, zero mean and unit norm
   };
   struct Kept {
-    cv::Mat descriptors;               // rows with a valid depth only
-    std::vector<cv::Point3f> points;   // in the keyframe's camera frame
+    cv::Mat descriptors;              // rows with a valid depth only
+    std::vector<cv::Point3f> points;  // in the keyframe's camera frame
   };
   /// The frame's features, detected once per frame (by stamp) however many keyframes it is
   /// registered to; none without an image.
