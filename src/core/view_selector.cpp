@@ -220,7 +220,8 @@ FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
     result.covered_by = coveringKeyframe(pose, frame.intrinsics);
     if (result.covered_by < 0) {
       result.covered_by = registeredCoveringKeyframe(frame, pose);
-      if (result.covered_by >= 0) ++revisits_registered_;
+      result.covered_by_registration = result.covered_by >= 0;
+      if (result.covered_by_registration) ++revisits_registered_;
     }
     if (result.covered_by >= 0) {
       ++revisits_skipped_;

@@ -96,6 +96,14 @@ void InputStatistics::frameOffered(uint64_t session, const ros::Time& stamp,
   ++version_;
 }
 
+void InputStatistics::revisit(uint64_t session, bool registered) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (session != session_) return;  // received before a reset
+  ++counts_.revisits;
+  if (registered) ++counts_.revisits_registered;
+  ++version_;
+}
+
 void InputStatistics::drop(uint64_t session, const std::string& reason, const std::string& message,
                            const ros::Time& stamp) {
   count(reason, message, stamp, &session);
@@ -223,6 +231,8 @@ view_selection::InputStatistics InputStatistics::toMsg() const {
   msg.keyframes_corrected = counts_.keyframes_corrected;
   msg.frames_offered = counts_.frames_offered;
   msg.keyframes = static_cast<uint32_t>(counts_.keyframes);
+  msg.revisits = counts_.revisits;
+  msg.revisits_registered = counts_.revisits_registered;
   msg.time_jumps = counts_.time_jumps;
   for (const auto& [reason, count] : counts_.dropped) {
     msg.drop_reasons.push_back(reason);

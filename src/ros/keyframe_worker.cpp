@@ -467,6 +467,7 @@ void KeyframeWorker::process(const QueuedFrame& queued) {
     handoff_.keyframeInserted(*selector_);  // an autosave every ~autosave_keyframes
     return;
   }
+  if (result.covered_by >= 0) statistics_.revisit(queued.session, result.covered_by_registration);
   statistics_.frameOffered(queued.session, stamp, insertion);
 }
 

@@ -170,6 +170,8 @@ void SelectionOutputs::diagnose(diagnostic_updater::DiagnosticStatusWrapper& sta
   status.add("frames waiting for the worker", pending);
   status.add("worker lag [s]", lag);
   status.add("keyframes", keyframes);
+  status.add("revisits (no keyframe)", counts.revisits);
+  status.add("revisits recognised from the image", counts.revisits_registered);
   status.add("last insertion [s]", counts.last_insertion_seconds);
   status.add("max insertion [s]", counts.max_insertion_seconds);
   status.add("since last keyframe [s]",

@@ -43,6 +43,8 @@ struct FrameResult {
   /// kSkippedByPolicy by the revisit rule: the earlier keyframe that already has the view
   /// (-1: not skipped, or the last keyframe had it)
   ViewId covered_by = -1;
+  /// ... found by registering the frame's image (registeredCoveringKeyframe), not by its pose
+  bool covered_by_registration = false;
   size_t points = 0;                 ///< sample points of the new keyframe
   std::vector<ViewId> updated_rows;  ///< earlier keyframes whose rows were recomputed
   double points_seconds = 0.0;       ///< time in the point source

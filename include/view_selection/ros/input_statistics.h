@@ -33,6 +33,8 @@ class InputStatistics {
     uint64_t keyframes_corrected = 0;     ///< keyframe pose corrections, over all paths
     uint64_t frames_offered = 0;
     uint64_t keyframes = 0;  ///< offered frames that became keyframes
+    uint64_t revisits = 0;   ///< offered frames the revisit rule kept from becoming keyframes
+    uint64_t revisits_registered = 0;  ///< ... of them, recognised from their image
     uint64_t time_jumps = 0;  ///< times stamps went back and a new session started (since ~reset)
     std::map<std::string, uint64_t> dropped;
     std::string last_error;
@@ -46,6 +48,9 @@ class InputStatistics {
     uint64_t frames_dropped() const;
   };
 
+  /// An offered frame became no keyframe because an earlier keyframe has its view (the revisit
+  /// rule), found by registering its image or not.
+  void revisit(uint64_t session, bool registered);
   /// A message reached the subscriber callback of one of the synchroniser's inputs.
   void arrived(Input input);
   /// How many images the synchroniser holds now (the last of a bag waits for a later partner).

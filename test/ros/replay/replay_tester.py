@@ -6,6 +6,9 @@ select_views's on the same frames with the same parameters.
 The data: ~dataset (default ../shared/data/redkitchen-0-499 next to the package), its first
 ~max_frames frames; when that folder is absent, the built-in synthetic sequence written by
 generate_sequence; when that tool is not built either, the test is skipped with a message.
+With ~drifted_revisit: a round of the built-in walk at 320 x 240, then the same round again along
+the frames in between with its poses placed off the truth (6 degrees, 0.25 m); that revisit must be
+recognised from the images.
 """
 import json
 import os
@@ -65,7 +68,22 @@ class Replay(unittest.TestCase):
         tum_to_bag, select_views = find_tool('tum_to_bag'), find_tool('select_views')
         if not tum_to_bag or not select_views:
             raise AssertionError('tum_to_bag or select_views is not built (build the package first)')
-        if dataset and os.path.isdir(dataset):
+        cls.revisit = bool(rospy.get_param('~drifted_revisit', False))
+        if cls.revisit:
+            # A round of the built-in walk, then the same round again along the frames in between,
+            # its poses placed off the truth as an odometry's drift places a revisit off its first
+            # pass: the revisit rule must recognise it from the images (docs/design.md, "Revisits
+            # under drift").
+            generate = find_tool('generate_sequence')
+            if not generate:
+                raise AssertionError('generate_sequence is not built (build the package first)')
+            walk = os.path.join(cls.tmp, 'walk')
+            run([generate, '--out', walk, '--frames', str(cls.ROUND), '--width', '320', '--height', '240',
+                 '--quiet'], 600, 'generate_sequence')
+            cls.source = os.path.join(cls.tmp, 'drifted_revisit')
+            cls.revisit_stamp = cls.write_drifted_revisit(walk, cls.source)
+            cls.max_frames = cls.ROUND + cls.ROUND // 2
+        elif dataset and os.path.isdir(dataset):
             cls.source = dataset
         else:
             log = os.environ.get('VIEW_SELECTION_SKIP_LOG')
@@ -95,6 +113,14 @@ class Replay(unittest.TestCase):
             cls.expected = json.load(f)
         with open(os.path.join(cls.offline, 'pairs.txt')) as f:
             cls.expected_pairs_txt = f.read()
+        if cls.revisit:
+            # The same frames with the rule of the poses alone, for comparison.
+            posed = os.path.join(cls.tmp, 'offline_poses_alone')
+            run([select_views, '--dataset', cls.source, '--max-frames', str(cls.max_frames), '--out', posed,
+                 '--quiet', '--print-sets', '0', '--revisit-registration', 'false'] +
+                cls.select_views_options(cls.nodes[0]), 600, 'select_views')
+            with open(os.path.join(posed, 'selection.json')) as f:
+                cls.expected_poses_alone = json.load(f)
         cls.frames = min(cls.max_frames, cls.count_frames(cls.bag))
 
         for node in cls.nodes:
@@ -107,6 +133,55 @@ class Replay(unittest.TestCase):
 
         cls.play()
         cls.wait_until_processed()
+
+    ROUND = 290  # frames: a round of the built-in walk (about 280 at its 0.7 m/s) and a little more
+
+    @staticmethod
+    def write_drifted_revisit(walk, out):
+        """A TUM folder: the walk's frames, then its odd frames again (copies named by their new
+        stamps, 1/30 s apart after the last), their poses turned 6 degrees about the vertical (z)
+        through the origin and shifted 0.25 m along x. Returns the revisit's first stamp."""
+        import math
+        import shutil
+
+        def entries(name):
+            with open(os.path.join(walk, name)) as f:
+                return [line.split() for line in f if line.strip() and not line.startswith('#')]
+        rgb, depth, truth = entries('rgb.txt'), entries('depth.txt'), entries('groundtruth.txt')
+        def stamps(rows):
+            return [round(float(r[0]), 6) for r in rows]
+        assert stamps(rgb) == stamps(depth) == stamps(truth), 'the walk has one pose and depth per image'
+        turn = math.radians(6.0)
+        c, s = math.cos(turn), math.sin(turn)
+        half_c, half_s = math.cos(turn / 2.0), math.sin(turn / 2.0)
+        for folder in ('rgb', 'depth'):
+            os.makedirs(os.path.join(out, folder))
+        shutil.copyfile(os.path.join(walk, 'camera.yaml'), os.path.join(out, 'camera.yaml'))
+        lists = {'rgb.txt': [], 'depth.txt': [], 'groundtruth.txt': []}
+        last = float(rgb[-1][0])
+        revisit_stamp = None
+        for q in list(range(len(rgb))) + list(range(1, len(rgb), 2)):
+            again = len(lists['rgb.txt']) >= len(rgb)
+            stamp = '%.6f' % (last + (len(lists['rgb.txt']) - len(rgb) + 1) / 30.0) if again else rgb[q][0]
+            if again and revisit_stamp is None:
+                revisit_stamp = float(stamp)
+            for name, entry in (('rgb.txt', rgb[q]), ('depth.txt', depth[q])):
+                folder = name[:-4]
+                target = '%s/%s.png' % (folder, stamp)
+                shutil.copyfile(os.path.join(walk, entry[1]), os.path.join(out, target))
+                lists[name].append('%s %s\n' % (stamp, target))
+            x, y, z, qx, qy, qz, qw = (float(a) for a in truth[q][1:8])
+            if again:
+                # position: R_z(turn) p + (0.25, 0, 0); orientation: q_z(turn) * q
+                x, y = c * x - s * y + 0.25, s * x + c * y
+                qx, qy, qz, qw = (half_c * qx - half_s * qy, half_c * qy + half_s * qx,
+                                  half_c * qz + half_s * qw, half_c * qw - half_s * qz)
+            lists['groundtruth.txt'].append(
+                '%s %s\n' % (stamp, ' '.join('%.9f' % a for a in (x, y, z, qx, qy, qz, qw))))
+        for name, lines in lists.items():
+            with open(os.path.join(out, name), 'w') as f:
+                f.writelines(lines)
+        return revisit_stamp
 
     @classmethod
     def play(cls):
@@ -366,6 +441,28 @@ class Replay(unittest.TestCase):
             self.assertEqual(done.returncode, code, '%s: %s' % (args, done.stdout))
             self.assertIn(text, done.stdout, args)
         self.assertFalse(os.path.exists(os.path.join(self.tmp, 'y.bag')), 'no bag is left after an error')
+
+    def test_4_drifted_revisits_are_recognised_from_the_images(self):
+        """With ~drifted_revisit: the drifted revisit adds (nearly) no keyframe where the rule of
+        the poses alone adds many, and the node counts revisits recognised from the images."""
+        if not self.revisit:
+            self.skipTest('no ~drifted_revisit')
+        from view_selection.msg import InputStatistics
+        later = self.revisit_stamp - 1e-6
+        registered = [k for k in self.expected['keyframes'] if k['stamp'] > later]
+        alone = [k for k in self.expected_poses_alone['keyframes'] if k['stamp'] > later]
+        first = len(self.expected['keyframes']) - len(registered)
+        rospy.loginfo('keyframes of the first round: %d; of the drifted revisit: %d, with the poses alone %d',
+                      first, len(registered), len(alone))
+        self.assertGreaterEqual(len(alone), first // 4, 'the drift places the revisit off the first round')
+        self.assertLessEqual(len(registered), 2, 'the revisit is recognised from the images')
+        for node in self.nodes:
+            stats = rospy.wait_for_message(node + '/statistics', InputStatistics, timeout=self.timeout)
+            # Each frame the poses alone made a keyframe of is one the registration has to
+            # recognise (measured: 62 recognised where the poses alone made 30 keyframes).
+            self.assertGreaterEqual(stats.revisits_registered, max(1, len(alone) // 2),
+                                    node + ': revisits recognised from the image')
+            self.assertGreaterEqual(stats.revisits, stats.revisits_registered, node)
 
     # One test method a node, so that a failure names the pose source.
     def test_0_topic_pose_source(self):
