@@ -27,7 +27,9 @@ cv::Mat greyOf(const core::ColourImage& image) {
 }  // namespace
 
 OrbRegistration::OrbRegistration(OrbRegistrationConfig config)
-    : config_(config), orb_(cv::ORB::create(config.features)) {}
+    : config_(config),
+      orb_(cv::ORB::create(config.features, 1.2f, 8, 31, 0, 2, cv::ORB::HARRIS_SCORE, 31,
+                           config.fast_threshold)) {}
 
 const OrbRegistration::Features* OrbRegistration::frameFeatures(const core::Frame& frame) {
   if (cached_stamp_ && *cached_stamp_ == frame.stamp) return cached_valid_ ? &cached_ : nullptr;

@@ -17,6 +17,10 @@ namespace view_selection::registration {
 
 struct OrbRegistrationConfig {
   int features = 500;                ///< ORB features detected per image
+  /// FAST's corner threshold (OpenCV's default 20): 10 finds enough corners on small or soft
+  /// images (on the odometry's 10 minutes of a walk at 160 x 120, 59% of the frames asked
+  /// registered at 20, 99.6% at 10).
+  int fast_threshold = 10;
   double ratio = 0.8;                ///< nearest / second-nearest Hamming distance, at most
   int min_inliers = 40;              ///< PnP inliers for a registration
   double min_inlier_share = 0.4;     ///< of the ratio test's matches
