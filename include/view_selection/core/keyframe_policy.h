@@ -58,8 +58,10 @@ struct KeyframePolicyConfig {
   /// last ViewSelector::kRecentSeconds) and measured again at the registered pose, so that a
   /// revisit is recognised where drift put it off its first pass
   /// (ViewSelector::registeredCoveringKeyframe; only where the caller gave the selector a
-  /// FrameRegistration: the node, select_views).
-  bool revisit_registration = true;
+  /// FrameRegistration: the node, select_views). Off by default: the revisits it skips were the
+  /// pairs across passes that let the refinement pull an odometry's drift back (docs/design.md,
+  /// "Revisits under drift").
+  bool revisit_registration = false;
 
   void visitParameters(ParameterVisitor& v);
   /// Throws InvalidArgument naming the first field out of range.

@@ -116,9 +116,12 @@ class Replay(unittest.TestCase):
         if cls.revisit:
             # The same frames with the rule of the poses alone, for comparison.
             posed = os.path.join(cls.tmp, 'offline_poses_alone')
+            options = cls.select_views_options(cls.nodes[0])
+            if '--revisit-registration' in options:
+                at = options.index('--revisit-registration')
+                del options[at:at + 2]
             run([select_views, '--dataset', cls.source, '--max-frames', str(cls.max_frames), '--out', posed,
-                 '--quiet', '--print-sets', '0', '--revisit-registration', 'false'] +
-                cls.select_views_options(cls.nodes[0]), 600, 'select_views')
+                 '--quiet', '--print-sets', '0', '--revisit-registration', 'false'] + options, 600, 'select_views')
             with open(os.path.join(posed, 'selection.json')) as f:
                 cls.expected_poses_alone = json.load(f)
         cls.frames = min(cls.max_frames, cls.count_frames(cls.bag))
@@ -231,6 +234,8 @@ class Replay(unittest.TestCase):
                 options += [option, repr(value) if isinstance(value, float) else str(value)]
         if get('occlusion_test') is False:
             options.append('--no-occlusion')
+        if get('revisit_registration') is not None:
+            options += ['--revisit-registration', 'true' if get('revisit_registration') else 'false']
         return options
 
     @classmethod
