@@ -214,6 +214,9 @@ TEST_F(RevisitsUnderDrift, RegistrationRecoversTheRelativePose) {
         << "frame " << q;
   }
   EXPECT_GE(registered, 3u) << "the same place registers";
+  // Only the keyframe with features was tried, once a frame.
+  EXPECT_EQ(orb.attempts(), 4u);
+  EXPECT_EQ(orb.registrations(), registered);
   // Across the room (half a round on, looking at the opposite wall): nothing in common.
   EXPECT_FALSE(orb.relativePose(frameOf(240, false), 0).has_value());
   // The images most alike frame 110's: frame 100's keyframe, the only one kept.
