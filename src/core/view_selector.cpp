@@ -1,6 +1,7 @@
 #include "view_selection/core/view_selector.h"
 
 #include "view_selection/core/exceptions.h"
+#include "view_selection/core/pose_interpolation.h"
 
 #include <algorithm>
 #include <chrono>
@@ -120,23 +121,33 @@ ViewId ViewSelector::coveringKeyframe(const CameraPose& pose,
   const ViewId last = static_cast<ViewId>(matrix_.size()) - 1;
   neighbours_.query(pose, std::sqrt(intrinsics.fx * intrinsics.fy), kOverlapMaxScaleRatio,
                     kRevisitCandidates, near_);
-  KeyframeReference r;
-  r.max_parallax_deg = kOverlapMaxParallaxDeg;  // the last keyframe's gate: fixed
-  r.max_scale_ratio = kOverlapMaxScaleRatio;
   for (const ViewId id : near_) {
     if (id == last) continue;  // measured already: it does not have the view
-    const Keyframe& k = matrix_.keyframe(id);
-    r.pose = k.pose;
-    r.intrinsics = k.intrinsics;
-    r.points = &k.points;
-    r.stamp = k.stamp;
-    if (policy_.covers(r, pose, intrinsics)) return id;
+    if (keyframeCovers(id, pose, intrinsics)) return id;
   }
   return -1;
 }
 
+bool ViewSelector::keyframeCovers(ViewId id, const CameraPose& pose,
+                                  const PinholeIntrinsics& intrinsics) const {
+  const Keyframe& k = matrix_.keyframe(id);
+  KeyframeReference r;
+  r.max_parallax_deg = kOverlapMaxParallaxDeg;  // the last keyframe's gate: fixed
+  r.max_scale_ratio = kOverlapMaxScaleRatio;
+  r.pose = k.pose;
+  r.intrinsics = k.intrinsics;
+  r.points = &k.points;
+  r.stamp = k.stamp;
+  return policy_.covers(r, pose, intrinsics);
+}
+
+bool ViewSelector::registers() const {
+  return registration_ && config_.keyframes.revisit_registration &&
+         config_.keyframes.mode == KeyframeMode::kScaleFree;
+}
+
 ViewId ViewSelector::registeredCoveringKeyframe(const Frame& frame, const CameraPose& pose) {
-  if (!registration_ || !config_.keyframes.revisit_registration) return -1;
+  if (!registers()) return -1;
   // Keyframes below this id may be asked: those made kRecentSeconds or more before the frame
   // (the stamps grow with the ids).
   ViewId older = static_cast<ViewId>(matrix_.size());
@@ -149,10 +160,8 @@ ViewId ViewSelector::registeredCoveringKeyframe(const Frame& frame, const Camera
   // places it.
   std::vector<ViewId> candidates;
   if (revisit_offset_) {
-    CameraPose moved;
-    moved.orientation = (revisit_offset_->orientation * pose.orientation).normalized();
-    moved.position = revisit_offset_->position + revisit_offset_->rotation() * pose.position;
-    neighbours_.query(moved, focal, kOverlapMaxScaleRatio, kRegisteredCandidates, near_, older);
+    neighbours_.query(composePoses(*revisit_offset_, pose), focal, kOverlapMaxScaleRatio,
+                      kRegisteredCandidates, near_, older);
     candidates = near_;
   }
   neighbours_.query(pose, focal, kOverlapMaxScaleRatio, kRegisteredCandidates, near_, older);
@@ -161,39 +170,24 @@ ViewId ViewSelector::registeredCoveringKeyframe(const Frame& frame, const Camera
     for (const ViewId id : *list)
       if (std::find(candidates.begin(), candidates.end(), id) == candidates.end())
         candidates.push_back(id);
-  KeyframeReference r;
-  r.max_parallax_deg = kOverlapMaxParallaxDeg;
-  r.max_scale_ratio = kOverlapMaxScaleRatio;
   for (const ViewId id : candidates) {
     const std::optional<CameraPose> relative = registration_->relativePose(frame, id);
     if (!relative || !relative->isValid()) continue;
-    const Keyframe& registered_to = matrix_.keyframe(id);
     // Where the images put the frame in that keyframe's world: its pose composed with the
-    // frame's pose relative to it.
-    CameraPose registered;
-    registered.orientation = (registered_to.pose.orientation * relative->orientation).normalized();
-    registered.position =
-        registered_to.pose.position + registered_to.pose.rotation() * relative->position;
-    // The offset from the frame's pose to the registered one (world to world) for the next frames.
-    CameraPose offset;
-    offset.orientation = (registered.orientation * pose.orientation.conjugate()).normalized();
-    offset.position = registered.position - offset.rotation() * pose.position;
-    revisit_offset_ = offset;
+    // frame's pose relative to it; and the offset from the frame's pose to there (world to
+    // world), for the next frames' candidates.
+    const CameraPose registered = composePoses(matrix_.keyframe(id).pose, *relative);
+    revisit_offset_ = composePoses(registered, inversePose(pose));
     // The keyframes made just before and after it share its drift: the frame is measured
-    // against them at the registered pose, nearest in id first (the keyframe itself first).
-    const ViewId lo = std::max<ViewId>(0, id - kRegisteredWindow);
-    const ViewId hi = std::min<ViewId>(older - 1, id + kRegisteredWindow);
-    for (ViewId step = 0; id - step >= lo || id + step <= hi; ++step) {
-      for (const ViewId c : {id - step, id + step}) {
-        if (c < lo || c > hi) continue;
-        const Keyframe& k = matrix_.keyframe(c);
-        r.pose = k.pose;
-        r.intrinsics = k.intrinsics;
-        r.points = &k.points;
-        r.stamp = k.stamp;
-        if (policy_.covers(r, registered, frame.intrinsics)) return c;
-        if (step == 0) break;  // id - 0 and id + 0 are the same keyframe
-      }
+    // against them at the registered pose, nearest in id first (the keyframe itself first),
+    // among those that may be asked.
+    const auto covers = [&](ViewId c) {
+      return c >= 0 && c < older && keyframeCovers(c, registered, frame.intrinsics);
+    };
+    if (covers(id)) return id;
+    for (ViewId step = 1; step <= kRegisteredWindow; ++step) {
+      if (covers(id - step)) return id - step;
+      if (covers(id + step)) return id + step;
     }
   }
   return -1;
@@ -269,9 +263,7 @@ FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
   result.matrix_seconds = secondsSince(t_matrix);
   policy_.keyframeAccepted(pose);
   // Only the revisit rule registers frames: a policy without it keeps nothing for it.
-  if (registration_ && config_.keyframes.revisit_registration &&
-      config_.keyframes.mode == KeyframeMode::kScaleFree)
-    registration_->keyframeAdded(result.id, normalised);
+  if (registers()) registration_->keyframeAdded(result.id, normalised);
   result.outcome = FrameOutcome::kKeyframe;
   return result;
 }

@@ -32,11 +32,14 @@ OrbRegistration::OrbRegistration(OrbRegistrationConfig config)
                            config.fast_threshold)) {}
 
 const OrbRegistration::Features* OrbRegistration::frameFeatures(const core::Frame& frame) {
-  if (cached_stamp_ && *cached_stamp_ == frame.stamp) return cached_valid_ ? &cached_ : nullptr;
+  if (!cached_stamp_ || *cached_stamp_ != frame.stamp) detect(frame);
+  return cached_.keypoints.empty() ? nullptr : &cached_;
+}
+
+void OrbRegistration::detect(const core::Frame& frame) {
   cached_stamp_ = frame.stamp;
-  cached_valid_ = false;
   cached_ = Features{};
-  if (frame.image.empty()) return nullptr;
+  if (frame.image.empty()) return;
   const cv::Mat grey = greyOf(frame.image);
   // ORB's 31-pixel patches leave little of a small image: one narrower than kMinOrbWidth is
   // enlarged for the detection, and the keypoints are scaled back to its pixels.
@@ -61,8 +64,6 @@ const OrbRegistration::Features* OrbRegistration::frameFeatures(const core::Fram
   small = small.reshape(1, 1) - cv::mean(small)[0];
   const double norm = cv::norm(small);
   cached_.thumbnail = norm > 1e-6 ? cv::Mat(small / norm) : cv::Mat();
-  cached_valid_ = !cached_.keypoints.empty();
-  return cached_valid_ ? &cached_ : nullptr;
 }
 
 void OrbRegistration::keyframeAdded(core::ViewId id, const core::Frame& frame) {
@@ -193,7 +194,6 @@ void OrbRegistration::clear() {
   kept_.clear();
   thumbnails_.release();
   cached_stamp_.reset();
-  cached_valid_ = false;
   cached_ = Features{};
 }
 

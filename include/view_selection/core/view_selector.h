@@ -156,6 +156,11 @@ class ViewSelector {
 
  private:
   FrameResult insert(const Frame& frame, const CameraPose& pose);
+  /// Whether keyframe `id` has the view of a frame at `pose` (KeyframePolicy::covers with the
+  /// last keyframe's fixed gates).
+  bool keyframeCovers(ViewId id, const CameraPose& pose, const PinholeIntrinsics& intrinsics) const;
+  /// Whether frames are registered (a registration set, revisit_registration, scale_free).
+  bool registers() const;
   /// Whether the revisit rule applies to the policy's last verdict (scale_free, measured).
   bool revisitRuleApplies(const KeyframePolicy& policy) const;
   /// The revisit rule's index from the keyframes as they are (restore, a new keyframe_overlap).

@@ -60,16 +60,17 @@ class OrbRegistration : public core::FrameRegistration {
     std::vector<cv::Point3f> points;  // in the keyframe's camera frame
   };
   /// The frame's features, detected once per frame (by stamp) however many keyframes it is
-  /// registered to; none without an image.
+  /// registered to; none without an image or without a keypoint.
   const Features* frameFeatures(const core::Frame& frame);
+  /// Detects the frame's features and thumbnail into cached_.
+  void detect(const core::Frame& frame);
 
   OrbRegistrationConfig config_;
   cv::Ptr<cv::Feature2D> orb_;
   std::vector<Kept> kept_;  // by keyframe id
   cv::Mat thumbnails_;      // row id: keyframe id's thumbnail (zeros: none kept)
   std::optional<double> cached_stamp_;
-  Features cached_;
-  bool cached_valid_ = false;
+  Features cached_;  // of the frame at cached_stamp_
   std::size_t attempts_ = 0;
   std::size_t registrations_ = 0;
 };
