@@ -21,6 +21,7 @@ import unittest
 import rospy
 import rostest
 
+from view_selection import geometry
 from view_selection.srv import Export, ExportRequest, GetSelection
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'robustness'))
@@ -155,8 +156,7 @@ class Replay(unittest.TestCase):
             return [round(float(r[0]), 6) for r in rows]
         assert stamps(rgb) == stamps(depth) == stamps(truth), 'the walk has one pose and depth per image'
         turn = math.radians(6.0)
-        c, s = math.cos(turn), math.sin(turn)
-        half_c, half_s = math.cos(turn / 2.0), math.sin(turn / 2.0)
+        drift = geometry.rotation_of((math.cos(turn / 2.0), 0.0, 0.0, math.sin(turn / 2.0)))
         for folder in ('rgb', 'depth'):
             os.makedirs(os.path.join(out, folder))
         shutil.copyfile(os.path.join(walk, 'camera.yaml'), os.path.join(out, 'camera.yaml'))
@@ -174,11 +174,9 @@ class Replay(unittest.TestCase):
                 shutil.copyfile(os.path.join(walk, entry[1]), os.path.join(out, target))
                 lists[name].append('%s %s\n' % (stamp, target))
             x, y, z, qx, qy, qz, qw = (float(a) for a in truth[q][1:8])
-            if again:
-                # position: R_z(turn) p + (0.25, 0, 0); orientation: q_z(turn) * q
-                x, y = c * x - s * y + 0.25, s * x + c * y
-                qx, qy, qz, qw = (half_c * qx - half_s * qy, half_c * qy + half_s * qx,
-                                  half_c * qz + half_s * qw, half_c * qw - half_s * qz)
+            if again:  # turned by `drift` about z, then shifted 0.25 m along x
+                x, y, z = drift.dot((x, y, z)) + (0.25, 0.0, 0.0)
+                qw, qx, qy, qz = geometry.quaternion_of(drift.dot(geometry.rotation_of((qw, qx, qy, qz))))
             lists['groundtruth.txt'].append(
                 '%s %s\n' % (stamp, ' '.join('%.9f' % a for a in (x, y, z, qx, qy, qz, qw))))
         for name, lines in lists.items():
