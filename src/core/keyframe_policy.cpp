@@ -25,8 +25,8 @@ void KeyframePolicyConfig::visitParameters(ParameterVisitor& v) {
             "scale_free: a frame the poses place on no earlier keyframe's view is registered "
             "from its image (ORB, PnP) to the most alike earlier keyframes and measured again at "
             "the registered pose, so that a revisit is recognised under drift; needs images and "
-            "keyframes with depth. Off by default: fewer keyframes on revisits, but fewer pairs "
-            "across them for the refinement to pull the drift back with");
+            "keyframes with depth. The keyframe made where such a revisit ends names the keyframe "
+            "it revisits (revisit_of), a pair across the drift for colmap_bridge's loop pairs");
   visitInteger(v, "every_n", every_n, 1, 1000000, "every_nth: one keyframe every N valid frames");
   visitReal(v, "min_translation", min_translation, 0.0, 1e9,
             "motion: a new keyframe after this much translation [scene units: m when the poses "

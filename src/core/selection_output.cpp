@@ -10,6 +10,7 @@ KeyframeSummary KeyframeSummary::of(const Keyframe& keyframe) {
   s.intrinsics = keyframe.intrinsics;
   s.pose = keyframe.pose;
   s.num_points = static_cast<std::size_t>(keyframe.points.cols());
+  s.revisit_of = keyframe.revisit_of;
   return s;
 }
 

@@ -217,7 +217,10 @@ FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
       result.covered_by_registration = result.covered_by >= 0;
       if (result.covered_by_registration) ++revisits_registered_;
     }
+    // A keyframe made right after frames recognised from their images is where the walk leaves
+    // a revisit the poses do not show: it is linked to the keyframe that covered the last one.
     if (result.covered_by >= 0) {
+      revisit_link_ = result.covered_by_registration ? result.covered_by : -1;
       ++revisits_skipped_;
       return result;
     }
@@ -244,6 +247,8 @@ FrameResult ViewSelector::insert(const Frame& frame, const CameraPose& pose) {
   keyframe.intrinsics = frame.intrinsics;
   keyframe.pose = pose;
   keyframe.points = std::move(points.points);
+  keyframe.revisit_of = revisit_link_;
+  revisit_link_ = -1;
   const OcclusionConfig& occlusion = config_.matrix.occlusion;
   if (occlusion.enabled && !frame.depth.empty())
     keyframe.depth = std::make_shared<const DepthMap>(
@@ -336,6 +341,7 @@ void ViewSelector::reset() {
   neighbours_.clear();
   revisits_skipped_ = revisits_registered_ = 0;
   revisit_offset_.reset();
+  revisit_link_ = -1;
   if (registration_) registration_->clear();
   policy_.reset();
   points_->reset();
@@ -371,6 +377,7 @@ void ViewSelector::restore(const ViewSelectorState& state) {
   // The saved keyframes have no images: later frames register to the new keyframes only.
   if (registration_) registration_->clear();
   revisit_offset_.reset();
+  revisit_link_ = -1;
   indexNeighbours();
   params_.reset();
 }

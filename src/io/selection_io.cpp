@@ -30,6 +30,7 @@ nlohmann::json keyframeToJson(core::ViewId id, const core::KeyframeSummary& kf,
       {"intrinsics", {k.fx, k.fy, k.cx, k.cy, k.width, k.height}},
       {"num_points", kf.num_points},
   };
+  if (kf.revisit_of >= 0) j["revisit_of"] = kf.revisit_of;
   if (points) {
     nlohmann::json list = nlohmann::json::array();
     for (Eigen::Index c = 0; c < points->cols(); ++c)

@@ -271,6 +271,7 @@ view_selection::KeyframeInfo keyframeToMsg(const core::SelectionOutput& snapshot
   info.image_name = snapshot.imageName(static_cast<size_t>(view));
   info.pose = poseToMsg(kf.pose);
   info.num_points = static_cast<int32_t>(kf.num_points);
+  info.revisit_of = kf.revisit_of;
   info.intrinsics = {kf.intrinsics.fx, kf.intrinsics.fy, kf.intrinsics.cx, kf.intrinsics.cy};
   info.width = static_cast<uint32_t>(std::max(0, kf.intrinsics.width));
   info.height = static_cast<uint32_t>(std::max(0, kf.intrinsics.height));

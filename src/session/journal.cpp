@@ -55,6 +55,15 @@ SessionDelta decodeRecord(io::BinaryReader& r, uint64_t& base_id, uint64_t& inde
     readRow(r, row);
   }
   d.rest = decodeContent(r, what);
+  // The record's keyframes' revisit_of (ascending id both).
+  auto k = d.keyframes.begin();
+  for (const auto& [id, earlier] : d.rest.revisit_links) {
+    while (k != d.keyframes.end() && k->first < id) ++k;
+    if (k == d.keyframes.end() || k->first != id)
+      r.fail("a revisit link names keyframe " + std::to_string(id) + ", not in the record");
+    k->second.revisit_of = earlier;
+  }
+  d.rest.revisit_links.clear();
   return d;
 }
 
@@ -138,7 +147,10 @@ std::vector<uint8_t> encodeJournalRecord(uint64_t base_id, uint64_t index,
     w.i32(id);
     writeRow(w, row);
   }
-  encodeContent(w, trailerOf(delta.rest));
+  SessionState trailer = trailerOf(delta.rest);
+  for (const auto& [id, k] : delta.keyframes)
+    if (k.revisit_of >= 0) trailer.revisit_links.emplace_back(id, k.revisit_of);
+  encodeContent(w, trailer);
   io::BinaryWriter h;
   h.raw(kJournalMagic.data(), kJournalMagic.size());
   h.u32(kJournalVersion);

@@ -25,7 +25,7 @@ constexpr uint32_t kSession = io::sectionTag("SESS"), kConfig = io::sectionTag("
                    kKeyframes = io::sectionTag("KEYF"), kMatrix = io::sectionTag("MATX"),
                    kPolicy = io::sectionTag("PLCY"), kPoints = io::sectionTag("PSRC"),
                    kStatistics = io::sectionTag("STAT"), kPairStream = io::sectionTag("PAIR"),
-                   kJournalBase = io::sectionTag("JRNL");
+                   kJournalBase = io::sectionTag("JRNL"), kRevisitLinks = io::sectionTag("RVST");
 
 void writeKeyframes(io::BinaryWriter& w, const std::vector<core::Keyframe>& keyframes) {
   w.u64(keyframes.size());
@@ -159,6 +159,21 @@ void encodeContent(io::BinaryWriter& w, const SessionState& state) {
     w.u64(*state.pair_sequence);
     w.endSection(s);
   }
+  // Optional (readers before it skip it; a file without it has no links): the keyframes'
+  // revisit_of, written after KEYF's layout was fixed.
+  std::vector<std::pair<core::ViewId, core::ViewId>> links = state.revisit_links;
+  for (size_t i = 0; i < state.selector.keyframes.size(); ++i)
+    if (state.selector.keyframes[i].revisit_of >= 0)
+      links.emplace_back(static_cast<core::ViewId>(i), state.selector.keyframes[i].revisit_of);
+  if (!links.empty()) {
+    s = w.beginSection(kRevisitLinks);
+    w.u64(links.size());
+    for (const auto& [id, earlier] : links) {
+      w.i32(id);
+      w.i32(earlier);
+    }
+    w.endSection(s);
+  }
   // Optional: the id a journal's records name to follow this file.
   if (state.base_id) {
     s = w.beginSection(kJournalBase);
@@ -222,6 +237,13 @@ SessionState decodeContent(io::BinaryReader& r, const std::string& what) {
       state.pair_sequence = s.u64("pair sequence");
     } else if (t == kJournalBase) {
       state.base_id = s.u64("journal base id");
+    } else if (t == kRevisitLinks) {
+      state.revisit_links.resize(s.count(8, "revisit links"));
+      for (auto& [id, earlier] : state.revisit_links) {
+        id = s.i32("revisit link");
+        earlier = s.i32("revisit link");
+        if (earlier < 0 || earlier >= id) s.fail("a revisit link to a keyframe not before it");
+      }
     } else {
       continue;  // a section of a later minor revision: skipped
     }
@@ -232,6 +254,16 @@ SessionState decodeContent(io::BinaryReader& r, const std::string& what) {
       throw io::StateFileError(what + " lacks its '" +
                                std::string(reinterpret_cast<const char*>(&required[q]), 4) +
                                "' section");
+  if (!state.selector.keyframes.empty()) {  // a whole state: the links go to its keyframes
+    for (const auto& [id, earlier] : state.revisit_links) {
+      if (static_cast<size_t>(id) >= state.selector.keyframes.size())
+        throw io::StateFileError(what + " is inconsistent: a revisit link names keyframe " +
+                                 std::to_string(id) + " of " +
+                                 std::to_string(state.selector.keyframes.size()));
+      state.selector.keyframes[static_cast<size_t>(id)].revisit_of = earlier;
+    }
+    state.revisit_links.clear();
+  }
   if (state.selector.rows.size() != state.selector.keyframes.size())
     throw io::StateFileError(
         what + " is inconsistent: " + std::to_string(state.selector.rows.size()) +

@@ -8,11 +8,15 @@ import math
 
 
 class Keyframe:
-    __slots__ = ("id", "name", "stamp", "position", "orientation", "intrinsics", "width", "height")
+    __slots__ = ("id", "name", "stamp", "position", "orientation", "intrinsics", "width", "height", "revisit_of")
 
-    def __init__(self, id, name, stamp, position, orientation, intrinsics, width, height):
-        """orientation: camera-to-world (w, x, y, z); intrinsics: (fx, fy, cx, cy) in pixels."""
+    def __init__(self, id, name, stamp, position, orientation, intrinsics, width, height, revisit_of=-1):
+        """orientation: camera-to-world (w, x, y, z); intrinsics: (fx, fy, cx, cy) in pixels.
+        revisit_of: -1, or the id of an earlier keyframe that the frames just before this one
+        were recognised from their images to revisit (the node's ~revisit_registration): a pair
+        across drift that the poses do not show (matching/loops.py proposes it)."""
         self.id, self.name, self.stamp = int(id), str(name), float(stamp)
+        self.revisit_of = int(revisit_of) if 0 <= int(revisit_of) < self.id else -1
         self.position = tuple(float(v) for v in position)
         self.orientation = tuple(float(v) for v in orientation)
         self.intrinsics = tuple(float(v) for v in intrinsics)[:4]
@@ -42,7 +46,7 @@ class Keyframe:
         """A view_selection/KeyframeInfo (or anything with its fields)."""
         p, o = k.pose.position, k.pose.orientation
         return Keyframe(k.id, k.image_name, k.stamp.to_sec(), (p.x, p.y, p.z), (o.w, o.x, o.y, o.z),
-                        list(k.intrinsics)[:4], k.width, k.height)
+                        list(k.intrinsics)[:4], k.width, k.height, getattr(k, "revisit_of", -1))
 
     @staticmethod
     def from_json(index, k):
@@ -50,12 +54,15 @@ class Keyframe:
         x, y, z, w = k["orientation_xyzw"]
         intr = k["intrinsics"]
         return Keyframe(k.get("id", index), k["image"], k.get("stamp", 0.0), k["position"], (w, x, y, z), intr[:4],
-                        intr[4] if len(intr) > 4 else 0, intr[5] if len(intr) > 5 else 0)
+                        intr[4] if len(intr) > 4 else 0, intr[5] if len(intr) > 5 else 0, k.get("revisit_of", -1))
 
     def to_json(self):
         w, x, y, z = self.orientation
-        return {"id": self.id, "image": self.name, "stamp": self.stamp, "position": list(self.position),
-                "orientation_xyzw": [x, y, z, w], "intrinsics": list(self.intrinsics) + [self.width, self.height]}
+        out = {"id": self.id, "image": self.name, "stamp": self.stamp, "position": list(self.position),
+               "orientation_xyzw": [x, y, z, w], "intrinsics": list(self.intrinsics) + [self.width, self.height]}
+        if self.revisit_of >= 0:
+            out["revisit_of"] = self.revisit_of
+        return out
 
 
 def pair_of(a, b):

@@ -129,6 +129,31 @@ def test_one_keyframe_in_spacing_gets_a_pair():
     assert len([j for j in later if j >= 80]) == 80 // 5
 
 
+def _linked(k, revisit_of):
+    return Keyframe(k.id, k.name, k.stamp, k.position, k.orientation, k.intrinsics, k.width, k.height, revisit_of)
+
+
+def test_a_keyframe_the_node_links_to_a_revisit_is_paired_with_it_whatever_the_poses():
+    # Most of a first lap, then keyframes made 3 m away by their drifted poses (the poses' search finds
+    # nothing there), two of which the node linked to the first lap's keyframes 10 and 40 (it
+    # recognised the frames before them from their images). Those two pairs are proposed, also
+    # within spacing of each other and closer than min_gap; a link to a keyframe the wanted
+    # pairs already join with that one, or to itself or a later one, gives none.
+    first = lap(0)[:70]  # not closed: it has no loop pair of its own
+    far = [_moved(k, (3.0, 0.0, 0.0)) for k in lap(70, per_lap=80)[:20]]
+    far[2], far[4] = _linked(far[2], 10), _linked(far[4], 40)
+    far[6] = _linked(far[6], 12)   # 76: joined already (75 with 11)
+    far[8] = _linked(far[8], 78)   # not an earlier keyframe: ignored
+    loops = LoopCandidates()
+    found = proposals_by_keyframe(loops.update(first + far[:6], set()), first + far)
+    assert found == [(10, 72), (40, 74)]
+    assert loops.registered == {pair_of("0010.png", "0072.png"), pair_of("0040.png", "0074.png")}
+    later = loops.update(first + far, {pair_of("0011.png", "0075.png")})
+    assert later == []
+    # without the links, the poses alone give nothing there
+    assert LoopCandidates().update(first + [_moved(k, (0, 0, 0)) for k in far], set()) == []
+
+
 def test_bad_options_are_refused():
     with pytest.raises(ValueError):
         LoopOptions(min_gap=0)

@@ -66,7 +66,7 @@ struct Walk {
 
   static core::ViewSelectorConfig config() {
     core::ViewSelectorConfig c;
-    c.keyframes.revisit_registration = true;  // off by default; unused without a registration
+    c.keyframes.revisit_registration = true;  // the default; unused without a registration
     return c;
   }
   explicit Walk(bool registration) {
@@ -167,6 +167,61 @@ TEST_F(RevisitsUnderDrift, DriftedPassesAreRecognisedFromTheImages) {
     EXPECT_GE(c.overlap, 0.7) << "frame " << skip.frame << " covered by keyframe "
                               << skip.covered_by << " (frame " << source << ")";
     EXPECT_LT(c.parallax_deg, 6.0) << "frame " << skip.frame;
+  }
+}
+
+TEST_F(RevisitsUnderDrift, WhereARevisitEndsTheNewKeyframeNamesTheKeyframeItRevisits) {
+  // The first half of the round at the true poses, then the whole round along the frames in
+  // between with 6 degrees and 0.25 m of drift: a revisit of the first half that the images
+  // recognise, then new ground. The keyframe made where the recognised frames end is linked
+  // (revisit_of) to the keyframe that covered the last of them: a pair across the drift that
+  // the poses do not show, and one that sees the same part of the room at the true poses.
+  const Drift drift{6.0, 0.25};
+  Walk registered(true), posed(false);
+  for (Walk* w : {&registered, &posed}) {
+    w->pass(*sequence_, Drift{}, 0, kRound / 2, 2);
+    w->pass(*sequence_, drift, 1, kRound, 2);
+  }
+  const core::ViewSelector& s = registered.selector;
+  const core::PinholeIntrinsics& in = sequence_->config().intrinsics;
+  std::vector<core::ViewId> linked;
+  size_t first_pass = 0;
+  for (size_t id = 0; id < s.matrix().size(); ++id) {
+    const core::Keyframe& k = s.matrix().keyframe(static_cast<core::ViewId>(id));
+    EXPECT_EQ(s.matrix().summaries()[id].revisit_of, k.revisit_of) << "the outputs show it";
+    if (registered.keyframe_frames[id] % 2 == 0) {
+      ++first_pass;
+      EXPECT_EQ(k.revisit_of, -1) << "keyframe " << id << " of the first pass";
+    } else if (k.revisit_of >= 0) {
+      linked.push_back(static_cast<core::ViewId>(id));
+    }
+  }
+  for (size_t id = 0; id < posed.selector.matrix().size(); ++id)
+    EXPECT_EQ(posed.selector.matrix().keyframe(static_cast<core::ViewId>(id)).revisit_of, -1)
+        << "nothing is recognised without a registration";
+  ASSERT_FALSE(linked.empty());
+  // The first keyframe of the second pass past the first pass's ground is such a link.
+  size_t past = first_pass;
+  while (past < s.matrix().size() && registered.keyframe_frames[past] < kRound / 2) ++past;
+  ASSERT_LT(past, s.matrix().size());
+  EXPECT_GE(s.matrix().keyframe(static_cast<core::ViewId>(past)).revisit_of, 0)
+      << "keyframe " << past << " (frame " << registered.keyframe_frames[past] << ")";
+  for (const core::ViewId id : linked) {
+    const core::ViewId earlier = s.matrix().keyframe(id).revisit_of;
+    ASSERT_LT(static_cast<size_t>(earlier), first_pass) << "a keyframe of the first pass";
+    // At the true poses the later keyframe sees the earlier one's points (its first-pass points
+    // are at their true places).
+    const core::CameraPose& truth_k =
+        sequence_->path()[registered.keyframe_frames[static_cast<size_t>(earlier)]].pose;
+    const core::CameraPose& truth_f =
+        sequence_->path()[registered.keyframe_frames[static_cast<size_t>(id)]].pose;
+    const core::ViewChange c = core::measureViewChange(
+        s.matrix().keyframe(earlier).points, truth_k.position, std::sqrt(in.fx * in.fy), truth_f,
+        in, core::kOverlapMaxParallaxDeg, core::kOverlapMaxScaleRatio);
+    std::printf("keyframe %d (frame %zu) revisits keyframe %d (frame %zu): overlap %.2f\n", id,
+                registered.keyframe_frames[static_cast<size_t>(id)], earlier,
+                registered.keyframe_frames[static_cast<size_t>(earlier)], c.overlap);
+    EXPECT_GE(c.overlap, 0.3) << "keyframe " << id << " and " << earlier;
   }
 }
 

@@ -209,6 +209,48 @@ TEST(StateFile, WrittenAtomicallyAndReadBack) {
   fs::remove_all(dir);
 }
 
+TEST(StateFile, RevisitLinksAreKeptInTheFileAndInAJournalRecord) {
+  // Keyframe::revisit_of (a revisit recognised from the images) in the optional RVST section:
+  // read back into the keyframes of a whole state and of a journal record; a file without the
+  // section has none; a link to a keyframe not before its own is refused.
+  auto selector = makeSelector("depth");
+  feed(*selector, "depth", 0, 12);
+  SessionState state = captureSession(*selector);
+  ASSERT_GE(state.selector.keyframes.size(), 4u);
+  std::vector<uint8_t> bytes = encodeState(state);
+  for (const core::Keyframe& k : decodeState(bytes.data(), bytes.size()).selector.keyframes)
+    EXPECT_EQ(k.revisit_of, -1);
+  state.selector.keyframes[3].revisit_of = 1;
+  state.selector.keyframes[2].revisit_of = 0;
+  bytes = encodeState(state);
+  const SessionState read = decodeState(bytes.data(), bytes.size());
+  for (size_t i = 0; i < read.selector.keyframes.size(); ++i)
+    EXPECT_EQ(read.selector.keyframes[i].revisit_of, i == 3 ? 1 : i == 2 ? 0 : -1) << i;
+  EXPECT_TRUE(read.revisit_links.empty());
+
+  SessionDelta delta;
+  delta.keyframe_count = state.selector.keyframes.size();
+  for (size_t i = 1; i < state.selector.keyframes.size(); ++i)
+    delta.keyframes.emplace_back(static_cast<core::ViewId>(i), state.selector.keyframes[i]);
+  delta.rest = state;
+  delta.rest.selector.keyframes.clear();
+  delta.rest.selector.rows.clear();
+  SessionState replayed = state;
+  for (core::Keyframe& k : replayed.selector.keyframes) k.revisit_of = -1;
+  replayed.base_id = 7;
+  const std::vector<uint8_t> record = encodeJournalRecord(7, 0, delta);
+  const JournalReplay r = replayJournal(replayed, record.data(), record.size());
+  EXPECT_EQ(r.error, "");
+  EXPECT_EQ(r.records, 1u);
+  EXPECT_EQ(replayed.selector.keyframes[3].revisit_of, 1);
+  EXPECT_EQ(replayed.selector.keyframes[2].revisit_of, 0);
+  EXPECT_EQ(replayed.selector.keyframes[1].revisit_of, -1);
+
+  state.selector.keyframes[2].revisit_of = 2;  // itself
+  bytes = encodeState(state);
+  EXPECT_THROW(decodeState(bytes.data(), bytes.size()), StateFileError);
+}
+
 /// The message of the StateFileError that decoding `bytes` throws ("" when none is thrown).
 std::string decodeError(const std::vector<uint8_t>& bytes) {
   try {

@@ -58,10 +58,10 @@ struct KeyframePolicyConfig {
   /// last ViewSelector::kRecentSeconds) and measured again at the registered pose, so that a
   /// revisit is recognised where drift put it off its first pass
   /// (ViewSelector::registeredCoveringKeyframe; only where the caller gave the selector a
-  /// FrameRegistration: the node, select_views). Off by default: the revisits it skips were the
-  /// pairs across passes that let the refinement pull an odometry's drift back (docs/design.md,
-  /// "Revisits under drift").
-  bool revisit_registration = false;
+  /// FrameRegistration: the node, select_views). The keyframe made where such a revisit ends is
+  /// linked to the keyframe it revisits (Keyframe::revisit_of), the pair across the drift that
+  /// the refinement needs (docs/design.md, "Revisits under drift").
+  bool revisit_registration = true;
 
   void visitParameters(ParameterVisitor& v);
   /// Throws InvalidArgument naming the first field out of range.

@@ -91,6 +91,10 @@ struct Keyframe {
   CameraPose pose;
   Eigen::Matrix3Xd points;                ///< sample points X_i, world coordinates [scene units]
   std::shared_ptr<const DepthMap> depth;  ///< optional, for the occlusion test in this view
+  /// The earlier keyframe that the frames just before this one were recognised from their
+  /// images to revisit (ViewSelector's revisit rule under drift), or -1: a pair across drift
+  /// that the poses do not show, for a consumer to match without trusting the poses.
+  int revisit_of = -1;
 };
 
 }  // namespace view_selection::core

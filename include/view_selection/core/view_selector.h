@@ -179,6 +179,9 @@ class ViewSelector {
   size_t revisits_registered_ = 0;
   // World to world: where the last registration placed a frame against its pose
   std::optional<CameraPose> revisit_offset_;
+  // The keyframe that registration found to cover the last frame the revisit rule measured, or
+  // -1 (the poses covered it, or a keyframe was made since): the next keyframe's revisit_of.
+  ViewId revisit_link_ = -1;
   std::unique_ptr<FrameRegistration> registration_;
   // What select() last returned, updated from the rows that changed since. Not shared between
   // threads: like every other member, one thread at a time drives a ViewSelector.

@@ -53,6 +53,9 @@ struct SessionState {
   /// The id of this file as a journal's base (section JRNL): records of a journal beside it
   /// continue it only when they name this id. Absent in files before the journal.
   std::optional<uint64_t> base_id;
+  /// (keyframe id, Keyframe::revisit_of) of keyframes this state does not hold whole: a journal
+  /// record's (section RVST). In a whole state they are in selector.keyframes and this is empty.
+  std::vector<std::pair<core::ViewId, core::ViewId>> revisit_links;
 };
 
 /// What changed in a session since an earlier capture: a record of the state journal

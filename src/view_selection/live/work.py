@@ -593,6 +593,7 @@ class LiveWork:
                "images_with_no_features": featureless,
                "final_pairs": len(final), "continuity_pairs": len(extra), "loop_pairs": len(loops),
                "loop_pairs_verified": sum(1 for p in loops if inliers.get(p, 0) > 0),
+               "loop_pairs_from_revisits": len(loops & self.loops.registered) if self.loops is not None else 0,
                "pairs_matched": len(matched),
                "final_pairs_matched": len(set(final) & matched), "pairs_wasted": len(matched - wanted),
                "pairs_wanted": len(wanted), "pairs_lost": lost,
