@@ -82,8 +82,8 @@ class Replay(unittest.TestCase):
             run([generate, '--out', walk, '--frames', str(cls.ROUND), '--width', '320', '--height', '240',
                  '--quiet'], 600, 'generate_sequence')
             cls.source = os.path.join(cls.tmp, 'drifted_revisit')
-            cls.revisit_stamp = cls.write_drifted_revisit(walk, cls.source)
-            cls.max_frames = cls.ROUND + cls.ROUND // 2
+            cls.revisit_stamp, cls.new_ground_stamp = cls.write_drifted_revisit(walk, cls.source)
+            cls.max_frames = cls.FIRST + cls.ROUND // 2
         elif dataset and os.path.isdir(dataset):
             cls.source = dataset
         else:
@@ -139,12 +139,14 @@ class Replay(unittest.TestCase):
         cls.wait_until_processed()
 
     ROUND = 290  # frames: a round of the built-in walk (about 280 at its 0.7 m/s) and a little more
+    FIRST = 230  # frames of the first pass: the revisit goes on to ground it did not see
 
     @staticmethod
     def write_drifted_revisit(walk, out):
-        """A TUM folder: the walk's frames, then its odd frames again (copies named by their new
-        stamps, 1/30 s apart after the last), their poses turned 6 degrees about the vertical (z)
-        through the origin and shifted 0.25 m along x. Returns the revisit's first stamp."""
+        """A TUM folder: the walk's first FIRST frames, then its odd frames again up to the end of
+        the round (copies named by their new stamps, 1/30 s apart after the last), their poses
+        turned 6 degrees about the vertical (z) through the origin and shifted 0.25 m along x.
+        Returns the revisit's first stamp and the stamp where it leaves the first pass's ground."""
         import math
         import shutil
 
@@ -161,13 +163,16 @@ class Replay(unittest.TestCase):
             os.makedirs(os.path.join(out, folder))
         shutil.copyfile(os.path.join(walk, 'camera.yaml'), os.path.join(out, 'camera.yaml'))
         lists = {'rgb.txt': [], 'depth.txt': [], 'groundtruth.txt': []}
-        last = float(rgb[-1][0])
-        revisit_stamp = None
-        for q in list(range(len(rgb))) + list(range(1, len(rgb), 2)):
-            again = len(lists['rgb.txt']) >= len(rgb)
-            stamp = '%.6f' % (last + (len(lists['rgb.txt']) - len(rgb) + 1) / 30.0) if again else rgb[q][0]
+        first = Replay.FIRST
+        last = float(rgb[first - 1][0])
+        revisit_stamp = new_ground_stamp = None
+        for q in list(range(first)) + list(range(1, len(rgb), 2)):
+            again = len(lists['rgb.txt']) >= first
+            stamp = '%.6f' % (last + (len(lists['rgb.txt']) - first + 1) / 30.0) if again else rgb[q][0]
             if again and revisit_stamp is None:
                 revisit_stamp = float(stamp)
+            if again and q >= first and new_ground_stamp is None:
+                new_ground_stamp = float(stamp)
             for name, entry in (('rgb.txt', rgb[q]), ('depth.txt', depth[q])):
                 folder = name[:-4]
                 target = '%s/%s.png' % (folder, stamp)
@@ -182,7 +187,7 @@ class Replay(unittest.TestCase):
         for name, lines in lists.items():
             with open(os.path.join(out, name), 'w') as f:
                 f.writelines(lines)
-        return revisit_stamp
+        return revisit_stamp, new_ground_stamp
 
     @classmethod
     def play(cls):
@@ -299,6 +304,7 @@ class Replay(unittest.TestCase):
             what = '%s keyframe %d' % (node, i)
             self.assertEqual(k.id, i, what)
             self.assertEqual(k.num_points, x['num_points'], what + ' sample points')
+            self.assertEqual(k.revisit_of, x.get('revisit_of', -1), what + ' revisit_of')
             p, q = k.pose.position, k.pose.orientation
             for a, b, c in zip((p.x, p.y, p.z), x['position'], 'xyz'):
                 self.assertClose(a, b, tolerance, what + ' position ' + c)
@@ -451,14 +457,28 @@ class Replay(unittest.TestCase):
         if not self.revisit:
             self.skipTest('no ~drifted_revisit')
         from view_selection.msg import InputStatistics
-        later = self.revisit_stamp - 1e-6
-        registered = [k for k in self.expected['keyframes'] if k['stamp'] > later]
-        alone = [k for k in self.expected_poses_alone['keyframes'] if k['stamp'] > later]
-        first = len(self.expected['keyframes']) - len(registered)
-        rospy.loginfo('keyframes of the first round: %d; of the drifted revisit: %d, with the poses alone %d',
-                      first, len(registered), len(alone))
-        self.assertGreaterEqual(len(alone), first // 4, 'the drift places the revisit off the first round')
+        later, beyond = self.revisit_stamp - 1e-6, self.new_ground_stamp - 1e-6
+
+        def revisiting(keyframes):
+            return [k for k in keyframes if later < k['stamp'] < beyond]
+        registered = revisiting(self.expected['keyframes'])
+        alone = revisiting(self.expected_poses_alone['keyframes'])
+        first = len([k for k in self.expected['keyframes'] if k['stamp'] <= later])
+        rospy.loginfo('keyframes of the first pass: %d; of the drifted revisit of its ground: %d, with the poses '
+                      'alone %d', first, len(registered), len(alone))
+        self.assertGreaterEqual(len(alone), first // 4, 'the drift places the revisit off the first pass')
         self.assertLessEqual(len(registered), 2, 'the revisit is recognised from the images')
+        # Where the revisit goes on to new ground, the keyframe made there names the first-pass
+        # keyframe it was revisiting (check_selection: the node's are select_views's): the pair
+        # across the drift that colmap_bridge's loop pairs match.
+        new = [k for k in self.expected['keyframes'] if k['stamp'] > beyond]
+        self.assertTrue(new, 'the revisit makes keyframes on new ground')
+        links = [k for k in self.expected['keyframes'] if k.get('revisit_of', -1) >= 0]
+        rospy.loginfo('keyframes naming the keyframe they revisit: %s',
+                      [(k['id'], k['revisit_of']) for k in links])
+        self.assertTrue(links, 'no keyframe names a revisit')
+        self.assertTrue(all(k['stamp'] > later and k['revisit_of'] < first for k in links), links)
+        self.assertGreaterEqual(new[0].get('revisit_of', -1), 0, 'the first keyframe past the first pass')
         for node in self.nodes:
             stats = rospy.wait_for_message(node + '/statistics', InputStatistics, timeout=self.timeout)
             # Each frame the poses alone made a keyframe of is one the registration has to
