@@ -66,6 +66,7 @@ visualization_msgs::MarkerArray selectionMarkers(const core::SelectionOutput& sn
   auto start = lineList("start_view", world_frame, 2.0 * width, 1.0f, 0.1f, 0.1f, 1.0f);
   auto edges = lineList("next_views", world_frame, width, 0.1f, 0.5f, 1.0f, 0.8f);
   auto completion = lineList("completion", world_frame, 1.5 * width, 1.0f, 0.6f, 0.0f, 0.9f);
+  auto revisits = lineList("revisits", world_frame, 2.0 * width, 0.9f, 0.1f, 0.9f, 0.9f);
   const size_t n = snapshot.size();
   const size_t stride = max_views == 0 || n <= max_views ? 1 : (n + max_views - 1) / max_views;
   auto drawn = [&](size_t i) {
@@ -86,7 +87,15 @@ visualization_msgs::MarkerArray selectionMarkers(const core::SelectionOutput& sn
       target.points.push_back(point(snapshot.keyframes[static_cast<size_t>(fin[q])].pose.position));
     }
   }
-  for (auto* m : {&frusta, &start, &edges, &completion})
+  // Each keyframe that names the keyframe it revisits (recognised from the images): the line's
+  // length is the drift the poses have between the two passes, plus the baseline.
+  for (size_t i = 0; i < n; ++i) {
+    const core::ViewId earlier = snapshot.keyframes[i].revisit_of;
+    if (!drawn(i) || earlier < 0 || static_cast<size_t>(earlier) >= n) continue;
+    revisits.points.push_back(point(snapshot.keyframes[i].pose.position));
+    revisits.points.push_back(point(snapshot.keyframes[static_cast<size_t>(earlier)].pose.position));
+  }
+  for (auto* m : {&frusta, &start, &edges, &completion, &revisits})
     if (!m->points.empty()) array.markers.push_back(*m);
   return array;
 }

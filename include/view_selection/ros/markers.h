@@ -10,7 +10,8 @@
 
 namespace view_selection::ros_node {
 
-/// Namespaces: "frusta", "start_view", "next_views", "completion". Each is one marker that is
+/// Namespaces: "frusta", "start_view", "next_views", "completion", "revisits" (a keyframe with a
+/// revisit_of to the keyframe it revisits). Each is one marker that is
 /// replaced on every call (a DELETEALL first clears markers of a larger earlier selection).
 /// `scale` is the frustum depth [m, scene units]. Above `max_views` keyframes (0: never) only a
 /// summary is drawn: the frusta and final next-view edges of every m-th view, m = ceil(n /
