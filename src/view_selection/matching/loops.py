@@ -61,7 +61,7 @@ class LoopCandidates:
         self._axes = np.zeros((0, 3))
         self._path = np.zeros(0)  # path travelled up to each keyframe, along the keyframes
         self._last_proposed = -10 ** 9  # position of the last keyframe given a pair
-        self._names_by_id = {}
+        self._index_by_id = {}  # keyframe id -> position in _names (for revisit_of)
         self.registered = set()  # of `pairs`, those the node's revisit_of links gave
 
     def update(self, keyframes, wanted):
@@ -74,7 +74,7 @@ class LoopCandidates:
         o = self.options
         start = len(self._names)
         for k in new:
-            self._index[k.name] = len(self._names)
+            self._index[k.name] = self._index_by_id[k.id] = len(self._names)
             self._names.append(k.name)
         self._centres = np.vstack([self._centres, np.array([k.position for k in new], float)])
         axes = [geometry.rotation_of(k.orientation)[:, 2] for k in new]  # the optical axis in the world
@@ -85,10 +85,8 @@ class LoopCandidates:
         self._path = np.concatenate([self._path, (self._path[-1] if start else 0.0) + np.cumsum(steps)])
         proposed = []
         cos_max = math.cos(math.radians(o.max_angle_deg))
-        for k in new:
-            self._names_by_id[k.id] = k.name
         for j, k in zip(range(start, len(self._names)), new):
-            earlier = self._index.get(self._names_by_id.get(k.revisit_of))
+            earlier = self._index_by_id.get(k.revisit_of)
             if earlier is not None and o.per_keyframe > 0:
                 # The node recognised from the images that the walk revisits that keyframe here
                 # (its ~revisit_registration): proposed whatever the poses say, spacing or not.
