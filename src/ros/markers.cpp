@@ -72,10 +72,18 @@ visualization_msgs::MarkerArray selectionMarkers(const core::SelectionOutput& sn
   auto drawn = [&](size_t i) {
     return i % stride == 0 || static_cast<core::ViewId>(i) == selection.start_view || i + 1 == n;
   };
-  for (size_t i = 0; i < n; ++i)
-    if (drawn(i))
-      addFrustum(static_cast<core::ViewId>(i) == selection.start_view ? start : frusta,
-                 snapshot.keyframes[i], scale);
+  for (size_t i = 0; i < n; ++i) {
+    if (!drawn(i)) continue;
+    const core::KeyframeSummary& kf = snapshot.keyframes[i];
+    addFrustum(static_cast<core::ViewId>(i) == selection.start_view ? start : frusta, kf, scale);
+    // A keyframe that names the keyframe it revisits (recognised from the images): the line's
+    // length is the drift the poses have between the two passes, plus the baseline.
+    if (kf.revisit_of >= 0 && static_cast<size_t>(kf.revisit_of) < n) {
+      revisits.points.push_back(point(kf.pose.position));
+      revisits.points.push_back(
+          point(snapshot.keyframes[static_cast<size_t>(kf.revisit_of)].pose.position));
+    }
+  }
   for (size_t i = 0; i < selection.final_next_views.size() && i < n; ++i) {
     if (!drawn(i)) continue;
     const Eigen::Vector3d from = snapshot.keyframes[i].pose.position;
@@ -86,14 +94,6 @@ visualization_msgs::MarkerArray selectionMarkers(const core::SelectionOutput& sn
       target.points.push_back(point(from));
       target.points.push_back(point(snapshot.keyframes[static_cast<size_t>(fin[q])].pose.position));
     }
-  }
-  // Each keyframe that names the keyframe it revisits (recognised from the images): the line's
-  // length is the drift the poses have between the two passes, plus the baseline.
-  for (size_t i = 0; i < n; ++i) {
-    const core::ViewId earlier = snapshot.keyframes[i].revisit_of;
-    if (!drawn(i) || earlier < 0 || static_cast<size_t>(earlier) >= n) continue;
-    revisits.points.push_back(point(snapshot.keyframes[i].pose.position));
-    revisits.points.push_back(point(snapshot.keyframes[static_cast<size_t>(earlier)].pose.position));
   }
   for (auto* m : {&frusta, &start, &edges, &completion, &revisits})
     if (!m->points.empty()) array.markers.push_back(*m);

@@ -17,7 +17,7 @@ struct KeyframeSummary {
   PinholeIntrinsics intrinsics;
   CameraPose pose;
   std::size_t num_points = 0;
-  int revisit_of = -1;  ///< Keyframe::revisit_of
+  ViewId revisit_of = -1;  ///< Keyframe::revisit_of
 
   static KeyframeSummary of(const Keyframe& keyframe);
 };

@@ -94,7 +94,7 @@ struct Keyframe {
   /// The earlier keyframe that the frames just before this one were recognised from their
   /// images to revisit (ViewSelector's revisit rule under drift), or -1: a pair across drift
   /// that the poses do not show, for a consumer to match without trusting the poses.
-  int revisit_of = -1;
+  ViewId revisit_of = -1;
 };
 
 }  // namespace view_selection::core
