@@ -57,18 +57,15 @@ struct Skip {
 /// frames the policy may take. The keyframes' frames and drifts, and the registered skips, are
 /// recorded.
 struct Walk {
-  core::ViewSelector selector{config(), std::make_unique<points::DepthPointSource>()};
+  // The shipped defaults (revisit_registration on; unused without a registration).
+  core::ViewSelector selector{core::ViewSelectorConfig{},
+                              std::make_unique<points::DepthPointSource>()};
   std::vector<size_t> keyframe_frames;  // by keyframe id: the frame it was made from
   std::vector<Drift> keyframe_drifts;   // ... and its pass's drift
   std::vector<Skip> registered;         // frames the registration covered
   std::vector<cv::Mat> keep;            // pixels the frames' views point at
   double stamp = 0.0;
 
-  static core::ViewSelectorConfig config() {
-    core::ViewSelectorConfig c;
-    c.keyframes.revisit_registration = true;  // the default; unused without a registration
-    return c;
-  }
   explicit Walk(bool registration) {
     if (registration) selector.setRegistration(std::make_unique<registration::OrbRegistration>());
   }
