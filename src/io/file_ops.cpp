@@ -35,7 +35,7 @@ std::vector<uint8_t> readFileBytes(const std::string& path) {
   return bytes;
 }
 
-void appendToFile(const std::string& path, const std::vector<uint8_t>& bytes) {
+void appendToFile(const std::string& path, const std::vector<uint8_t>& bytes, bool flush) {
   const int fd = ::open(path.c_str(), O_WRONLY | O_APPEND | O_CREAT | O_CLOEXEC, 0644);
   if (fd < 0) throw core::IoError("cannot open '" + path + "': " + std::strerror(errno));
   size_t done = 0;
@@ -49,7 +49,7 @@ void appendToFile(const std::string& path, const std::vector<uint8_t>& bytes) {
     }
     done += static_cast<size_t>(n);
   }
-  if (::fdatasync(fd) != 0) {
+  if (flush && ::fdatasync(fd) != 0) {
     const int saved = errno;
     ::close(fd);
     throw core::IoError("cannot flush '" + path + "': " + std::strerror(saved));

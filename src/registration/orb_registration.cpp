@@ -1,6 +1,7 @@
 #include "view_selection/registration/orb_registration.h"
 
 #include "view_selection/images/image_conversion.h"
+#include "view_selection/io/binary_codec.h"
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core/eigen.hpp>
@@ -9,6 +10,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <string>
 
 namespace view_selection::registration {
 
@@ -66,8 +69,7 @@ void OrbRegistration::detect(const core::Frame& frame) {
   cached_.thumbnail = norm > 1e-6 ? cv::Mat(small / norm) : cv::Mat();
 }
 
-void OrbRegistration::keyframeAdded(core::ViewId id, const core::Frame& frame) {
-  if (id < 0) return;
+void OrbRegistration::makeRoom(core::ViewId id) {
   if (kept_.size() <= static_cast<size_t>(id)) kept_.resize(static_cast<size_t>(id) + 1);
   if (thumbnails_.rows <= id) {
     cv::Mat grown = cv::Mat::zeros(std::max(2 * thumbnails_.rows, id + 1),
@@ -75,9 +77,14 @@ void OrbRegistration::keyframeAdded(core::ViewId id, const core::Frame& frame) {
     if (!thumbnails_.empty()) thumbnails_.copyTo(grown.rowRange(0, thumbnails_.rows));
     thumbnails_ = grown;
   }
-  Kept& k = kept_[static_cast<size_t>(id)];
-  k = Kept{};
+  kept_[static_cast<size_t>(id)] = Kept{};
   thumbnails_.row(id).setTo(0.0f);
+}
+
+void OrbRegistration::keyframeAdded(core::ViewId id, const core::Frame& frame) {
+  if (id < 0) return;
+  makeRoom(id);
+  Kept& k = kept_[static_cast<size_t>(id)];
   if (frame.depth.empty()) return;
   const Features* f = frameFeatures(frame);
   if (f == nullptr || f->thumbnail.empty()) return;
@@ -188,6 +195,64 @@ std::optional<core::CameraPose> OrbRegistration::relativePose(const core::Frame&
   if (!pose.isValid()) return std::nullopt;
   ++registrations_;
   return pose;
+}
+
+// keptBytes: u32 features n, u32 descriptor bytes d (ORB's 32), n x d descriptor bytes, n x 3
+// f32 points (the keyframe's camera frame), kThumbnailWidth x kThumbnailHeight f32 thumbnail;
+// little-endian.
+std::vector<uint8_t> OrbRegistration::keptBytes(core::ViewId id) const {
+  std::vector<uint8_t> out;
+  if (id < 0 || static_cast<size_t>(id) >= kept_.size()) return out;
+  const Kept& k = kept_[static_cast<size_t>(id)];
+  if (k.points.empty()) return out;
+  io::BinaryWriter w;
+  const auto n = static_cast<uint32_t>(k.points.size());
+  const auto d = static_cast<uint32_t>(k.descriptors.cols);
+  w.u32(n);
+  w.u32(d);
+  for (int r = 0; r < k.descriptors.rows; ++r) w.raw(k.descriptors.ptr<uint8_t>(r), d);
+  for (const cv::Point3f& p : k.points) {
+    w.f32(p.x);
+    w.f32(p.y);
+    w.f32(p.z);
+  }
+  const float* t = thumbnails_.ptr<float>(id);
+  for (int q = 0; q < kThumbnailWidth * kThumbnailHeight; ++q) w.f32(t[q]);
+  return std::move(w.bytes);
+}
+
+bool OrbRegistration::restoreKept(core::ViewId id, const std::vector<uint8_t>& bytes) {
+  if (id < 0) return false;
+  Kept k;
+  cv::Mat thumbnail(1, kThumbnailWidth * kThumbnailHeight, CV_32F);
+  try {
+    io::BinaryReader r(bytes.data(), bytes.size(),
+                       "kept features of keyframe " + std::to_string(id));
+    const uint32_t n = r.u32("features"), d = r.u32("descriptor bytes");
+    if (d != static_cast<uint32_t>(orb_->descriptorSize()) || n < 1 ||
+        static_cast<uint64_t>(n) * (d + 12) > r.left())
+      return false;
+    k.descriptors.create(static_cast<int>(n), static_cast<int>(d), CV_8U);
+    for (int q = 0; q < static_cast<int>(n); ++q)
+      std::memcpy(k.descriptors.ptr<uint8_t>(q), r.take(d, "descriptors"), d);
+    k.points.reserve(n);
+    for (uint32_t q = 0; q < n; ++q) {
+      const float x = r.f32("points"), y = r.f32("points"), z = r.f32("points");
+      if (!std::isfinite(x) || !std::isfinite(y) || !(z > 0.0f) || !std::isfinite(z)) return false;
+      k.points.emplace_back(x, y, z);
+    }
+    for (int q = 0; q < thumbnail.cols; ++q) {
+      thumbnail.at<float>(0, q) = r.f32("thumbnail");
+      if (!std::isfinite(thumbnail.at<float>(0, q))) return false;
+    }
+    r.expectEnd("kept features");
+  } catch (const io::StateFileError&) {
+    return false;
+  }
+  makeRoom(id);
+  kept_[static_cast<size_t>(id)] = std::move(k);
+  thumbnail.copyTo(thumbnails_.row(id));
+  return true;
 }
 
 void OrbRegistration::clear() {

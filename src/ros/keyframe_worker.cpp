@@ -23,6 +23,16 @@ namespace view_selection::ros_node {
 
 namespace {
 
+// The revisit rule under drift registers frames from their images (scale_free with
+// ~revisit_registration only; docs/design.md, "Revisits under drift"): the selector owns the
+// registration, the worker keeps what it knows of the keyframes in the registration log.
+core::FrameRegistration& attachRegistration(core::ViewSelector& selector) {
+  auto orb = std::make_unique<registration::OrbRegistration>();
+  core::FrameRegistration& kept = *orb;
+  selector.setRegistration(std::move(orb));
+  return kept;
+}
+
 std::unique_ptr<core::PointSource> makePoints(const NodeConfig& config,
                                               const PointSourceFactory& make_points) {
   return make_points ? make_points(config)
@@ -47,11 +57,9 @@ KeyframeWorker::KeyframeWorker(const NodeConfig& config, PoseProvider& poses,
       intake_(static_cast<size_t>(config_.max_pending_frames), statistics_, generation_),
       shared_(generation_),
       handoff_(config_, keeper_, statistics_, pairs_),
-      images_(config_, image_writer) {
+      images_(config_, image_writer),
+      registration_log_(keeper_.path(), attachRegistration(*selector_)) {
   selector_->trackPairChanges(pairs_ != nullptr);
-  // The revisit rule under drift registers frames from their images (scale_free with
-  // ~revisit_registration only; docs/design.md, "Revisits under drift").
-  selector_->setRegistration(std::make_unique<registration::OrbRegistration>());
   {
     std::lock_guard<std::timed_mutex> lock(state_mutex_);
     restoreLoaded();
@@ -73,7 +81,7 @@ KeyframeWorker::~KeyframeWorker() {
 void KeyframeWorker::restoreLoaded() {
   const std::optional<session::SessionState> loaded =
       handoff_.continueLoaded(*selector_, config_.selector);
-  if (!loaded) return;
+  if (!loaded) return startRegistrationLog(false);
   last_stamp_ = loaded->selector.last_stamp;
   if (pairs_) {
     // The continued session's pairs count as announced (a consumer catches up on the whole set
@@ -84,8 +92,10 @@ void KeyframeWorker::restoreLoaded() {
   }
   const size_t keyframes = selector_->matrix().size();
   keyframe_count_ = keyframes;
-  // The state file keeps no images: the continued keyframes have none, later ones do.
+  // The state file keeps no images: the continued keyframes have none, later ones do. What the
+  // registration kept of them is in its own log.
   images_.continued(keyframes);
+  startRegistrationLog(true);
   statistics_.restore(loaded->statistics, keyframes);
   const auto& last = loaded->statistics.last_frame_stamp;
   statistics_.stateSaved(static_cast<uint32_t>(keyframes),
@@ -94,6 +104,30 @@ void KeyframeWorker::restoreLoaded() {
       "view_selection: continuing the saved session: "
       << keyframes << " keyframes, " << loaded->statistics.frames_offered << " frames offered"
       << (last ? ", last frame at " + stampText(ros::Time(std::max(0.0, *last))) : std::string()));
+}
+
+void KeyframeWorker::startRegistrationLog(bool continued) {
+  if (registration_log_.path().empty()) return;
+  if (!continued) {
+    const std::string error = registration_log_.startSession();
+    if (!error.empty())
+      ROS_WARN_STREAM("view_selection: " << error
+                                         << ": after a restart, revisits are recognised only of "
+                                            "the keyframes made after it");
+    return;
+  }
+  const session::RegistrationLog::Continued c =
+      registration_log_.continueSession(selector_->matrix());
+  if (!c.error.empty()) ROS_WARN_STREAM("view_selection: " << c.error);
+  if (c.restored + c.dropped + c.unread == 0 && !config_.selector.keyframes.revisit_registration)
+    return;
+  ROS_INFO_STREAM("view_selection: the revisit rule's features of "
+                  << c.restored << " of the " << selector_->matrix().size()
+                  << " continued keyframes read from " << registration_log_.path()
+                  << (c.dropped + c.unread > 0
+                          ? " (" + std::to_string(c.dropped) + " records of no such keyframe and " +
+                                std::to_string(c.unread) + " unreadable bytes dropped)"
+                          : std::string()));
 }
 
 void KeyframeWorker::push(PendingFrame frame) {
@@ -166,6 +200,7 @@ void KeyframeWorker::applyResetLocked(uint64_t generation) {
   // none of the new one is recorded yet).
   poses_.clearHistory();
   selector_->reset();
+  startRegistrationLog(false);
   images_.newSession();  // selections shared before keep the old images
   last_stamp_.reset();
   later_corrections_.clear();  // the old session's world
@@ -458,6 +493,11 @@ void KeyframeWorker::process(const QueuedFrame& queued) {
     // Counted before the selection is shared: a reader never sees more keyframes in the
     // selection than in the statistics.
     statistics_.frameOffered(queued.session, stamp, insertion);
+    const std::string unlogged = registration_log_.keyframeAdded(result.id, core_frame.stamp);
+    if (!unlogged.empty())
+      ROS_WARN_STREAM("view_selection: "
+                      << unlogged << ": after a restart, revisits of keyframe " << result.id
+                      << " and later ones are recognised only where new keyframes are made");
     keyframeInsertedLocked();
     ROS_DEBUG_STREAM("view_selection: keyframe "
                      << result.id << " at " << stampText(stamp) << ": " << result.points

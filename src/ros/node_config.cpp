@@ -135,7 +135,8 @@ void NodeConfig::visitParameters(core::ParameterVisitor& v) {
   v.section("State across restarts");
   core::visitText(v, "state_file", state_file, {},
                   "the session is saved here and continued from it at start (relative to "
-                  "ROS_HOME, default ~/.ros); \"\" = off");
+                  "ROS_HOME, default ~/.ros; beside it: .journal, .registration, .previous); "
+                  "\"\" = off");
   core::visitInteger(v, "autosave_keyframes", autosave_keyframes, 0, 1000000,
                      "save the session every N new keyframes (also on shutdown and ~save_state); "
                      "0 = only then");

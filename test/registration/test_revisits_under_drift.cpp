@@ -6,11 +6,16 @@
 #include "view_selection/images/image_conversion.h"
 #include "view_selection/points/depth_point_source.h"
 #include "view_selection/registration/orb_registration.h"
+#include "view_selection/session/registration_log.h"
 #include "view_selection/sim/synthetic_sequence.h"
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <cmath>
+#include <cstdio>
+#include <cstring>
 #include <map>
 #include <memory>
 #include <vector>
@@ -66,8 +71,13 @@ struct Walk {
   std::vector<cv::Mat> keep;            // pixels the frames' views point at
   double stamp = 0.0;
 
+  registration::OrbRegistration* orb = nullptr;  // the selector's, when it has one
+
   explicit Walk(bool registration) {
-    if (registration) selector.setRegistration(std::make_unique<registration::OrbRegistration>());
+    if (!registration) return;
+    auto r = std::make_unique<registration::OrbRegistration>();
+    orb = r.get();
+    selector.setRegistration(std::move(r));
   }
   /// A pass over frames first, first + step, ... below `end`; returns the keyframes it made.
   size_t pass(const sim::SyntheticSequence& sequence, const Drift& drift, size_t first, size_t end,
@@ -222,6 +232,51 @@ TEST_F(RevisitsUnderDrift, WhereARevisitEndsTheNewKeyframeNamesTheKeyframeItRevi
   }
 }
 
+TEST_F(RevisitsUnderDrift, AContinuedSessionRecognisesTheKeyframesMadeBeforeItsRestart) {
+  // The round at the true poses; then the node restarts: its selector continues from the state
+  // file (which holds no images) and its registration from the registration log beside it, as
+  // the node's worker does. The round again along the frames in between, with 6 degrees and
+  // 0.25 m of drift, is then recognised as in one session. Without the log the continued
+  // session knows no image of the first round and makes keyframes all round it.
+  const Drift drift{6.0, 0.25};
+  Walk before(true);
+  before.pass(*sequence_, Drift{}, 0, kRound, 2);
+  const std::string state =
+      ::testing::TempDir() + "revisits_restart_" + std::to_string(::getpid()) + ".vss";
+  session::RegistrationLog log(state, *before.orb);
+  ASSERT_EQ(log.startSession(), "");
+  for (core::ViewId id = 0; id < static_cast<core::ViewId>(before.selector.matrix().size()); ++id)
+    ASSERT_EQ(log.keyframeAdded(id, before.selector.matrix().keyframe(id).stamp), "");
+
+  Walk continued(true), forgotten(true);
+  for (Walk* w : {&continued, &forgotten}) {
+    w->selector.restore(before.selector.state());
+    w->stamp = before.stamp;
+  }
+  const session::RegistrationLog::Continued c =
+      session::RegistrationLog(state, *continued.orb).continueSession(continued.selector.matrix());
+  std::remove(log.path().c_str());
+  EXPECT_EQ(c.error, "");
+  EXPECT_EQ(c.restored, before.orb->keyframesKept());
+  EXPECT_GE(c.restored + 2, before.selector.matrix().size()) << "nearly every keyframe has depth";
+  for (core::ViewId id = 0; id < static_cast<core::ViewId>(before.selector.matrix().size()); ++id)
+    EXPECT_EQ(continued.orb->keptBytes(id), before.orb->keptBytes(id)) << "keyframe " << id;
+  const size_t with_log = continued.pass(*sequence_, drift, 1, kRound, 2);
+  const size_t without = forgotten.pass(*sequence_, drift, 1, kRound, 2);
+  std::printf(
+      "first round: %zu keyframes; the drifted round after the restart: %zu with the log (%zu "
+      "frames recognised), %zu without\n",
+      before.selector.matrix().size(), with_log, continued.registered.size(), without);
+  // As DriftedPassesAreRecognisedFromTheImages (exact poses: at most 3 a pass; recognised: at
+  // most 5 more).
+  EXPECT_LE(with_log, 8u);
+  EXPECT_GT(continued.registered.size(), 10u);
+  EXPECT_GE(without, 20u);
+  for (const Skip& skip : continued.registered)
+    EXPECT_LT(static_cast<size_t>(skip.covered_by), before.selector.matrix().size())
+        << "frame " << skip.frame << " recognised as a keyframe of the first round";
+}
+
 TEST_F(RevisitsUnderDrift, RegistrationRecoversTheRelativePose) {
   registration::OrbRegistration orb;
   const core::PinholeIntrinsics& in = sequence_->config().intrinsics;
@@ -281,6 +336,30 @@ TEST_F(RevisitsUnderDrift, RegistrationRecoversTheRelativePose) {
   blank.stamp += 1e-3;
   blank.image = images::colourImageOf(grey);
   EXPECT_FALSE(orb.relativePose(blank, 0).has_value());
+  // What is kept, as bytes, registers the same in another instance (a continued session).
+  registration::OrbRegistration copy;
+  EXPECT_TRUE(orb.keptBytes(1).empty()) << "nothing kept of keyframe 1";
+  const std::vector<uint8_t> bytes = orb.keptBytes(0);
+  EXPECT_FALSE(copy.restoreKept(0, std::vector<uint8_t>(bytes.begin(), bytes.end() - 1)));
+  std::vector<uint8_t> behind = bytes;  // the first point put behind the camera
+  uint32_t features = 0;
+  std::memcpy(&features, bytes.data(), 4);
+  const float minus_one = -1.0f;
+  std::memcpy(behind.data() + 8 + 32 * features + 8, &minus_one, 4);
+  EXPECT_FALSE(copy.restoreKept(0, behind));
+  EXPECT_EQ(copy.keyframesKept(), 0u) << "refused bytes keep nothing";
+  ASSERT_TRUE(copy.restoreKept(0, bytes));
+  EXPECT_EQ(copy.keyframesKept(), 1u);
+  EXPECT_EQ(copy.keptBytes(0), bytes);
+  for (size_t q : {103u, 109u}) {
+    const std::optional<core::CameraPose> a = orb.relativePose(frameOf(q, false), 0);
+    const std::optional<core::CameraPose> b = copy.relativePose(frameOf(q, false), 0);
+    ASSERT_EQ(a.has_value(), b.has_value()) << "frame " << q;
+    if (a) {
+      EXPECT_LT((a->position - b->position).norm(), 1e-9) << "frame " << q;
+    }
+  }
+  EXPECT_EQ(copy.alikeKeyframes(frameOf(110, false), 2, 5), std::vector<core::ViewId>{0});
   orb.clear();
   EXPECT_EQ(orb.keyframesKept(), 0u);
   EXPECT_FALSE(orb.relativePose(frameOf(110, false), 0).has_value());

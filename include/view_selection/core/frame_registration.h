@@ -7,6 +7,7 @@
 #include "view_selection/core/types.h"
 
 #include <cstddef>
+#include <cstdint>
 #include <optional>
 #include <vector>
 
@@ -29,6 +30,13 @@ class FrameRegistration {
   virtual std::vector<ViewId> alikeKeyframes(const Frame& frame, ViewId below, size_t max) = 0;
   /// Forgets every keyframe (the selector's reset, or a session restored without images).
   virtual void clear() = 0;
+  /// What it keeps of keyframe `id`, as bytes that restoreKept() of a later instance takes: a
+  /// session continued after a restart registers to the keyframes made before it
+  /// (session/registration_log.h). Empty when nothing is kept of it.
+  virtual std::vector<uint8_t> keptBytes(ViewId id) const = 0;
+  /// Keeps keyframe `id` as keptBytes() gave it. False, and nothing kept of it, when the bytes
+  /// are not such.
+  virtual bool restoreKept(ViewId id, const std::vector<uint8_t>& bytes) = 0;
 };
 
 }  // namespace view_selection::core

@@ -10,6 +10,7 @@
 #include <opencv2/features2d.hpp>
 
 #include <cstddef>
+#include <cstdint>
 #include <optional>
 #include <vector>
 
@@ -42,6 +43,11 @@ class OrbRegistration : public core::FrameRegistration {
   static constexpr int kThumbnailHeight = 24;
   void clear() override;
 
+  /// A keyframe's descriptors, their points and its thumbnail. restoreKept refuses bytes that
+  /// are truncated, of another descriptor or thumbnail size, or with points not in front.
+  std::vector<uint8_t> keptBytes(core::ViewId id) const override;
+  bool restoreKept(core::ViewId id, const std::vector<uint8_t>& bytes) override;
+
   /// Keyframes with features kept, and their bytes (descriptors and points).
   std::size_t keyframesKept() const;
   std::size_t bytes() const;
@@ -64,6 +70,8 @@ class OrbRegistration : public core::FrameRegistration {
   const Features* frameFeatures(const core::Frame& frame);
   /// Detects the frame's features and thumbnail into cached_.
   void detect(const core::Frame& frame);
+  /// Room for keyframe `id` in kept_ and thumbnails_, its entries emptied.
+  void makeRoom(core::ViewId id);
 
   OrbRegistrationConfig config_;
   cv::Ptr<cv::Feature2D> orb_;

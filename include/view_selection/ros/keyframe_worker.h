@@ -12,6 +12,9 @@
 //                                            the state keeper's thread writes
 //   image output      ros/keyframe_images   under the state lock: the image cache for ~export,
 //                                            the keyframe image writer's thread
+//   registration log  session/registration_log  under the state lock: what the revisit
+//                                            rule's registration keeps of the keyframes, for a
+//                                            restart
 // Nothing waits for the worker: the inputs queue frames under the queue lock alone, ~reset and
 // reconfigures are handed to the worker's thread and return at once, and a ServedSelection costs
 // O(what changed) (core::SelectionOutput shares its chunks). Locks nest queue > aside and
@@ -33,6 +36,7 @@
 #include "view_selection/ros/served_selection.h"
 #include "view_selection/ros/session_handoff.h"
 #include "view_selection/ros/state_keeper.h"
+#include "view_selection/session/registration_log.h"
 
 #include <atomic>
 #include <cstdint>
@@ -147,6 +151,9 @@ class KeyframeWorker {
   void applyMapLocked(Eigen::Matrix3Xd points);
   /// At construction: continues the session the keeper read, or starts empty.
   void restoreLoaded();
+  /// Under state_mutex_: the registration log emptied for a new session, or read back for a
+  /// continued one; what went wrong logged.
+  void startRegistrationLog(bool continued);
   void drop(const QueuedFrame& queued, const std::string& reason, const std::string& message);
 
   const NodeConfig& config_;
@@ -178,6 +185,7 @@ class KeyframeWorker {
   SharedSelection shared_;   // the served lock
   SessionHandoff handoff_;   // under the state lock; the aside lock
   KeyframeImages images_;    // under the state lock
+  session::RegistrationLog registration_log_;  // under the state lock
 
   std::thread thread_;  // last: started when everything above exists
 };

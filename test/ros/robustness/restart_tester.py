@@ -10,6 +10,7 @@ tum_to_bag, else the built-in synthetic sequence (generate_sequence)."""
 import json
 import os
 import shutil
+import struct
 import sys
 import tempfile
 import threading
@@ -31,6 +32,24 @@ PKG = 'view_selection'
 # test_5: the kitchen's first 240 frames give 15 keyframes at the shipped parameters; the kill
 # comes at about half of them.
 REPLAY_FRAMES = 240
+
+
+def registration_log(path):
+    """(keyframe id, stamp) of each record of a registration log (docs/state_file.md, "The
+    registration log"), checking each record's CRC."""
+    import zlib
+    with open(path, 'rb') as f:
+        data = f.read()
+    out, at = [], 0
+    while at < len(data):
+        tag, length = struct.unpack_from('<4sI', data, at)
+        assert tag == b'VSRG', 'record at byte %d of %s: tag %r' % (at, path, tag)
+        payload = data[at + 8:at + 8 + length]
+        (crc,) = struct.unpack_from('<I', data, at + 8 + length)
+        assert crc == zlib.crc32(payload), 'record at byte %d of %s: CRC' % (at, path)
+        out.append(struct.unpack_from('<id', payload))
+        at += 8 + length + 4
+    return out
 KILL_AT_KEYFRAMES = 8
 
 # The session's method (as test/ros/replay/replay.yaml: ~20 keyframes in 120 kitchen frames); the
@@ -380,6 +399,20 @@ class Restart(unittest.TestCase):
                              'the restarted session\'s keyframes differ from the uninterrupted one\'s')
             self.assertEqual(serialized(b), serialized(a),
                              'the restarted session\'s selection differs from the uninterrupted one')
+            # What the revisit rule's registration kept of each keyframe is in the registration
+            # log beside the state file: one record per keyframe, the continued ones' read back at
+            # the restart (any record of a keyframe the kill lost was dropped then) and the later
+            # ones appended, each naming its keyframe by id and stamp.
+            records = registration_log(state + '.registration')
+            ids = [i for i, _ in records]
+            self.assertEqual(ids, sorted(set(ids)), 'one record per keyframe, in order')
+            for i, stamp in records:
+                self.assertAlmostEqual(stamp, b.keyframes[i].stamp.to_sec(), places=6,
+                                       msg='record of keyframe %d' % i)
+            self.assertGreaterEqual(len(records), 0.9 * len(b.keyframes),
+                                    'nearly every kitchen keyframe has features with depth')
+            self.assertTrue(any(i < restored.keyframes for i in ids) and
+                            any(i >= restored.keyframes for i in ids))
             s = stats.get()
             drops = dict(zip(s.drop_reasons, s.drop_counts))
             # Only the frames played again before the saved one are dropped, as not after it.
