@@ -103,6 +103,10 @@ RegistrationLog::RegistrationLog(const std::string& state_path,
 std::string RegistrationLog::startSession() {
   failed_ = false;
   if (path_.empty()) return {};
+  // The state file's folder, made here as the state keeper makes it (it writes later).
+  std::error_code ignored;  // a folder that cannot be made fails the write below
+  const std::filesystem::path folder = std::filesystem::path(path_).parent_path();
+  if (!folder.empty()) std::filesystem::create_directories(folder, ignored);
   try {
     writeRegistrationLog(path_, {});
   } catch (const core::IoError& e) {

@@ -16,6 +16,7 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <vector>
 
@@ -157,20 +158,31 @@ TEST_F(RegistrationLogTest, ALogThatCannotBeWrittenStopsAndSaysWhy) {
   EXPECT_EQ(off.keyframeAdded(0, 1.0), "");
   EXPECT_EQ(off.continueSession(keyframesAt({1.0})).restored, 0u);
   EXPECT_TRUE(r.kept.count(0));
-  // In a folder that is gone: the first append fails and says so, later ones are not tried.
-  RegistrationLog gone((dir_ / "missing" / "state.vss").string(), r);
+  // The state file's folder is made when missing (the state keeper makes it at its first save,
+  // later than the first keyframe).
+  RegistrationLog fresh((dir_ / "new" / "state.vss").string(), r);
+  EXPECT_EQ(fresh.startSession(), "");
+  EXPECT_EQ(fresh.keyframeAdded(0, 1.0), "");
+  EXPECT_EQ(readRegistrationLog(fresh.path()).size(), 1u);
+  // Under a file where its folder should be: it cannot be made, says so, and this session
+  // appends nothing, even once it could.
+  const fs::path blocked = dir_ / "blocked";
+  std::ofstream(blocked.string()) << "a file";
+  RegistrationLog gone((blocked / "state.vss").string(), r);
   EXPECT_NE(gone.startSession(), "");
-  fs::create_directories(dir_ / "missing");  // too late: this session appends nothing
+  fs::remove(blocked);
+  fs::create_directories(blocked);
   EXPECT_EQ(gone.keyframeAdded(0, 1.0), "");
   EXPECT_FALSE(fs::exists(gone.path()));
   // A new session that can write appends again.
   EXPECT_EQ(gone.startSession(), "");
   EXPECT_EQ(gone.keyframeAdded(1, 2.0), "");
   EXPECT_EQ(readRegistrationLog(gone.path()).size(), 1u);
-  fs::remove_all(dir_ / "missing");
+  // The folder gone mid-session: the append fails and says so, later ones are not tried.
+  fs::remove_all(blocked);
   const std::string error = gone.keyframeAdded(0, 3.0);
   EXPECT_NE(error.find("cannot append to the registration log"), std::string::npos) << error;
-  fs::create_directories(dir_ / "missing");
+  fs::create_directories(blocked);
   EXPECT_EQ(gone.keyframeAdded(1, 4.0), "") << "nothing more this session";
   EXPECT_FALSE(fs::exists(gone.path()));
 }

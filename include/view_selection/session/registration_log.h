@@ -57,8 +57,8 @@ class RegistrationLog {
   RegistrationLog(const std::string& state_path, core::FrameRegistration& registration);
 
   const std::string& path() const { return path_; }
-  /// A new session (none continued, a reset, a time jump): the file emptied. Returns an error
-  /// message, or empty.
+  /// A new session (none continued, a reset, a time jump): the file emptied (its folder made
+  /// when missing). Returns an error message, or empty.
   std::string startSession();
 
   struct Continued {
