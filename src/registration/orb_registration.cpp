@@ -1,7 +1,6 @@
 #include "view_selection/registration/orb_registration.h"
 
 #include "view_selection/images/image_conversion.h"
-#include "view_selection/io/binary_codec.h"
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core/eigen.hpp>
@@ -11,13 +10,53 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
-#include <string>
 
 namespace view_selection::registration {
 
 namespace {
 
 constexpr int kMinOrbWidth = 320;
+
+// keptBytes' little-endian fields (the registration stands on the core alone, not on io/).
+void putU32(std::vector<uint8_t>& out, uint32_t v) {
+  for (int b = 0; b < 4; ++b) out.push_back(static_cast<uint8_t>(v >> (8 * b)));
+}
+
+void putF32(std::vector<uint8_t>& out, float v) {
+  uint32_t u;
+  std::memcpy(&u, &v, 4);
+  putU32(out, u);
+}
+
+/// Reads keptBytes' fields; `ok` turns false (and stays) at the first read past the end.
+struct ByteReader {
+  const std::vector<uint8_t>& bytes;
+  size_t at = 0;
+  bool ok = true;
+  const uint8_t* take(size_t n) {
+    if (!ok || n > bytes.size() - at) {
+      ok = false;
+      return nullptr;
+    }
+    const uint8_t* p = bytes.data() + at;
+    at += n;
+    return p;
+  }
+  uint32_t u32() {
+    const uint8_t* p = take(4);
+    uint32_t v = 0;
+    if (p)
+      for (int b = 0; b < 4; ++b) v |= static_cast<uint32_t>(p[b]) << (8 * b);
+    return v;
+  }
+  float f32() {
+    const uint32_t u = u32();
+    float v;
+    std::memcpy(&v, &u, 4);
+    return v;
+  }
+  size_t left() const { return bytes.size() - at; }
+};
 
 cv::Mat greyOf(const core::ColourImage& image) {
   const cv::Mat m = images::matOf(image);
@@ -205,49 +244,44 @@ std::vector<uint8_t> OrbRegistration::keptBytes(core::ViewId id) const {
   if (id < 0 || static_cast<size_t>(id) >= kept_.size()) return out;
   const Kept& k = kept_[static_cast<size_t>(id)];
   if (k.points.empty()) return out;
-  io::BinaryWriter w;
-  const auto n = static_cast<uint32_t>(k.points.size());
-  const auto d = static_cast<uint32_t>(k.descriptors.cols);
-  w.u32(n);
-  w.u32(d);
-  for (int r = 0; r < k.descriptors.rows; ++r) w.raw(k.descriptors.ptr<uint8_t>(r), d);
+  const auto d = static_cast<size_t>(k.descriptors.cols);
+  out.reserve(8 + k.points.size() * (d + 12) + 4 * kThumbnailWidth * kThumbnailHeight);
+  putU32(out, static_cast<uint32_t>(k.points.size()));
+  putU32(out, static_cast<uint32_t>(d));
+  for (int r = 0; r < k.descriptors.rows; ++r)
+    out.insert(out.end(), k.descriptors.ptr<uint8_t>(r), k.descriptors.ptr<uint8_t>(r) + d);
   for (const cv::Point3f& p : k.points) {
-    w.f32(p.x);
-    w.f32(p.y);
-    w.f32(p.z);
+    putF32(out, p.x);
+    putF32(out, p.y);
+    putF32(out, p.z);
   }
   const float* t = thumbnails_.ptr<float>(id);
-  for (int q = 0; q < kThumbnailWidth * kThumbnailHeight; ++q) w.f32(t[q]);
-  return std::move(w.bytes);
+  for (int q = 0; q < kThumbnailWidth * kThumbnailHeight; ++q) putF32(out, t[q]);
+  return out;
 }
 
 bool OrbRegistration::restoreKept(core::ViewId id, const std::vector<uint8_t>& bytes) {
   if (id < 0) return false;
-  Kept k;
-  cv::Mat thumbnail(1, kThumbnailWidth * kThumbnailHeight, CV_32F);
-  try {
-    io::BinaryReader r(bytes.data(), bytes.size(),
-                       "kept features of keyframe " + std::to_string(id));
-    const uint32_t n = r.u32("features"), d = r.u32("descriptor bytes");
-    if (d != static_cast<uint32_t>(orb_->descriptorSize()) || n < 1 ||
-        static_cast<uint64_t>(n) * (d + 12) > r.left())
-      return false;
-    k.descriptors.create(static_cast<int>(n), static_cast<int>(d), CV_8U);
-    for (int q = 0; q < static_cast<int>(n); ++q)
-      std::memcpy(k.descriptors.ptr<uint8_t>(q), r.take(d, "descriptors"), d);
-    k.points.reserve(n);
-    for (uint32_t q = 0; q < n; ++q) {
-      const float x = r.f32("points"), y = r.f32("points"), z = r.f32("points");
-      if (!std::isfinite(x) || !std::isfinite(y) || !(z > 0.0f) || !std::isfinite(z)) return false;
-      k.points.emplace_back(x, y, z);
-    }
-    for (int q = 0; q < thumbnail.cols; ++q) {
-      thumbnail.at<float>(0, q) = r.f32("thumbnail");
-      if (!std::isfinite(thumbnail.at<float>(0, q))) return false;
-    }
-    r.expectEnd("kept features");
-  } catch (const io::StateFileError&) {
+  ByteReader r{bytes};
+  const uint32_t n = r.u32(), d = r.u32();
+  const size_t thumbnail_bytes = 4 * static_cast<size_t>(kThumbnailWidth * kThumbnailHeight);
+  if (!r.ok || d != static_cast<uint32_t>(orb_->descriptorSize()) || n < 1 ||
+      r.left() != static_cast<size_t>(n) * (d + 12) + thumbnail_bytes)
     return false;
+  Kept k;
+  k.descriptors.create(static_cast<int>(n), static_cast<int>(d), CV_8U);
+  for (int q = 0; q < static_cast<int>(n); ++q)
+    std::memcpy(k.descriptors.ptr<uint8_t>(q), r.take(d), d);
+  k.points.reserve(n);
+  for (uint32_t q = 0; q < n; ++q) {
+    const float x = r.f32(), y = r.f32(), z = r.f32();
+    if (!std::isfinite(x) || !std::isfinite(y) || !(z > 0.0f) || !std::isfinite(z)) return false;
+    k.points.emplace_back(x, y, z);
+  }
+  cv::Mat thumbnail(1, kThumbnailWidth * kThumbnailHeight, CV_32F);
+  for (int q = 0; q < thumbnail.cols; ++q) {
+    thumbnail.at<float>(0, q) = r.f32();
+    if (!std::isfinite(thumbnail.at<float>(0, q))) return false;
   }
   makeRoom(id);
   kept_[static_cast<size_t>(id)] = std::move(k);
