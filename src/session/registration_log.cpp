@@ -21,11 +21,6 @@ constexpr size_t kHeaderBytes = 8;              // tag, payload length
 constexpr size_t kPayloadMinBytes = 4 + 8;      // id, stamp
 constexpr size_t kMaxPayloadBytes = 64u << 20;  // far above a keyframe's (about 25 KB)
 
-uint32_t readU32(const uint8_t* p) {
-  return static_cast<uint32_t>(p[0]) | static_cast<uint32_t>(p[1]) << 8 |
-         static_cast<uint32_t>(p[2]) << 16 | static_cast<uint32_t>(p[3]) << 24;
-}
-
 }  // namespace
 
 std::string registrationLogPath(const std::string& state_path) {
@@ -33,15 +28,14 @@ std::string registrationLogPath(const std::string& state_path) {
 }
 
 std::vector<uint8_t> encodeRegistrationRecord(const RegistrationRecord& record) {
-  io::BinaryWriter payload;
-  payload.i32(record.id);
-  payload.f64(record.stamp);
-  payload.raw(record.bytes.data(), record.bytes.size());
   io::BinaryWriter w;
+  w.bytes.reserve(kHeaderBytes + kPayloadMinBytes + record.bytes.size() + 4);
   w.u32(kRecordTag);
-  w.u32(static_cast<uint32_t>(payload.bytes.size()));
-  w.raw(payload.bytes.data(), payload.bytes.size());
-  w.u32(io::crc32(payload.bytes.data(), payload.bytes.size()));
+  w.u32(static_cast<uint32_t>(kPayloadMinBytes + record.bytes.size()));
+  w.i32(record.id);
+  w.f64(record.stamp);
+  w.raw(record.bytes.data(), record.bytes.size());
+  w.u32(io::crc32(w.bytes.data() + kHeaderBytes, w.bytes.size() - kHeaderBytes));
   return std::move(w.bytes);
 }
 
@@ -50,19 +44,21 @@ std::vector<RegistrationRecord> decodeRegistrationRecords(const uint8_t* data, s
   std::vector<RegistrationRecord> out;
   size_t at = 0;
   while (size - at >= kHeaderBytes) {
-    const uint8_t* p = data + at;
-    const uint32_t length = readU32(p + 4);
-    if (readU32(p) != kRecordTag || length < kPayloadMinBytes || length > kMaxPayloadBytes ||
+    io::BinaryReader header(data + at, kHeaderBytes, "registration record");
+    const uint32_t tag = header.u32("tag"), length = header.u32("length");
+    if (tag != kRecordTag || length < kPayloadMinBytes || length > kMaxPayloadBytes ||
         size - at - kHeaderBytes < static_cast<size_t>(length) + 4)
       break;
-    const uint8_t* payload = p + kHeaderBytes;
-    if (readU32(payload + length) != io::crc32(payload, length)) break;
-    io::BinaryReader r(payload, length, "registration record");
+    const uint8_t* payload = data + at + kHeaderBytes;
+    io::BinaryReader r(payload, static_cast<size_t>(length) + 4, "registration record");
     RegistrationRecord record;
     record.id = r.i32("id");
     record.stamp = r.f64("stamp");
-    if (record.id < 0 || !std::isfinite(record.stamp)) break;
-    record.bytes.assign(payload + kPayloadMinBytes, payload + length);
+    const uint8_t* bytes = r.take(length - kPayloadMinBytes, "bytes");
+    if (r.u32("checksum") != io::crc32(payload, length) || record.id < 0 ||
+        !std::isfinite(record.stamp))
+      break;
+    record.bytes.assign(bytes, bytes + (length - kPayloadMinBytes));
     out.push_back(std::move(record));
     at += kHeaderBytes + length + 4;
   }
