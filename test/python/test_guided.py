@@ -201,6 +201,58 @@ def test_poses_that_disagree_with_features_that_match_without_a_geometry_fall_ba
     assert len(guided.mutual_ratio_matches(fa.descriptors @ fb.descriptors.T, 0.8, 0.7)) >= 15
 
 
+def repeated_texture_on_the_poses_lines(a, b, fa, fb, poses_b, copies=25, seed=11):
+    """fb with a look-alike of the first `copies` of a's points put in front: each the same
+    descriptor as the point's own feature in b (a repeated texture), placed where the poses
+    (a, poses_b) put the point at a wrong depth, so on the poses' epipolar line of a's feature
+    while its true match lies off it. Returns the features (b's own feature i is now copies + i)."""
+    rng = np.random.default_rng(seed)
+    q, t = geometry.world_to_camera(a.position, a.orientation)
+    ra = geometry.rotation_of(q)
+    fx, fy, cx, cy = a.intrinsics
+    xy = []
+    for i in range(copies):
+        ray = np.array([(fa.xy[i, 0] - cx) / fx, (fa.xy[i, 1] - cy) / fy, 1.0])
+        for depth in rng.uniform(1.5, 9.0, 50):
+            point = ra.T @ (ray * depth - t)  # a's ray at a wrong depth, in the world
+            x, z = project(poses_b, point[None, :])
+            if z[0] > 0 and np.all((x[0] >= 0) & (x[0] < [640, 480])) and np.linalg.norm(x[0] - fb.xy[i]) > 30:
+                xy.append(x[0])
+                break
+    n = len(xy)
+    look_alike = fb.descriptors[:n] + rng.normal(scale=0.01, size=(n, 128)).astype(np.float32)
+    look_alike /= np.linalg.norm(look_alike, axis=1, keepdims=True)
+    return n, Features(np.vstack([np.array(xy), fb.xy]), np.ones(n + len(fb)), np.zeros(n + len(fb)),
+                       np.vstack([look_alike, fb.descriptors]).astype(np.float32))
+
+
+def test_a_repeated_texture_along_poses_that_are_off_is_confirmed_by_the_images():
+    """Drift across a revisit with a repeated texture: the true matches lie beyond the window of
+    the poses' lines, and 25 look-alikes lie on them. Within the window the look-alikes pass the
+    strict ratio test (their twins are outside it) and verify against the poses' own geometry;
+    trusted, they were a wrong two-view geometry in the database (a 30-minute walk had 17, each
+    with 15-28 inliers, and the refinement followed them metres off). Fewer than confirm_inliers
+    matches near the lines: the images confirm, and their geometry is the true one."""
+    a, b, fa, fb, n = synthetic_pair(seed=2)
+    off = tilted(b)
+    copies, fb = repeated_texture_on_the_poses_lines(a, b, fa, fb, off)
+    assert copies >= 20
+    trusted = guided.match_pair(fa, fb, a, off, guided.GuidedOptions(confirm_inliers=0))
+    assert trusted.path == guided.GUIDED and 15 <= len(trusted.inliers) < 30  # what the poses alone verify
+    assert np.sum(trusted.inliers[:, 1] == trusted.inliers[:, 0] + copies) <= 0.2 * len(trusted.inliers)
+    r = guided.match_pair(fa, fb, a, off)
+    assert r.path == guided.IMAGES and "the images confirm" in r.why, r.why
+    correct = np.sum(r.inliers[:, 1] == r.inliers[:, 0] + copies)
+    assert correct >= 0.99 * len(r.inliers) and correct >= 0.8 * n
+
+
+def test_poses_that_agree_with_the_images_are_not_confirmed_again():
+    """Many matches near exact poses' lines: the poses guide, the images are not asked."""
+    a, b, fa, fb, _ = synthetic_pair(seed=3)
+    r = guided.match_pair(fa, fb, a, b)
+    assert r.path == guided.GUIDED and r.searched >= 30 and len(r.inliers) >= 30 and r.why == ""
+
+
 def test_no_baseline_falls_back():
     a, _, fa, fb, _ = synthetic_pair()
     r = guided.match_pair(fa, fb, a, a)
