@@ -17,8 +17,8 @@ epipolar line F x_a.
      verify against the poses' own geometry. On a 30-minute walk on odometry 17 of 2,478 guided
      pairs were such (15-28 inliers; the rendered poses put their matches 5-49 px off the true
      epipolar geometry, median) and the refinement followed them metres off; confirmed by the
-     images, none of the 220 pairs below 30 kept a wrong geometry: 182 took the images' (all 17
-     among them, now true), 12 the poses' again, 26 went to COLMAP's matcher (docs/design.md).
+     images, none of the 220 pairs below 30 kept a wrong geometry (of the 17, 16 took the
+     images' geometry, true, and 1 went to COLMAP's matcher; docs/design.md).
   1'. Then the images guide instead (path 'images'): the same strongest features matched without
      the poses (strict ratio, mutual), and the geometry those give (two_view.estimate, at least
      `min_inliers` inliers) is the epipolar geometry of steps 2-4, as COLMAP's guided matching
