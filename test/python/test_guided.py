@@ -201,7 +201,7 @@ def test_poses_that_disagree_with_features_that_match_without_a_geometry_fall_ba
     assert len(guided.mutual_ratio_matches(fa.descriptors @ fb.descriptors.T, 0.8, 0.7)) >= 15
 
 
-def repeated_texture_on_the_poses_lines(a, b, fa, fb, poses_b, copies=25, seed=11):
+def repeated_texture_on_the_poses_lines(a, fa, fb, poses_b, copies=25, seed=11):
     """fb with a look-alike of the first `copies` of a's points put in front: each the same
     descriptor as the point's own feature in b (a repeated texture), placed where the poses
     (a, poses_b) put the point at a wrong depth, so on the poses' epipolar line of a's feature
@@ -235,7 +235,7 @@ def test_a_repeated_texture_along_poses_that_are_off_is_confirmed_by_the_images(
     matches near the lines: the images confirm, and their geometry is the true one."""
     a, b, fa, fb, n = synthetic_pair(seed=2)
     off = tilted(b)
-    copies, fb = repeated_texture_on_the_poses_lines(a, b, fa, fb, off)
+    copies, fb = repeated_texture_on_the_poses_lines(a, fa, fb, off)
     assert copies >= 20
     trusted = guided.match_pair(fa, fb, a, off, guided.GuidedOptions(confirm_inliers=0))
     assert trusted.path == guided.GUIDED and 15 <= len(trusted.inliers) < 30  # what the poses alone verify
