@@ -176,11 +176,10 @@ def match_pair(fa, fb, ka, kb, options=None):
         # window keeps look-alikes elsewhere in the image out of the ratio test, so where the poses
         # are off (drift across a revisit) a repeated texture can give min_inliers matches along
         # their lines, which then verify against the poses' own geometry.
-        confirmed = _match(fa, fb, ka, kb, o, trust_poses=False,
-                           why="%d matches within the window of the poses' epipolar lines, %d inliers: "
-                               "fewer than %d, the images confirm" % (result.searched, len(result.inliers),
-                                                                       o.confirm_inliers))
-        return confirmed
+        return _match(fa, fb, ka, kb, o, trust_poses=False,
+                      why="%d matches within the window of the poses' epipolar lines, %d inliers: "
+                          "fewer than %d, the images confirm" % (result.searched, len(result.inliers),
+                                                                  o.confirm_inliers))
     return result
 
 
