@@ -673,6 +673,9 @@ struct PassResult {
   int epipolar_iterations = 0;
   double epipolar_median_input = 0.0, epipolar_median_refined = 0.0;
   bool epipolar_undone = false;
+  size_t rotation_pairs = 0;
+  double rotation_change_deg = 0.0;
+  bool rotations_adopted = false;
   std::vector<std::string> not_begun;  ///< RefinementReport::not_begun
   std::map<std::string, double> seconds;  ///< by step (RefinementReport::phase_seconds)
 };
@@ -698,15 +701,64 @@ double medianSampson(const State& s, const std::vector<const EpipolarPair*>& pai
   return d[d.size() / 2];
 }
 
+/// The rotations' global start (RefinementConfig::rotations_first; rotation_averaging.h): the
+/// priors' relative rotations and the pairs' averaged, with the first image of the priors' chain
+/// held; where that turns some image by rotation_min_change_deg or more, every image of the chain
+/// takes its averaged rotation and its centre is chained again from the first one's, each step
+/// the one the poses it came with make, in the camera's frame before the step. Images in `kept`
+/// take no part.
+void rotationStart(PassResult& r, const Gauge& gauge, const std::vector<PairRotation>& pairs,
+                   const std::set<int>& kept, const RefinementConfig& config) {
+  State& s = r.state;
+  if (gauge.priors.empty()) return;
+  const PhaseTimer timer(r.seconds, "rotations");
+  std::map<int, Eigen::Quaterniond> start;
+  std::vector<RelativeRotation> relatives;
+  for (const Prior& p : gauge.priors) {
+    start[p.a] = s.poses.at(p.a).rotation;
+    start[p.b] = s.poses.at(p.b).rotation;
+    relatives.push_back({p.a, p.b, p.rotation_ba, p.sigma_r});
+  }
+  const double pair_sigma = config.rotation_pair_sigma_deg * kPi / 180.0;
+  for (const PairRotation& p : pairs)
+    if (start.count(p.a) && start.count(p.b) && !kept.count(p.a) && !kept.count(p.b)) {
+      relatives.push_back({p.a, p.b, p.rotation_ba, pair_sigma});
+      ++r.rotation_pairs;
+    }
+  if (r.rotation_pairs == 0) return;
+  const int first = gauge.priors.front().a;
+  const RotationAveragingResult averaged =
+      averageRotations(start, relatives, first, config.rotation_iterations);
+  if (!averaged.solved) return;
+  for (const auto& [id, q] : averaged.rotations)
+    r.rotation_change_deg = std::max(r.rotation_change_deg, rotationBetweenDeg(q, start.at(id)));
+  if (r.rotation_change_deg < config.rotation_min_change_deg) return;
+  r.rotations_adopted = true;
+  std::map<int, State::Pose> chained;
+  const auto placed = [&](int id, const Eigen::Vector3d& centre) {
+    const Eigen::Quaterniond q = averaged.rotations.at(id);
+    chained[id] = {q, -(q * centre)};
+  };
+  placed(first, s.poses.at(first).centre());
+  for (const Prior& p : gauge.priors) {  // consecutive images, in order
+    const State::Pose& a = s.poses.at(p.a);
+    const Eigen::Vector3d step =
+        a.rotation * (s.poses.at(p.b).centre() - a.centre());  // in a's frame
+    placed(p.b, chained.at(p.a).centre() + averaged.rotations.at(p.a).conjugate() * step);
+  }
+  for (const auto& [id, pose] : chained) s.poses[id] = pose;
+}
+
 /// The poses of the gauge's moving images adjusted to the matches' epipolar geometry and the
 /// priors, before the first triangulation (epipolar.h; config.epipolar_first). Needs the priors:
 /// they alone hold the scale. Images in `kept` and their pairs take no part. A pair's matches are
 /// one residual block under a Huber loss on their root mean square (a pair verified with a wrong
 /// geometry weighs as one, however many matches it has). A solve that fails leaves the poses as
 /// they were; the points are left where they are (the stage after triangulates them anew).
-void epipolarStage(PassResult& r, const Gauge& gauge, const std::vector<EpipolarPair>& all, const std::set<int>& kept,
-                   const RefinementConfig& config, const Deadline& deadline, const std::string& where,
-                   io::Progress* progress) {
+void epipolarStage(PassResult& r, const Gauge& gauge, const std::vector<EpipolarPair>& all,
+                   const std::set<int>& kept, const RefinementConfig& config,
+                   const Deadline& deadline, const std::string& where, io::Progress* progress,
+                   const std::vector<PairRotation>* rotations, bool all_movable) {
   State& s = r.state;
   const PhaseTimer timer(r.seconds, "epipolar");
   std::vector<const EpipolarPair*> pairs;
@@ -717,6 +769,9 @@ void epipolarStage(PassResult& r, const Gauge& gauge, const std::vector<Epipolar
   if (pairs.empty() || gauge.priors.empty() || gauge.moving.empty()) return;
   for (const EpipolarPair* p : pairs) r.epipolar_correspondences += p->rays_a.size();
   r.epipolar_median_input = medianSampson(s, pairs);
+  const std::map<int, State::Pose> incoming = s.poses;
+  if (config.rotations_first && rotations && all_movable)
+    rotationStart(r, gauge, *rotations, kept, config);
   ceres::Problem problem;  // owns the cost functions and the pairs' losses
   ceres::CauchyLoss* prior_loss = new ceres::CauchyLoss(config.prior_loss_scale);
   std::map<int, PoseBlock> pose = poseBlocks(s);
@@ -820,6 +875,8 @@ void epipolarStage(PassResult& r, const Gauge& gauge, const std::vector<Epipolar
   r.epipolar_iterations = static_cast<int>(summary.iterations.size());
   if (summary.termination_type == ceres::FAILURE || summary.termination_type == ceres::USER_FAILURE ||
       !std::isfinite(summary.final_cost) || summary.final_cost > summary.initial_cost) {
+    s.poses = incoming;  // the rotations' start too
+    r.rotations_adopted = false;
     r.epipolar_median_refined = r.epipolar_median_input;
     return;
   }
@@ -945,10 +1002,12 @@ void alignToReference(PassResult& r, const std::map<int, State::Pose>& reference
 /// Stages of triangulation (with tracks) and adjust-then-filter rounds on `input`, with the
 /// images in `kept` left out (their observations too) and those not in `movable` held; aligned
 /// to the reference when the caller held nothing. `pass_number` names the pass in the progress.
-PassResult pass(const State& input, const std::map<int, State::Pose>& reference, const std::set<int>& movable,
-                const std::set<int>& kept, const RefinementConfig& config, const Tracks* tracks,
-                const std::vector<EpipolarPair>* epipolar, const Deadline& deadline, int pass_number = 1,
-                io::Progress* progress = nullptr) {
+PassResult pass(const State& input, const std::map<int, State::Pose>& reference,
+                const std::set<int>& movable, const std::set<int>& kept,
+                const RefinementConfig& config, const Tracks* tracks,
+                const std::vector<EpipolarPair>* epipolar,
+                const std::vector<PairRotation>* rotations, const Deadline& deadline,
+                int pass_number = 1, io::Progress* progress = nullptr) {
   PassResult r;
   r.state = input;
   State& s = r.state;
@@ -966,7 +1025,8 @@ PassResult pass(const State& input, const std::map<int, State::Pose>& reference,
   if (tracks && config.triangulate_first && config.epipolar_first && epipolar && !epipolar->empty()) {
     if (triangulationPaidFor(deadline, 1.0 - config.epipolar_time_share, observationsOf(*tracks), config))
       epipolarStage(r, gauge, *epipolar, kept, config, deadline.share(config.epipolar_time_share),
-                    "(pass " + std::to_string(pass_number) + ")", progress);
+                    "(pass " + std::to_string(pass_number) + ")", progress, rotations,
+                    !caller_fixed);
     else
       r.not_begun.push_back("epipolar");
   }
@@ -1062,6 +1122,9 @@ void reportEpipolar(RefinementReport& rep, const PassResult& result) {
   rep.epipolar_median_input = result.epipolar_median_input;
   rep.epipolar_median_refined = result.epipolar_median_refined;
   rep.epipolar_undone = result.epipolar_undone;
+  rep.rotation_pairs = result.rotation_pairs;
+  rep.rotation_change_deg = result.rotation_change_deg;
+  rep.rotations_adopted = result.rotations_adopted;
   for (const std::string& step : result.not_begun)
     if (std::find(rep.not_begun.begin(), rep.not_begun.end(), step) == rep.not_begun.end()) rep.not_begun.push_back(step);
 }
@@ -1138,10 +1201,13 @@ void reportUntouched(RefinementReport& rep, const PassResult& result, const Refi
 /// pass would keep it), the points left out. The model as it came (nullopt) when the stage moved
 /// nothing.
 /// `s` comes as the input and leaves as the result.
-std::optional<io::ColmapModel> epipolarOnly(RefinementReport& rep, const io::ColmapModel& input, State& s,
-                                            const std::map<int, State::Pose>& reference,
-                                            const std::set<int>& movable, const std::map<int, double>& depth,
-                                            const std::vector<EpipolarPair>& epipolar, const RefinementConfig& config,
+std::optional<io::ColmapModel> epipolarOnly(RefinementReport& rep, const io::ColmapModel& input,
+                                            State& s, const std::map<int, State::Pose>& reference,
+                                            const std::set<int>& movable,
+                                            const std::map<int, double>& depth,
+                                            const std::vector<EpipolarPair>& epipolar,
+                                            const std::vector<PairRotation>* rotations,
+                                            const RefinementConfig& config,
                                             const Deadline& deadline, io::Progress* progress) {
   PassResult r;
   r.state = s;
@@ -1155,7 +1221,8 @@ std::optional<io::ColmapModel> epipolarOnly(RefinementReport& rep, const io::Col
       if (at_reference.poses.count(p.a) && at_reference.poses.count(p.b)) pairs.push_back(&p);
     rep.epipolar_median_reference = medianSampson(at_reference, pairs);
   }
-  epipolarStage(r, gauge, epipolar, {}, config, deadline, "(epipolar only)", progress);
+  epipolarStage(r, gauge, epipolar, {}, config, deadline, "(epipolar only)", progress, rotations,
+                movable.size() == s.poses.size());
   for (const auto& [name, seconds] : r.seconds) rep.phase_seconds[name] += seconds;
   if (r.epipolar_iterations == 0 || r.epipolar_median_refined == r.epipolar_median_input) {
     reportEpipolar(rep, r);
@@ -1197,6 +1264,11 @@ void RefinementConfig::validate() const {
     throw core::InvalidArgument("function_tolerance must be in (0, 1)");
   if (min_observations < 0) throw core::InvalidArgument("min_observations must be >= 0");
   if (!(max_correction_depth_ratio > 0.0)) throw core::InvalidArgument("max_correction_depth_ratio must be positive");
+  if (!(rotation_pair_sigma_deg > 0.0) || !(rotation_min_change_deg >= 0.0) ||
+      rotation_iterations < 1)
+    throw core::InvalidArgument(
+        "rotation_pair_sigma_deg must be positive, rotation_min_change_deg >= 0, "
+        "rotation_iterations >= 1");
   if (!(max_correction_deg > 0.0 && max_correction_deg <= 180.0))
     throw core::InvalidArgument("max_correction_deg must be in (0, 180]");
   if (threads < 0) throw core::InvalidArgument("threads must be >= 0");
@@ -1277,17 +1349,19 @@ io::ColmapModel startedAt(const io::ColmapModel& model, const io::ColmapModel& s
 
 io::ColmapModel refineModel(const io::ColmapModel& input, const std::set<int>& movable,
                             const RefinementConfig& config, RefinementReport* report,
-                            const io::ColmapModel* reference_model, const std::vector<Match>* matches,
-                            io::Progress* progress) {
-  std::optional<io::ColmapModel> refined =
-      refineModelIfChanged(input, movable, config, report, reference_model, matches, progress);
+                            const io::ColmapModel* reference_model,
+                            const std::vector<Match>* matches, io::Progress* progress,
+                            const std::vector<PairRotation>* rotations) {
+  std::optional<io::ColmapModel> refined = refineModelIfChanged(
+      input, movable, config, report, reference_model, matches, progress, rotations);
   return refined ? std::move(*refined) : input;
 }
 
-std::optional<io::ColmapModel> refineModelIfChanged(const io::ColmapModel& input, const std::set<int>& movable_in,
-                                                    const RefinementConfig& config, RefinementReport* report,
-                                                    const io::ColmapModel* reference_model,
-                                                    const std::vector<Match>* matches, io::Progress* progress) {
+std::optional<io::ColmapModel> refineModelIfChanged(
+    const io::ColmapModel& input, const std::set<int>& movable_in, const RefinementConfig& config,
+    RefinementReport* report, const io::ColmapModel* reference_model,
+    const std::vector<Match>* matches, io::Progress* progress,
+    const std::vector<PairRotation>* rotations) {
   const auto start = std::chrono::steady_clock::now();
   config.validate();
   Deadline deadline;
@@ -1401,8 +1475,8 @@ std::optional<io::ColmapModel> refineModelIfChanged(const io::ColmapModel& input
   }
   if (config.epipolar_only) {
     State s = initial;
-    std::optional<io::ColmapModel> model =
-        epipolarOnly(rep, input, s, reference, movable, depth, epipolar, config, deadline, progress);
+    std::optional<io::ColmapModel> model = epipolarOnly(
+        rep, input, s, reference, movable, depth, epipolar, rotations, config, deadline, progress);
     if (progress) progress->end();
     return finish(std::move(model), s);
   }
@@ -1461,7 +1535,8 @@ std::optional<io::ColmapModel> refineModelIfChanged(const io::ColmapModel& input
   const auto addSeconds = [&](const PassResult& r) {
     for (const auto& [name, seconds] : r.seconds) rep.phase_seconds[name] += seconds;
   };
-  PassResult result = pass(initial, reference, movable, keptIds(), config, with_tracks, &epipolar, deadline, 1, progress);
+  PassResult result = pass(initial, reference, movable, keptIds(), config, with_tracks, &epipolar,
+                           rotations, deadline, 1, progress);
   addSeconds(result);
   // Implausible corrections, or images left without enough observations: start again with them
   // kept at their input poses (once; what the second pass still moves too far is put back).
@@ -1471,7 +1546,8 @@ std::optional<io::ColmapModel> refineModelIfChanged(const io::ColmapModel& input
     kept.insert(offenders.begin(), offenders.end());
     if (!offenders.empty() && !deadline.passed()) {
       rep.passes = 2;
-      result = pass(initial, reference, movable, keptIds(), config, with_tracks, &epipolar, deadline, 2, progress);
+      result = pass(initial, reference, movable, keptIds(), config, with_tracks, &epipolar,
+                    rotations, deadline, 2, progress);
       addSeconds(result);
     }
   }

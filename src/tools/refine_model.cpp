@@ -64,6 +64,12 @@ Cameras must be PINHOLE or SIMPLE_PINHOLE.
   --epipolar-iterations N        ... and N Ceres iterations at most (default 100)
   --epipolar-max-blocks N  ... with the images in at most N runs of consecutive ids, each
                      moving rigidly (default 0: every image on its own)
+  --rotations FILE   the verified pairs' relative rotations (VSROTAT1: image id, image id, w, x, y, z
+                     of the second's world-to-camera rotation relative to the first's): with
+                     the priors, the epipolar stage starts from the rotations they and the
+                     priors average to, where those turn some image by 5 degrees or more
+                     (an odometry's heading drift)
+  --no-rotations     the rotations file is read but not used
   --epipolar-only    with --matches: the epipolar stage alone, on the whole budget; the output
                      holds its poses (aligned to the input's) and no points (status epipolar_only)
   --fixed FILE       image names (one a line) that must not move; default: every image moves
@@ -134,12 +140,16 @@ nlohmann::json reportJson(const refine::RefinementReport& r) {
           {"iterations", r.iterations},
           {"passes", r.passes},
           {"retriangulations", r.retriangulations},
-          {"epipolar", {{"correspondences", r.epipolar_correspondences},
-                        {"iterations", r.epipolar_iterations},
-                        {"median_sampson_input", r.epipolar_median_input},
-                        {"median_sampson_refined", r.epipolar_median_refined},
-                        {"median_sampson_reference", r.epipolar_median_reference},
-                        {"undone", r.epipolar_undone}}},
+          {"epipolar",
+           {{"correspondences", r.epipolar_correspondences},
+            {"iterations", r.epipolar_iterations},
+            {"median_sampson_input", r.epipolar_median_input},
+            {"median_sampson_refined", r.epipolar_median_refined},
+            {"median_sampson_reference", r.epipolar_median_reference},
+            {"undone", r.epipolar_undone},
+            {"rotation_pairs", r.rotation_pairs},
+            {"rotation_change_deg", r.rotation_change_deg},
+            {"rotations_adopted", r.rotations_adopted}}},
           {"not_begun", r.not_begun},
           {"unchanged", r.unchanged},
           {"tracks", r.tracks},
@@ -166,15 +176,19 @@ int run(int argc, char** argv) {
   const auto since = [](std::chrono::steady_clock::time_point t) {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
   };
+  // clang-format off
   const CommandLine cli(argc, argv,
-                        {"input", "output", "report", "fixed", "reference", "start", "loss", "loss-scale", "max-error", "min-angle",
-                         "rounds", "iterations", "min-observations", "max-correction-depth-ratio",
+                        {"input", "output", "report", "fixed", "reference", "start", "loss", "loss-scale", "max-error",
+                         "min-angle", "rounds", "iterations", "min-observations", "max-correction-depth-ratio",
                          "max-correction-deg", "threads", "prior-translation-ratio", "prior-rotation-deg",
                          "prior-loss-scale", "dense-up-to", "function-tolerance", "matches", "retriangulations",
                          "triangulation-max-error", "triangulation-growth", "max-seconds", "sparse-up-to",
-                         "progress-interval", "epipolar-matches-per-pair", "epipolar-loss-scale", "epipolar-time-share", "epipolar-iterations", "epipolar-max-blocks", "max-correction-path-ratio",
-                         "max-correction-deg-per-path"},
-                        {"no-align", "quiet", "verbose", "no-triangulate-first", "no-epipolar", "epipolar-only", "no-progress", "help"});
+                         "progress-interval", "epipolar-matches-per-pair", "epipolar-loss-scale",
+                         "epipolar-time-share", "epipolar-iterations", "epipolar-max-blocks",
+                         "max-correction-path-ratio", "max-correction-deg-per-path", "rotations"},
+                        {"no-align", "quiet", "verbose", "no-triangulate-first", "no-epipolar", "epipolar-only",
+                         "no-rotations", "no-progress", "help"});
+  // clang-format on
   if (cli.flag("help")) {
     std::cout << kUsage;
     return 0;
@@ -205,6 +219,7 @@ int run(int argc, char** argv) {
   config.triangulate_first = !cli.flag("no-triangulate-first");
   config.epipolar_first = !cli.flag("no-epipolar");
   config.epipolar_only = cli.flag("epipolar-only");
+  config.rotations_first = !cli.flag("no-rotations");
   config.epipolar_matches_per_pair = static_cast<size_t>(
       cli.integer("epipolar-matches-per-pair", static_cast<long>(config.epipolar_matches_per_pair), 1, 100000));
   config.epipolar_loss_scale = cli.real("epipolar-loss-scale", config.epipolar_loss_scale, 1e-6, 1e6);
@@ -245,12 +260,15 @@ int run(int argc, char** argv) {
   }
   std::vector<refine::Match> matches;
   if (cli.has("matches")) matches = refine::readMatches(*cli.text("matches"));
+  std::vector<refine::PairRotation> rotations;
+  if (cli.has("rotations")) rotations = refine::readPairRotations(*cli.text("rotations"));
   const double reading = since(started);
   io::Progress progress =
       io::Progress::toStderr(!cli.flag("no-progress"), cli.real("progress-interval", io::Progress::kLogInterval, 0.1, 1e6));
   const std::optional<io::ColmapModel> out = refine::refineModelIfChanged(
       input, movable, config, &report, cli.has("reference") || from_start ? &reference : nullptr,
-      cli.has("matches") ? &matches : nullptr, &progress);
+      cli.has("matches") ? &matches : nullptr, &progress,
+      cli.has("rotations") ? &rotations : nullptr);
   const auto writing = std::chrono::steady_clock::now();
   // The input as it came (out of time at a 30-minute session's size, a diverged solve): its
   // files linked, not written again (0.5 s there), nor copied.

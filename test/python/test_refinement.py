@@ -107,7 +107,11 @@ def known_pose_model(exact, given, rng, k=(525.0, 525.0, 319.5, 239.5), database
                         pairs.setdefault((a + 1, b + 1), []).append((ia, ib))
             for (a, b), matches in pairs.items():
                 d.write_matches(a, b, matches)
-                d.write_two_view_geometry(a, b, matches)
+                # the pair's relative pose as its matches give it: the exact one
+                ra, rb = (geometry.rotation_of(q).T for _, q in (exact[a - 1], exact[b - 1]))
+                r = rb @ ra.T
+                t = -rb @ np.asarray(exact[b - 1][0]) + r @ ra @ np.asarray(exact[a - 1][0])
+                d.write_two_view_geometry(a, b, matches, qvec=geometry.quaternion_of(r), tvec=tuple(t))
     return m
 
 
@@ -393,9 +397,11 @@ def test_the_runs_matches_kept_between_runs_are_the_file_write_matches_writes(tm
         d.con.execute("DELETE FROM two_view_geometries WHERE pair_id = ?", (cdb.pair_id(*added),))
 
     def same():
-        sampled.write(database, str(tmp_path / "kept.bin"))
+        sampled.write(database, str(tmp_path / "kept.bin"), str(tmp_path / "kept_rotations.bin"))
         refiner.write_matches(database, str(tmp_path / "read.bin"), per_pair=8)
-        return open(str(tmp_path / "kept.bin"), "rb").read() == open(str(tmp_path / "read.bin"), "rb").read()
+        refiner.write_rotations(database, str(tmp_path / "read_rotations.bin"))
+        read = lambda name: open(str(tmp_path / name), "rb").read()
+        return read("kept.bin") == read("read.bin") and read("kept_rotations.bin") == read("read_rotations.bin")
     assert same()
     with cdb.open_database(database) as d:
         pairs = sorted(p for p, n in d.inlier_counts().items() if n > 10)
@@ -404,12 +410,84 @@ def test_the_runs_matches_kept_between_runs_are_the_file_write_matches_writes(tm
         d.con.execute("DELETE FROM two_view_geometries WHERE pair_id = ?", (cdb.pair_id(c, e),))
         d.write_two_view_geometry(*added, np.stack([np.arange(20), np.arange(20)], axis=1))
     unchanged = pairs[2]
-    kept = {p: rows for p, (_, rows) in sampled.pairs.items()}
+    kept = {p: rows for p, (_, rows, _) in sampled.pairs.items()}
     assert added not in kept
     assert same()
     assert (c, e) not in sampled.pairs and added in sampled.pairs
     assert sampled.pairs[(a, b)][1] is not kept[(a, b)]
     assert sampled.pairs[unchanged][1] is kept[unchanged]  # not read again
+
+
+def test_the_pairs_rotations_are_those_estimated_from_their_matches(tmp_path):
+    """refiner.write_rotations: each verified pair's relative rotation (the second image's
+    world-to-camera rotation relative to the first's), as many inliers as the epipolar stage
+    takes a pair with; a geometry COLMAP estimated no pose for (zero qvec and tvec) and a pair
+    with fewer inliers are left out; `pairs` gives only those."""
+    import struct
+    from view_selection.colmap import database as cdb
+    exact = arc_poses(6)
+    database = str(tmp_path / "database.db")
+    known_pose_model(exact, exact, np.random.default_rng(5), database=database)
+    with cdb.open_database(database) as d:
+        d.write_two_view_geometry(1, 2, d.matches(1, 2, "two_view_geometries"), qvec=(0, 0, 0, 0))  # "none"
+        d.write_two_view_geometry(2, 3, d.matches(2, 3, "two_view_geometries")[:refiner.ROTATION_MIN_INLIERS - 1],
+                                  qvec=(1, 0, 0, 0), tvec=(1, 0, 0))
+        # given in the other order: stored as (3, 5), the rotation inverted
+        q35 = d.two_view_geometry(3, 5)["qvec"]
+        d.write_two_view_geometry(5, 3, d.matches(3, 5, "two_view_geometries")[:, ::-1],
+                                  qvec=geometry.quaternion_of(geometry.rotation_of(q35).T), tvec=(0, 0, 1))
+        verified = sorted(p for p, n in d.inlier_counts().items() if n >= refiner.ROTATION_MIN_INLIERS)
+    path = str(tmp_path / "rotations.bin")
+    n = refiner.write_rotations(database, path)
+    data = open(path, "rb").read()
+    assert data[:8] == b"VSROTAT1" and struct.unpack("<Q", data[8:16])[0] == n == len(verified) - 1
+    rows = [struct.unpack("<ii4d", data[16 + 40 * k:56 + 40 * k]) for k in range(n)]
+    assert sorted((a, b) for a, b, *_ in rows) == [p for p in verified if p != (1, 2)]
+    for a, b, *q in rows:
+        ra, rb = (geometry.rotation_of(exact[i - 1][1]).T for i in (a, b))
+        assert geometry.rotation_angle_deg(q, geometry.quaternion_of(rb @ ra.T)) < 1e-6, (a, b)
+    assert refiner.write_rotations(database, path, pairs=[(5, 3), (1, 2)]) == 1
+
+
+def test_refine_gives_refine_model_the_pairs_rotations(tmp_path):
+    """refiner.refine gives refine_model the database's pair rotations: a model whose heading
+    drifted 4 degrees a step (116 over the arc) starts from the averaged rotations (the report
+    says so; refine_model --no-rotations, through VS_REFINE_EXTRA, the development switch, does
+    not), and ends where the full refinement ends without them: on the arc every image sees
+    every other, and the adjustment corrects it either way (what the start changes on a long
+    walk is measured in docs/design.md; test_rotation_averaging and test_model_refinement hold
+    the stage to it)."""
+    exact = arc_poses()
+    given = []
+    turn = np.eye(3)
+    centre = np.asarray(exact[0][0])
+    for i, (c, q) in enumerate(exact):
+        if i:
+            step = np.asarray(c) - np.asarray(exact[i - 1][0])
+            a = math.radians(4.0)
+            turn = np.array([[math.cos(a), 0, math.sin(a)], [0, 1, 0], [-math.sin(a), 0, math.cos(a)]]) @ turn
+            centre = centre + turn @ step
+        given.append((tuple(centre), geometry.quaternion_of(turn @ geometry.rotation_of(q))))
+    database = str(tmp_path / "database.db")
+    model = known_pose_model(exact, given, np.random.default_rng(8), database=database)
+    cm.write_model(model, str(tmp_path / "in"))
+    options = refiner.RefinementOptions(threads=1)
+    options.max_correction_deg = 180.0  # 116 degrees over the arc's 5 m: beyond the plausibility check
+    options.max_correction_depth_ratio = 100.0
+    out = {}
+    for name, extra in (("with", ""), ("without", "--no-rotations")):
+        os.environ["VS_REFINE_EXTRA"] = extra
+        try:
+            out[name] = refiner.refine(str(tmp_path / "in"), str(tmp_path / name), options, database=database,
+                                       tool=refine_tool())
+        finally:
+            del os.environ["VS_REFINE_EXTRA"]
+    assert out["with"]["epipolar"]["rotation_pairs"] == 435
+    assert out["with"]["epipolar"]["rotations_adopted"] is True
+    assert out["without"]["epipolar"]["rotations_adopted"] is False
+    truth = [c for c, _ in exact]
+    errors = {name: ate_rmse(centres(cm.read_model(str(tmp_path / name))), truth) for name in out}
+    assert errors["with"] < 0.005 and errors["with"] < 1.05 * errors["without"], errors
 
 
 def skipped_below(model, matched, matches=0):

@@ -249,6 +249,29 @@ class Database:
         vec = lambda b, n: tuple(np.frombuffer(b, np.float64)) if b and len(b) == 8 * n else None
         return {"rows": row[0], "config": row[1], "qvec": vec(row[2], 4), "tvec": vec(row[3], 3)}
 
+    def pair_rotations(self, min_rows=1, pairs=None):
+        """[(image_id1, image_id2, (w, x, y, z))]: the relative rotation (image_id2's relative to
+        image_id1's, image_id1 < image_id2) of the two-view geometries with at least `min_rows`
+        inliers whose relative pose was estimated (a unit qvec and a non-zero tvec: COLMAP's
+        matcher leaves them zero where it estimated none); only those of `pairs` ((id, id), either
+        order; read one by one) when given."""
+        sql = "SELECT pair_id, qvec, tvec FROM two_view_geometries WHERE rows >= ?"
+        if pairs is None:
+            rows = self.con.execute(sql, (int(min_rows),)).fetchall()
+        else:
+            rows = [r for a, b in pairs
+                    for r in self.con.execute(sql + " AND pair_id = ?", (int(min_rows), pair_id(a, b))).fetchall()]
+        out = []
+        for pid, q, t in rows:
+            if not q or len(q) != 32 or not t or len(t) != 24:
+                continue
+            qvec, tvec = np.frombuffer(q, np.float64), np.frombuffer(t, np.float64)
+            if not (np.all(np.isfinite(qvec)) and abs(float(qvec @ qvec) - 1.0) < 1e-6 and np.any(tvec != 0.0)):
+                continue
+            a, b = ids_of_pair(pid)
+            out.append((a, b, tuple(float(v) for v in qvec)))
+        return out
+
     def geometry_pairs(self, verified_only=False):
         """{(image_id1, image_id2)} of the pairs with a two-view geometry (matched and verified
         or found not to verify); with verified_only, those with at least one inlier."""

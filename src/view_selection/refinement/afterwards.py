@@ -69,11 +69,13 @@ class RefinementAfterwards:
                                           dir=os.path.dirname(os.path.abspath(model_path)))
                 matches = os.path.join(folder, "matches.bin")
                 given = refiner.write_matches(project.database, matches, max_matches=self.max_matches)
+                rotations = os.path.join(folder, "rotations.bin")
+                refiner.write_rotations(project.database, rotations)
                 total = refiner.count_verified_matches(project.database)
                 args = refiner.refine_model_command(refiner.find_refine_tool(self.finish_refinement.tool), unrefined,
                                                     os.path.join(folder, "output"),
                                                     os.path.join(folder, "report.json"), self._options(),
-                                                    matches=matches)
+                                                    matches=matches, rotations=rotations)
                 proc = refiner.start_refine_model(args, getattr(project, "log_path", None), nice=NICE)
             except (OSError, refiner.RefinementError, ValueError) as e:
                 if folder:

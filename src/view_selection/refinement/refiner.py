@@ -45,6 +45,10 @@ FINISH_MAX_SECONDS = 5.0
 # (43.8 mm), its model 37,827 points against 83,368.
 STRONGEST_MATCHES = 800000
 
+# The pairs whose relative rotations refine_model is given (--rotations, write_rotations): those
+# with at least this many inliers, as its epipolar stage takes a pair (epipolar_min_matches).
+ROTATION_MIN_INLIERS = 15
+
 # What refine_model's steps ask of the time left, in its own rules (src/refine/model_refinement.cpp):
 # the matches' triangulation (and the epipolar stage) begins when half the time left pays for 1 us
 # an observation of the matches (RefinementConfig::triangulation_seconds_per_observation); without
@@ -125,7 +129,7 @@ def find_refine_tool(explicit=None):
 
 
 def refine_model_command(tool, model, output, report, options, fixed=(), reference=None, matches=None,
-                         progress=False, start=None):
+                         progress=False, start=None, rotations=None):
     """refine_model's command line (the list of images held written beside `output`)."""
     args = [tool, "--input", model, "--output", output, "--report", report, "--quiet"] + options.arguments()
     if progress:
@@ -136,6 +140,8 @@ def refine_model_command(tool, model, output, report, options, fixed=(), referen
         args += ["--start", start]
     if matches:
         args += ["--matches", matches]
+    if rotations:
+        args += ["--rotations", rotations]
     args += os.environ.get("VS_REFINE_EXTRA", "").split()  # development: more refine_model options
     if fixed:
         listing = output.rstrip("/") + ".fixed.txt"
@@ -173,12 +179,12 @@ def read_report(report):
 
 
 def run_refine_model(tool, model, output, report, options, fixed=(), reference=None, log_path=None, timeout=None,
-                     matches=None, progress=None, start=None):
+                     matches=None, progress=None, start=None, rotations=None):
     """One refine_model process; returns its report (dict). RefinementError when it cannot run,
     fails or exceeds the timeout (then it is killed). progress: called with each of its progress
     lines as it prints them (a line a second; None: they go to the log at the end, one every 10 s)."""
     args = refine_model_command(tool, model, output, report, options, fixed, reference, matches, bool(progress),
-                                start)
+                                start, rotations)
     timeout = options.timeout if timeout is None else timeout
     log = open(log_path, "a") if log_path else None
     try:
@@ -311,6 +317,24 @@ def write_matches(database_path, path, pairs=None, per_pair=0, max_matches=0):
     return len(data)
 
 
+def write_rotations(database_path, path, pairs=None):
+    """The verified pairs' relative rotations (their two-view geometries', estimated from the
+    pair's matches) as refine_model's VSROTAT1 file, the pairs with at least ROTATION_MIN_INLIERS
+    inliers (`pairs`: only those, read one by one). Returns how many."""
+    from ..colmap import database as cdb
+    with cdb.open_database(database_path) as d:
+        rotations = d.pair_rotations(ROTATION_MIN_INLIERS, pairs)
+    _write_rotation_file(path, rotations)
+    return len(rotations)
+
+
+def _write_rotation_file(path, rotations):
+    import struct
+    with open(path, "wb") as f:
+        f.write(b"VSROTAT1" + struct.pack("<Q", len(rotations)))
+        f.write(b"".join(struct.pack("<ii4d", a, b, *q) for a, b, q in rotations))
+
+
 def _pair_rows(database, a, b, per_pair):
     """A pair's verified matches as VSMATCH1 rows (image id, keypoint, image id, keypoint), at most
     `per_pair` of them evenly spread over its list (0: all)."""
@@ -339,19 +363,25 @@ class SampledMatches:
         self.per_pair = int(per_pair)
         self.pairs = {}  # (image id, image id) -> (inlier count, rows)
 
-    def write(self, database_path, path):
-        """Writes the VSMATCH1 file; returns how many matches it holds."""
+    def write(self, database_path, path, rotations_path=None):
+        """Writes the VSMATCH1 file, and with `rotations_path` the pairs' VSROTAT1 file
+        (write_rotations'); returns how many matches it holds."""
         from ..colmap import database as cdb
         with cdb.open_database(database_path) as d:
             counts = {pair: n for pair, n in d.inlier_counts().items() if n > 0}
-            for pair in [p for p, (n, _) in self.pairs.items() if counts.get(p) != n]:
+            for pair in [p for p, (n, _, _) in self.pairs.items() if counts.get(p) != n]:
                 del self.pairs[pair]
             for pair, n in counts.items():
                 if pair not in self.pairs:
-                    self.pairs[pair] = (n, _pair_rows(d, pair[0], pair[1], self.per_pair))
-        rows = [self.pairs[p][1] for p in sorted(self.pairs)]
+                    rotation = d.pair_rotations(ROTATION_MIN_INLIERS, [pair])
+                    self.pairs[pair] = (n, _pair_rows(d, pair[0], pair[1], self.per_pair),
+                                        rotation[0] if rotation else None)
+        ordered = sorted(self.pairs)
+        rows = [self.pairs[p][1] for p in ordered]
         data = np.concatenate(rows) if rows else np.zeros((0, 4), "<i4")
         _write_match_file(path, data)
+        if rotations_path:
+            _write_rotation_file(rotations_path, [self.pairs[p][2] for p in ordered if self.pairs[p][2] is not None])
         return len(data)
 
 
@@ -399,11 +429,14 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
         return section
 
     try:
-        matches, count = None, 0
+        matches, count, rotations = None, 0, None
         nothing = paid_for_nothing(0)
         if nothing is None and database and options.retriangulations > 0:
             matches = os.path.join(work, "matches.bin")
             count = write_matches(database, matches, pairs, max_matches=max_matches)
+            if not fixed:  # refine_model starts from averaged rotations only where no image is held
+                rotations = os.path.join(work, "rotations.bin")
+                write_rotations(database, rotations, pairs)
             nothing = paid_for_nothing(count)
         if nothing is not None:
             return nothing
@@ -418,7 +451,7 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
         children = resource.getrusage(resource.RUSAGE_CHILDREN)
         report = run_refine_model(tool, os.path.abspath(model_dir), made, made + ".json", options, fixed,
                                   reference=reference, log_path=log_path, timeout=timeout, matches=matches,
-                                  progress=progress, start=start_model)
+                                  progress=progress, start=start_model, rotations=rotations)
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu = (after.ru_utime + after.ru_stime) - (children.ru_utime + children.ru_stime)
         log("refinement: %s" % report["message"])
