@@ -64,6 +64,7 @@ RotationAveragingResult averageRotations(const std::map<int, Eigen::Quaterniond>
   const double pull = 1e-9 * strongest;
   const int n = static_cast<int>(index.size());
   const Eigen::Matrix3d& fixed = current.at(held);
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver;
   for (int it = 0; it < iterations; ++it) {
     std::vector<Eigen::Triplet<double>> triplets;
     triplets.reserve(static_cast<size_t>(n) * 3 + edges.size() * 36);
@@ -95,7 +96,8 @@ RotationAveragingResult averageRotations(const std::map<int, Eigen::Quaterniond>
     }
     Eigen::SparseMatrix<double> a(3 * n, 3 * n);
     a.setFromTriplets(triplets.begin(), triplets.end());
-    const Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(a);
+    if (it == 0) solver.analyzePattern(a);  // the same pattern every solve: only the weights change
+    solver.factorize(a);
     if (solver.info() != Eigen::Success) return out;
     const Eigen::MatrixXd x = solver.solve(rhs);
     if (solver.info() != Eigen::Success || !x.allFinite()) return out;
