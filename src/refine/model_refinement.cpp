@@ -701,6 +701,10 @@ double medianSampson(const State& s, const std::vector<const EpipolarPair*>& pai
   return d[d.size() / 2];
 }
 
+/// What the rotations' global start costs a keyframe [s], about (measured on one core of the
+/// development machine; it grows faster than the keyframes where revisits join far-apart ones).
+constexpr double kRotationSecondsPerImage = 1.5e-3;
+
 /// The rotations' global start (RefinementConfig::rotations_first; rotation_averaging.h): the
 /// priors' relative rotations and the pairs' averaged, with the first image of the priors' chain
 /// held; where that turns some image by rotation_min_change_deg or more, every image of the chain
@@ -770,8 +774,15 @@ void epipolarStage(PassResult& r, const Gauge& gauge, const std::vector<Epipolar
   for (const EpipolarPair* p : pairs) r.epipolar_correspondences += p->rays_a.size();
   r.epipolar_median_input = medianSampson(s, pairs);
   const std::map<int, State::Pose> incoming = s.poses;
-  if (config.rotations_first && rotations && all_movable)
-    rotationStart(r, gauge, *rotations, kept, config);
+  if (config.rotations_first && rotations && all_movable) {
+    // Not under a budget it would take half of: 0.6 s at 941 keyframes, 2.2 s at 1,521 (the
+    // factorisation fills in where revisits join far-apart keyframes), about 1.5 ms a keyframe.
+    if (deadline.left() >=
+        2.0 * kRotationSecondsPerImage * static_cast<double>(gauge.moving.size() + 1))
+      rotationStart(r, gauge, *rotations, kept, config);
+    else
+      r.not_begun.push_back("rotations");
+  }
   ceres::Problem problem;  // owns the cost functions and the pairs' losses
   ceres::CauchyLoss* prior_loss = new ceres::CauchyLoss(config.prior_loss_scale);
   std::map<int, PoseBlock> pose = poseBlocks(s);

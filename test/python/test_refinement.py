@@ -397,11 +397,9 @@ def test_the_runs_matches_kept_between_runs_are_the_file_write_matches_writes(tm
         d.con.execute("DELETE FROM two_view_geometries WHERE pair_id = ?", (cdb.pair_id(*added),))
 
     def same():
-        sampled.write(database, str(tmp_path / "kept.bin"), str(tmp_path / "kept_rotations.bin"))
+        sampled.write(database, str(tmp_path / "kept.bin"))
         refiner.write_matches(database, str(tmp_path / "read.bin"), per_pair=8)
-        refiner.write_rotations(database, str(tmp_path / "read_rotations.bin"))
-        read = lambda name: open(str(tmp_path / name), "rb").read()
-        return read("kept.bin") == read("read.bin") and read("kept_rotations.bin") == read("read_rotations.bin")
+        return open(str(tmp_path / "kept.bin"), "rb").read() == open(str(tmp_path / "read.bin"), "rb").read()
     assert same()
     with cdb.open_database(database) as d:
         pairs = sorted(p for p, n in d.inlier_counts().items() if n > 10)
@@ -410,7 +408,7 @@ def test_the_runs_matches_kept_between_runs_are_the_file_write_matches_writes(tm
         d.con.execute("DELETE FROM two_view_geometries WHERE pair_id = ?", (cdb.pair_id(c, e),))
         d.write_two_view_geometry(*added, np.stack([np.arange(20), np.arange(20)], axis=1))
     unchanged = pairs[2]
-    kept = {p: rows for p, (_, rows, _) in sampled.pairs.items()}
+    kept = {p: rows for p, (_, rows) in sampled.pairs.items()}
     assert added not in kept
     assert same()
     assert (c, e) not in sampled.pairs and added in sampled.pairs

@@ -95,7 +95,10 @@ struct RefinementConfig {
   /// degrees of the truth (that walk: 53.7 -> 1.0 degrees median, 5.5 at most). Below the
   /// threshold the poses are left as they came: the local stages correct a few degrees, and the
   /// pairs' rotations are noisier than that (2.5 degrees median at QVGA). Only when the caller
-  /// holds no image (the averaged frame is then aligned back to the reference at the end).
+  /// holds no image (the averaged frame is then aligned back to the reference at the end), and
+  /// under a budget only when half of what the epipolar stage has left pays for it (about 1.5 ms
+  /// a keyframe; else "rotations" is not begun): a long session's finish leaves it to the
+  /// refinement after it.
   /// A pair's relative rotation counts with rotation_pair_sigma_deg, a prior's with
   /// prior_rotation_deg, each under a Cauchy loss at its sigma.
   bool rotations_first = true;
@@ -217,8 +220,8 @@ struct RefinementReport {
   /// Its poses were given up: the budget left no time to triangulate at them, and the model's
   /// points, made at the input poses, were adjusted from those.
   bool epipolar_undone = false;
-  /// Steps not begun because the time left would not pay for them ("epipolar", "triangulation",
-  /// "adjustment"), in the order they were left out.
+  /// Steps not begun because the time left would not pay for them ("epipolar", "rotations",
+  /// "triangulation", "adjustment"), in the order they were left out.
   std::vector<std::string> not_begun;
   /// The returned model is the input as it came (refine_model then links the input's files into
   /// the output instead of writing them again).

@@ -230,16 +230,19 @@ class BackgroundPoses:
                         at_node.images[iid] = colmap_model.Image(iid, qv, tv, im.camera_id, im.name, im.xys,
                                                                  im.point3D_ids)
             colmap_model.write_model(at_node, os.path.join(folder, "input"), binary=True)
-            matches, rotations = os.path.join(folder, "matches.bin"), os.path.join(folder, "rotations.bin")
-            self.matches.write(work.project.database, matches, rotations)
+            # Without the pairs' rotations (refine_model's rotations' start): adopted by every run
+            # of the 30-minute walk (some keyframe always turned by 5 degrees), the averaged
+            # rotations (about a degree off) chained the steps again each time and undid what the
+            # runs had corrected: 1,005 mm at the finish against 585 without (docs/design.md).
+            matches = os.path.join(folder, "matches.bin")
+            self.matches.write(work.project.database, matches)
             options = copy.copy(self.finish_refinement.options)
             options.threads, options.max_seconds = 1, self.max_seconds
             options.timeout = 4.0 * self.max_seconds + 30.0
             args = refiner.refine_model_command(refiner.find_refine_tool(self.finish_refinement.tool),
                                                 os.path.join(folder, "input"), os.path.join(folder, "output"),
                                                 os.path.join(folder, "report.json"), options,
-                                                reference=os.path.join(folder, "reference"), matches=matches,
-                                                rotations=rotations)
+                                                reference=os.path.join(folder, "reference"), matches=matches)
             args += ["--epipolar-only", "--epipolar-iterations", str(self.iterations),
                      "--epipolar-max-blocks", str(MAX_BLOCKS)]
             proc = refiner.start_refine_model(args, getattr(work.project, "log_path", None))
@@ -282,7 +285,6 @@ class BackgroundPoses:
                      "sampson_px": [round(epipolar.get("median_sampson_input", 0.0), 3),
                                     round(epipolar.get("median_sampson_refined", 0.0), 3)],
                      "sampson_node_px": round(epipolar.get("median_sampson_reference", 0.0), 3),
-                     "rotations_adopted": bool(epipolar.get("rotations_adopted", False)),
                      "cpu_seconds": round(cpu, 3), "seconds": round(time.monotonic() - run.started, 3)}
             self.history.append(entry)
             del self.history[:-200]

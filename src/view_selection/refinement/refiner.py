@@ -363,25 +363,19 @@ class SampledMatches:
         self.per_pair = int(per_pair)
         self.pairs = {}  # (image id, image id) -> (inlier count, rows)
 
-    def write(self, database_path, path, rotations_path=None):
-        """Writes the VSMATCH1 file, and with `rotations_path` the pairs' VSROTAT1 file
-        (write_rotations'); returns how many matches it holds."""
+    def write(self, database_path, path):
+        """Writes the VSMATCH1 file; returns how many matches it holds."""
         from ..colmap import database as cdb
         with cdb.open_database(database_path) as d:
             counts = {pair: n for pair, n in d.inlier_counts().items() if n > 0}
-            for pair in [p for p, (n, _, _) in self.pairs.items() if counts.get(p) != n]:
+            for pair in [p for p, (n, _) in self.pairs.items() if counts.get(p) != n]:
                 del self.pairs[pair]
             for pair, n in counts.items():
                 if pair not in self.pairs:
-                    rotation = d.pair_rotations(ROTATION_MIN_INLIERS, [pair])
-                    self.pairs[pair] = (n, _pair_rows(d, pair[0], pair[1], self.per_pair),
-                                        rotation[0] if rotation else None)
-        ordered = sorted(self.pairs)
-        rows = [self.pairs[p][1] for p in ordered]
+                    self.pairs[pair] = (n, _pair_rows(d, pair[0], pair[1], self.per_pair))
+        rows = [self.pairs[p][1] for p in sorted(self.pairs)]
         data = np.concatenate(rows) if rows else np.zeros((0, 4), "<i4")
         _write_match_file(path, data)
-        if rotations_path:
-            _write_rotation_file(rotations_path, [self.pairs[p][2] for p in ordered if self.pairs[p][2] is not None])
         return len(data)
 
 
