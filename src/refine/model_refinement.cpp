@@ -709,10 +709,10 @@ constexpr double kRotationSecondsPerImage = 1.5e-3;
 /// priors' relative rotations and the pairs' averaged, with the first image of the priors' chain
 /// held; where that turns some image by rotation_min_change_deg or more, every image of the chain
 /// takes its averaged rotation and its centre is chained again from the first one's, each step
-/// the one the poses it came with make, in the camera's frame before the step. Images in `kept`
-/// take no part.
+/// the one the poses it came with make, in the camera's frame before the step. Only the images
+/// of the priors' chain take part (images kept out of a pass are not in it).
 void rotationStart(PassResult& r, const Gauge& gauge, const std::vector<PairRotation>& pairs,
-                   const std::set<int>& kept, const RefinementConfig& config) {
+                   const RefinementConfig& config) {
   State& s = r.state;
   if (gauge.priors.empty()) return;
   const PhaseTimer timer(r.seconds, "rotations");
@@ -725,7 +725,7 @@ void rotationStart(PassResult& r, const Gauge& gauge, const std::vector<PairRota
   }
   const double pair_sigma = config.rotation_pair_sigma_deg * kPi / 180.0;
   for (const PairRotation& p : pairs)
-    if (start.count(p.a) && start.count(p.b) && !kept.count(p.a) && !kept.count(p.b)) {
+    if (start.count(p.a) && start.count(p.b)) {
       relatives.push_back({p.a, p.b, p.rotation_ba, pair_sigma});
       ++r.rotation_pairs;
     }
@@ -779,7 +779,7 @@ void epipolarStage(PassResult& r, const Gauge& gauge, const std::vector<Epipolar
     // factorisation fills in where revisits join far-apart keyframes), about 1.5 ms a keyframe.
     if (deadline.left() >=
         2.0 * kRotationSecondsPerImage * static_cast<double>(gauge.moving.size() + 1))
-      rotationStart(r, gauge, *rotations, kept, config);
+      rotationStart(r, gauge, *rotations, config);
     else
       r.not_begun.push_back("rotations");
   }

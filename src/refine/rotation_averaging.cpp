@@ -64,19 +64,19 @@ RotationAveragingResult averageRotations(const std::map<int, Eigen::Quaterniond>
   const double pull = 1e-9 * strongest;
   const int n = static_cast<int>(index.size());
   const Eigen::Matrix3d& fixed = current.at(held);
+  Eigen::MatrixXd pulled =
+      Eigen::MatrixXd::Zero(3 * n, 3);  // the pull's side, the same every solve
+  for (const auto& [id, k] : index) pulled.middleRows(3 * k, 3) = pull * current.at(id);
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver;
   for (int it = 0; it < iterations; ++it) {
     std::vector<Eigen::Triplet<double>> triplets;
-    triplets.reserve(static_cast<size_t>(n) * 3 + edges.size() * 36);
-    Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(3 * n, 3);
+    triplets.reserve(static_cast<size_t>(n) * 9 + edges.size() * 36);
+    Eigen::MatrixXd rhs = pulled;
     const auto block = [&](int row, int col, const Eigen::Matrix3d& m) {
       for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) triplets.emplace_back(3 * row + i, 3 * col + j, m(i, j));
     };
-    for (const auto& [id, k] : index) {
-      block(k, k, pull * Eigen::Matrix3d::Identity());
-      rhs.middleRows(3 * k, 3) += pull * start.at(id).normalized().toRotationMatrix();
-    }
+    for (const auto& [id, k] : index) block(k, k, pull * Eigen::Matrix3d::Identity());
     // Each relative rotation: x_b - M x_a = 0 for every column x of the rotations, weighted.
     for (size_t q = 0; q < edges.size(); ++q) {
       const Eigen::Matrix3d& m = measured[q];

@@ -428,7 +428,8 @@ def refine(model_dir, output, options=None, fixed=(), database=None, tool=None, 
         if nothing is None and database and options.retriangulations > 0:
             matches = os.path.join(work, "matches.bin")
             count = write_matches(database, matches, pairs, max_matches=max_matches)
-            if not fixed:  # refine_model starts from averaged rotations only where no image is held
+            # refine_model's epipolar stage starts from averaged rotations only where no image is held
+            if options.epipolar and not fixed:
                 rotations = os.path.join(work, "rotations.bin")
                 write_rotations(database, rotations, pairs)
             nothing = paid_for_nothing(count)
